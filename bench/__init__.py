@@ -1,0 +1,1 @@
+"""Benchmarks of sensor_comp: ``./run bench`` runs them all (see README)."""

@@ -1,0 +1,15 @@
+"""
+Identify and compensate the acceleration-induced error of piezoelectric pressure sensors.
+
+Data flow one way: bag/stream → shots → model → residual → diagnosis → compensation.
+
+- :mod:`sensor_comp.streams`: the signal stream contract (``Stream``, ``Recording``).
+- :mod:`sensor_comp.blocks`: streams ↔ blocks as they travel on topics.
+- :mod:`sensor_comp.io`: MCAP bags (rosbag2 layout), CDR messages, CSV import; no ROS import.
+- :mod:`sensor_comp.sim`: the drop-hammer rig simulator.
+- :mod:`sensor_comp.core`: the numerical core (shots, identification, compensation).
+- :mod:`sensor_comp.nodes`: rclpy nodes; the only modules that import ROS.
+- :mod:`sensor_comp.cli`: the ``sensor-comp`` command.
+"""
+
+__version__ = '0.1.0'

@@ -1,0 +1,1 @@
+"""The ``sensor-comp`` command line."""

@@ -1,0 +1,53 @@
+"""
+Entry point of the ``sensor-comp`` command: one sub-command per module.
+
+Each sub-command module exposes ``register(subparsers)``, which adds its parser and sets
+``func`` to a callable taking the parsed arguments and returning an exit code.
+"""
+
+import argparse
+import importlib
+import sys
+
+from ..errors import SensorCompError
+
+__all__ = ['main']
+
+#: Sub-command modules of :mod:`sensor_comp.cli`, in the order ``--help`` lists them.
+COMMANDS = ('simulate', 'import_csv', 'info')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the parser with every sub-command registered."""
+    parser = argparse.ArgumentParser(
+        prog='sensor-comp',
+        description='Identify, diagnose and compensate the acceleration-induced error of '
+                    'piezoelectric pressure sensors.')
+    parser.add_argument('--quiet', '-q', action='store_true',
+                        help='print no progress bars (for scripts)')
+    subparsers = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    for name in COMMANDS:
+        importlib.import_module(f'{__package__}.{name}').register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """
+    Run ``sensor-comp``; return the process exit code.
+
+    User errors (bad files, bad values) print one ``sensor-comp: error:`` line and exit 1;
+    argparse usage errors exit 2.
+    """
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except SensorCompError as exc:
+        print(f'sensor-comp: error: {exc}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print('sensor-comp: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The numerical core: shots, identification, comparison and compensation (no ROS)."""

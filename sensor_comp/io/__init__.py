@@ -1,0 +1,1 @@
+"""Bag, message and file input/output; pure Python, no ROS import."""

@@ -1,0 +1,1 @@
+"""The drop-hammer rig simulator: shock pulses and the sensor physics they excite."""
