@@ -1,4 +1,5 @@
-"""Model input channels computed from acceleration, block by block, with carried state.
+"""
+Model input channels computed from acceleration, block by block, with carried state.
 
 A model names its inputs (``Model.inputs``); this module turns an acceleration block
 ``(3, w)`` in m/s² (rows x, y, z; z = sensor axis) into those rows. Identification windows
@@ -42,7 +43,8 @@ def _parse(name: str) -> tuple[str, int]:
 
 
 def needs_rate(names: Sequence[str]) -> bool:
-    """Return whether any of ``names`` needs the sample rate (derivatives).
+    """
+    Return whether any of ``names`` needs the sample rate (derivatives).
 
     Raises:
         InputError: On an unknown name.
@@ -53,7 +55,8 @@ def needs_rate(names: Sequence[str]) -> bool:
 
 def input_channels(names: Sequence[str], acceleration: np.ndarray,
                    state: MutableMapping[str, object], *, fs: float | None = None) -> np.ndarray:
-    """Return the model input rows for one acceleration block.
+    """
+    Return the model input rows for one acceleration block.
 
     Args:
         names: Input names, e.g. ``('a_z',)``.

@@ -1,4 +1,5 @@
-"""Shots: find the shocks of a drop-hammer recording and cut one window around each.
+"""
+Shots: find the shocks of a drop-hammer recording and cut one window around each.
 
 Detection runs on the axial acceleration ``a_z`` in g, after removing its median:
 
@@ -84,7 +85,8 @@ class ShotError(SensorCompError, ValueError):
 
 @dataclass(frozen=True)
 class Shot:
-    """One shock and its analysis window (sample indices into the recording).
+    """
+    One shock and its analysis window (sample indices into the recording).
 
     Args:
         index: Position of the shot in its list, from 0.
@@ -130,32 +132,32 @@ class Shot:
 
     @property
     def window(self) -> slice:
-        """Samples of the window."""
+        """Return the samples of the window."""
         return slice(self.start, self.stop)
 
     @property
     def baseline_window(self) -> slice:
-        """Pre-trigger samples the baseline is the mean of."""
+        """Return the pre-trigger samples the baseline is the mean of."""
         return slice(self.start, self.baseline_stop)
 
     @property
     def n_samples(self) -> int:
-        """Number of samples in the window."""
+        """Return the number of samples in the window."""
         return self.stop - self.start
 
     @property
     def start_s(self) -> float:
-        """Window start in seconds since the recording start."""
+        """Return the window start in seconds since the recording start."""
         return self.start / self.fs
 
     @property
     def stop_s(self) -> float:
-        """Window end in seconds since the recording start."""
+        """Return the window end in seconds since the recording start."""
         return self.stop / self.fs
 
     @property
     def onset_s(self) -> float:
-        """Pulse onset in seconds since the recording start."""
+        """Return the pulse onset in seconds since the recording start."""
         return self.onset / self.fs
 
     def to_dict(self) -> dict:
@@ -173,7 +175,8 @@ class Shot:
 
 
 def mad_sigma(x: np.ndarray) -> float:
-    """Return the noise σ of ``x`` from its median absolute deviation (NaN ignored).
+    """
+    Return the noise σ of ``x`` from its median absolute deviation (NaN ignored).
 
     ``1.4826 · median|x − median x|`` equals σ for Gaussian noise and ignores outliers such
     as shots that fill less than half of the samples.
@@ -303,7 +306,8 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
                  hysteresis: float = DEFAULT_HYSTERESIS, pre_ms: float = DEFAULT_PRE_MS,
                  post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
                  polarity: int | None = None) -> list[Shot]:
-    """Find the shots in a recording's axial acceleration.
+    """
+    Find the shots in a recording's axial acceleration.
 
     Args:
         recording: Pressure and acceleration.
@@ -384,7 +388,8 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
 
 def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, float]], *,
                        polarity: int | None = None) -> list[Shot]:
-    """Build shots from given windows instead of detecting them.
+    """
+    Build shots from given windows instead of detecting them.
 
     Inside each window the pulse is the largest excursion of the axial acceleration from
     the window's median; its timing and the baseline follow the same rules as
@@ -428,7 +433,8 @@ def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, fl
 def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[str] = ('a_z',),
              denoise: Callable[[np.ndarray], np.ndarray] | None = None
              ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Return identification data per shot window, baselines removed.
+    """
+    Return identification data per shot window, baselines removed.
 
     Each window starts at rest (quiet pre-trigger), so a model simulated from a zero state
     at the window start can be compared with it.
@@ -468,7 +474,8 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
 def split_calibration(shots: Sequence[Shot], *,
                       validation: str | Iterable[int] = 'alternate'
                       ) -> tuple[list[Shot], list[Shot]]:
-    """Split shots into a calibration set (to fit on) and a validation set (to report on).
+    """
+    Split shots into a calibration set (to fit on) and a validation set (to report on).
 
     Args:
         shots: All shots.
@@ -504,7 +511,8 @@ def split_calibration(shots: Sequence[Shot], *,
 
 
 def shot_table(shots: Sequence[Shot]) -> str:
-    """Return the shots as a text table in the layout of the seed paper's Table 2.
+    """
+    Return the shots as a text table in the layout of the seed paper's Table 2.
 
     Columns: shot index, peak acceleration (g), pulse width (ms), output charge (pC, '-'
     without a charge sensitivity), peak pressure (MPa), pressure per g (MPa/g) and the
