@@ -96,8 +96,9 @@ def test_float64_alignment_after_variable_strings_matches_rclpy(msgs, frame_id):
 
 def test_float64_sequences_match_rclpy(msgs):
     # JointState: Header, a string sequence, then float64 sequences (one empty).
-    state = msgs['JointState'](name=['j1', 'joint_2'], position=array.array('d', [0.5, -1.0]),
-                       velocity=array.array('d', [3.0]), effort=array.array('d'))
+    state = msgs['JointState'](name=['j1', 'joint_2'],
+                               position=array.array('d', [0.5, -1.0]),
+                               velocity=array.array('d', [3.0]), effort=array.array('d'))
     r = CdrReader(serialization.serialize_message(state))
     r.int32()
     r.uint32()
