@@ -1,0 +1,309 @@
+"""
+Compensation of the acceleration-induced pressure: subtract the model's response.
+
+The model (``Model`` from identification, or plain arrays) is the discrete transfer function
+from each input channel ``u_i`` (see :mod:`sensor_comp.core.inputs`) to the induced pressure::
+
+    induced = Σ_i B_i(q) q^-nk / A(q) · u_i        compensated = raw − induced
+
+with ``A = [1, a1, ..., ana]`` and ``B_i`` the row ``i`` of ``b`` (first coefficient at lag
+``nk``). :class:`CompensationFilter` runs it block by block: the filter state (``lfilter``'s
+``zi``, one per input channel, plus the input-channel state) is carried from block to
+block, so any split of a signal into blocks, down to single samples, gives the output of the
+whole signal filtered at once.
+
+Stability is checked when the filter is built: a pole on or outside the unit circle makes
+the induced estimate grow without bound from any disturbance, so such a model is rejected
+with :class:`UnstableModelError` naming the pole magnitude (re-identify it, e.g. with an
+output-error structure or a lower order).
+
+NaN samples (stream gaps) in the inputs give NaN output and reset the filter to rest: the
+compensation restarts after a gap as it would at the start of a stream.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import math
+from typing import Protocol, TYPE_CHECKING
+
+import numpy as np
+from scipy import signal
+
+from .ident.least_squares import delayed_numerator
+from .ident.polynomials import max_root_radius
+from .inputs import input_channels, InputError, needs_rate
+from ..errors import SensorCompError
+from ..streams import Recording
+
+if TYPE_CHECKING:
+    from .shots import Shot
+
+__all__ = ['CompensationError', 'CompensationFilter', 'UnstableModelError',
+           'compensate_recording', 'peak_residual_percent', 'shot_residuals']
+
+
+class CompensationError(SensorCompError, ValueError):
+    """Compensation cannot run on the data given (shape, rate or empty window)."""
+
+
+class UnstableModelError(CompensationError):
+    """The model's denominator has a pole on or outside the unit circle."""
+
+
+class LinearModel(Protocol):
+    """What compensation needs from a model (``sensor_comp.core.model.Model`` has it)."""
+
+    fs: float
+    inputs: tuple[str, ...]
+    b: np.ndarray
+    a: np.ndarray
+    nk: int
+
+
+class CompensationFilter:
+    """
+    Streaming induced-pressure filter with state carried across blocks.
+
+    Args:
+        b: ``(n_inputs, nb)`` numerators; ``b[i, 0]`` multiplies ``q^-nk``. A 1-D array is
+            one input.
+        a: Denominator ``[a0, a1, ..., ana]``, ``a0 ≠ 0`` (normalised to 1).
+        nk: Input delay in samples.
+        inputs: One input name per row of ``b`` (see :mod:`sensor_comp.core.inputs`).
+        fs: Sample rate in Hz; needed by derivative inputs.
+
+    Raises:
+        CompensationError: On shapes that do not match or non-finite coefficients.
+        UnstableModelError: When a pole has magnitude ≥ 1.
+        InputError: On an unknown input name or a derivative input without ``fs``.
+
+    """
+
+    def __init__(self, b: np.ndarray, a: np.ndarray, *, nk: int = 0,
+                 inputs: Sequence[str] = ('a_z',), fs: float | None = None):
+        b = np.atleast_2d(np.asarray(b, dtype=np.float64))
+        a = np.atleast_1d(np.asarray(a, dtype=np.float64))
+        inputs = tuple(inputs)
+        if a.ndim != 1 or a.size == 0 or a[0] == 0:
+            raise CompensationError(f'denominator must be 1-D with a non-zero first '
+                                    f'coefficient, got {a!r}')
+        if b.ndim != 2 or b.shape[1] == 0 or b.shape[0] != len(inputs):
+            raise CompensationError(f'numerator must have shape (n_inputs={len(inputs)}, nb) '
+                                    f'for inputs {inputs}, got {b.shape}')
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+            raise CompensationError('model coefficients must be finite')
+        if isinstance(nk, bool) or int(nk) != nk or nk < 0:
+            raise CompensationError(f'input delay nk must be a non-negative integer, got {nk!r}')
+        b, a = b / a[0], a / a[0]
+        radius = max_root_radius(a)
+        if radius >= 1.0:
+            raise UnstableModelError(
+                f'model denominator has a pole of magnitude {radius:.6g} (must be < 1): the '
+                f'compensation filter would diverge; re-identify the model (output-error '
+                f'structure or lower order)')
+        if needs_rate(inputs) and fs is None:
+            raise InputError(f'model inputs {inputs} include a derivative: give fs')
+        self.inputs = inputs
+        self.fs = fs
+        self.nk = int(nk)
+        self.a = a
+        self.b = b
+        self._num = delayed_numerator(b, self.nk)
+        self._order = max(self._num.shape[1], a.size) - 1
+        self.reset()
+
+    @classmethod
+    def from_model(cls, model: LinearModel) -> CompensationFilter:
+        """
+        Build the filter of ``model`` (anything with ``b``, ``a``, ``nk``, ``inputs``, ``fs``).
+
+        Raises:
+            UnstableModelError: When the model has a pole of magnitude ≥ 1.
+
+        """
+        return cls(model.b, model.a, nk=model.nk, inputs=model.inputs, fs=model.fs)
+
+    @property
+    def pole_radius(self) -> float:
+        """Return the largest pole magnitude of the filter (< 1)."""
+        return max_root_radius(self.a)
+
+    def reset(self) -> None:
+        """Return the filter to rest (zero state), as at the start of a stream."""
+        self._zi = np.zeros((len(self.inputs), self._order))
+        self._input_state: dict[str, object] = {}
+
+    def filter_inputs(self, u: np.ndarray) -> np.ndarray:
+        """
+        Return the induced pressure for input rows ``u``, continuing from the current state.
+
+        Args:
+            u: ``(n_inputs, w)`` model input channels.
+
+        Returns:
+            ``(w,)`` induced pressure in Pa; NaN where any input is NaN.
+
+        Raises:
+            CompensationError: When ``u`` does not have one row per input.
+
+        """
+        u = np.asarray(u, dtype=np.float64)
+        if u.ndim != 2 or u.shape[0] != len(self.inputs):
+            raise CompensationError(f'inputs must have shape ({len(self.inputs)}, samples), '
+                                    f'got {u.shape}')
+        finite = np.isfinite(u).all(axis=0)
+        if finite.all():
+            return self._run(u)
+        out = np.full(u.shape[1], np.nan)
+        # Runs of finite samples are filtered; a NaN run resets the state to rest.
+        edges = np.flatnonzero(np.diff(np.concatenate(([False], finite, [False])).astype(int)))
+        position = 0
+        for start, stop in zip(edges[::2], edges[1::2]):
+            if start > position:
+                self._zi[:] = 0.0
+            out[start:stop] = self._run(u[:, start:stop])
+            position = stop
+        if position < u.shape[1]:
+            self._zi[:] = 0.0
+        return out
+
+    def _run(self, u: np.ndarray) -> np.ndarray:
+        total = np.zeros(u.shape[1])
+        for i, row in enumerate(u):
+            y, self._zi[i] = signal.lfilter(self._num[i], self.a, row, zi=self._zi[i])
+            total += y
+        return total
+
+    def induced(self, acceleration: np.ndarray) -> np.ndarray:
+        """
+        Return the induced pressure (Pa) for an acceleration block, continuing the state.
+
+        Args:
+            acceleration: ``(3, w)`` block in m/s², rows x, y, z.
+
+        Returns:
+            ``(w,)`` induced pressure in Pa.
+
+        Raises:
+            InputError: When the block is not ``(3, w)``.
+
+        """
+        u = input_channels(self.inputs, acceleration, self._input_state, fs=self.fs)
+        return self.filter_inputs(u)
+
+    def process(self, acceleration: np.ndarray,
+                pressure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Compensate one block of raw pressure.
+
+        Args:
+            acceleration: ``(3, w)`` block in m/s², rows x, y, z.
+            pressure: ``(w,)`` raw pressure in Pa (a ``(1, w)`` block is accepted).
+
+        Returns:
+            ``(compensated, induced)``, both ``(w,)`` in Pa.
+
+        Raises:
+            CompensationError: When the blocks do not have the same number of samples.
+
+        """
+        pressure = np.asarray(pressure, dtype=np.float64)
+        if pressure.ndim == 2 and pressure.shape[0] == 1:
+            pressure = pressure[0]
+        acceleration = np.asarray(acceleration)
+        if pressure.ndim != 1 or acceleration.ndim != 2 or \
+                acceleration.shape[-1] != pressure.size:
+            raise CompensationError(f'pressure block {pressure.shape} and acceleration block '
+                                    f'{acceleration.shape} must hold the same samples')
+        induced = self.induced(acceleration)
+        return pressure - induced, induced
+
+
+def compensate_recording(model: LinearModel,
+                         recording: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Compensate a whole recording offline, from rest at its first sample.
+
+    The acceleration is used as recorded (no offset removed): a constant acceleration offset
+    becomes a constant pressure offset through the model's static gain.
+
+    Args:
+        model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``).
+        recording: Pressure and acceleration.
+
+    Returns:
+        ``(compensated, induced)`` pressure in Pa, ``(N,)`` each.
+
+    Raises:
+        CompensationError: When the model's and the recording's sample rates differ.
+        UnstableModelError: When the model has a pole of magnitude ≥ 1.
+
+    """
+    if not math.isclose(model.fs, recording.fs, rel_tol=1e-9):
+        raise CompensationError(f'model identified at {model.fs:g} Hz but the recording is '
+                                f'sampled at {recording.fs:g} Hz: resample the recording or '
+                                f'identify a model at its rate')
+    compensation = CompensationFilter.from_model(model)
+    return compensation.process(recording.acceleration, recording.pressure)
+
+
+def peak_residual_percent(raw: np.ndarray, compensated: np.ndarray) -> float:
+    """
+    Return peak ``|compensated|`` as a percentage of peak ``|raw|`` (baselines removed).
+
+    This is the seed paper's figure of merit (0.016 of 0.1402 MPa, < 11 %).
+
+    Args:
+        raw: Raw pressure in one shot window, pre-trigger baseline removed.
+        compensated: Compensated pressure in the same window, baseline removed.
+
+    Returns:
+        The percentage.
+
+    Raises:
+        CompensationError: When the raw window has no non-zero finite sample.
+
+    """
+    peak = np.nanmax(np.abs(raw)) if np.size(raw) else 0.0
+    if not peak > 0:
+        raise CompensationError('the raw pressure window is zero or empty: no peak to '
+                                'compare the residual with')
+    return float(100.0 * np.nanmax(np.abs(compensated)) / peak)
+
+
+def shot_residuals(shots: Sequence[Shot], raw: np.ndarray,
+                   compensated: np.ndarray) -> np.ndarray:
+    """
+    Return the peak residual percentage of every shot window.
+
+    Each window's pre-trigger mean is removed from the raw and the compensated pressure
+    before the peaks are taken.
+
+    Args:
+        shots: Shots with their windows.
+        raw: ``(N,)`` raw pressure of the recording in Pa.
+        compensated: ``(N,)`` compensated pressure in Pa.
+
+    Returns:
+        ``(len(shots),)`` percentages.
+
+    Raises:
+        CompensationError: When a window lies outside the arrays or holds no raw peak.
+
+    """
+    raw = np.asarray(raw, dtype=np.float64)
+    compensated = np.asarray(compensated, dtype=np.float64)
+    out = np.empty(len(shots))
+    for i, shot in enumerate(shots):
+        if shot.stop > min(raw.size, compensated.size):
+            raise CompensationError(f'shot {shot.index}: window ends at sample {shot.stop} '
+                                    f'beyond the {raw.size}-sample pressure')
+        r, c = raw[shot.window], compensated[shot.window]
+        base = shot.baseline_window
+        try:
+            out[i] = peak_residual_percent(r - np.nanmean(raw[base]),
+                                           c - np.nanmean(compensated[base]))
+        except CompensationError as err:
+            raise CompensationError(f'shot {shot.index}: {err}') from None
+    return out

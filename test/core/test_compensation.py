@@ -1,0 +1,158 @@
+"""
+Streaming compensation: block invariance, perfect-model cancellation, stability, metrics.
+
+The models are plain arrays (a 2nd-order sensor at 8 kHz, ζ = 0.1, discretised at
+100 kHz, plus an input delay), so these tests do not depend on identification.
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from sensor_comp.core.compensation import (
+    CompensationError, CompensationFilter, compensate_recording, peak_residual_percent,
+    shot_residuals, UnstableModelError)
+from sensor_comp.core.inputs import input_channels, InputError
+from sensor_comp.core.shots import detect_shots
+from sensor_comp.streams import G0, Recording
+
+FS = 100e3
+WN = 2 * np.pi * 8e3
+_B, A, _ = signal.cont2discrete(([14.0 * WN ** 2], [1, 0.2 * WN, WN ** 2]), 1 / FS)
+B = np.ravel(_B)[1:]  # ZOH numerator starts with a zero lag: nk = 1
+NK = 1
+
+
+def model(b=B, a=A, nk=NK, inputs=('a_z',)):
+    return SimpleNamespace(fs=FS, inputs=inputs, b=np.atleast_2d(b), a=np.asarray(a), nk=nk)
+
+
+def acceleration(n, seed=0):
+    """Half-sine shots every 20 ms (1 ms wide, 300-2000 g) plus small transverse motion."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / FS
+    phase = (t % 0.02) / 1e-3
+    peaks = rng.uniform(300, 2000, size=int(t[-1] / 0.02) + 1)[(t // 0.02).astype(int)]
+    acc = rng.standard_normal((3, n)) * 20.0
+    acc[2] += np.where(phase < 1, peaks * G0 * np.sin(np.pi * np.clip(phase, 0, 1)), 0.0)
+    return acc
+
+
+def test_blocks_of_any_size_give_the_whole_signal_output():
+    rng = np.random.default_rng(1)
+    n = 20_000
+    acc = acceleration(n)
+    b = np.vstack([B, 0.1 * B[::-1]])
+    whole = CompensationFilter(b, A, nk=5, inputs=('a_z', 'da_x'), fs=FS).induced(acc)
+    streaming = CompensationFilter(b, A, nk=5, inputs=('a_z', 'da_x'), fs=FS)
+    sizes = [1, 1, 2, 3, 4]  # below nk as well
+    while sum(sizes) < n:
+        sizes.append(int(rng.choice([1, 2, 7, 64, 1000, 4096])))
+    edges = np.cumsum([0] + sizes)
+    parts = [streaming.induced(acc[:, i:j]) for i, j in zip(edges[:-1], edges[1:])]
+    blocks = np.concatenate(parts)[:n]
+    assert np.max(np.abs(blocks - whole)) <= 1e-9 * np.max(np.abs(whole))
+
+
+def test_gap_gives_nan_and_restarts_from_rest_in_any_blocks():
+    acc = acceleration(5000)
+    acc[:, 1200:1300] = np.nan
+    whole = CompensationFilter(B, A, nk=NK).induced(acc)
+    assert np.all(np.isnan(whole[1200:1300])) and np.all(np.isfinite(whole[1300:]))
+    # After the gap the output is that of a filter started at rest at sample 1300.
+    fresh = CompensationFilter(B, A, nk=NK).induced(acc[:, 1300:])
+    assert np.allclose(whole[1300:], fresh, rtol=0, atol=1e-9 * np.max(np.abs(fresh)))
+    streaming = CompensationFilter(B, A, nk=NK)
+    blocks = np.concatenate([streaming.induced(acc[:, i:i + 37]) for i in range(0, 5000, 37)])
+    assert np.array_equal(np.isnan(blocks), np.isnan(whole))
+    assert np.allclose(blocks, whole, rtol=1e-9, atol=0, equal_nan=True)
+
+
+def test_perfect_model_removes_noiseless_induced_pressure():
+    acc = acceleration(30_000)
+    induced = signal.lfilter(np.concatenate([[0.0] * NK, B]), A, acc[2])
+    rec = Recording(fs=FS, t0_ns=0, pressure=induced, acceleration=acc)
+    compensated, estimate = compensate_recording(model(), rec)
+    assert np.allclose(estimate, induced, rtol=0, atol=1e-12 * np.max(np.abs(induced)))
+    assert np.max(np.abs(compensated)) <= 1e-12 * np.max(np.abs(induced))
+
+
+def test_perfect_model_leaves_only_the_noise_floor():
+    sigma = 800.0
+    acc = acceleration(30_000)
+    induced = signal.lfilter(np.concatenate([[0.0] * NK, B]), A, acc[2])
+    noise = np.random.default_rng(2).standard_normal(induced.size) * sigma
+    rec = Recording(fs=FS, t0_ns=0, pressure=induced + noise, acceleration=acc)
+    compensated, _ = compensate_recording(model(), rec)
+    assert np.allclose(compensated, noise, rtol=0, atol=1e-9 * np.max(np.abs(induced)))
+    shots = detect_shots(rec, pre_ms=3.0, post_ms=10.0)
+    assert len(shots) == 15
+    residual = shot_residuals(shots, rec.pressure, compensated)
+    peaks = np.array([np.max(np.abs(induced[s.window])) for s in shots])
+    # The residual is the window's noise peak: a few σ for ~1400 Gaussian samples.
+    assert np.all(residual > 100 * 2.5 * sigma / (peaks + 5 * sigma))
+    assert np.all(residual < 100 * 5.0 * sigma / (peaks - 5 * sigma))
+
+
+def test_unstable_denominator_is_rejected_with_its_pole_magnitude():
+    with pytest.raises(UnstableModelError, match='magnitude 1.1 '):
+        CompensationFilter(B, np.poly([1.1, 0.5]), nk=NK)
+    with pytest.raises(UnstableModelError, match='magnitude 1 '):
+        CompensationFilter(B, [1.0, -1.0], nk=NK)  # an integrator: marginal
+    with pytest.raises(UnstableModelError):
+        CompensationFilter.from_model(model(a=[1.0, -1.889, 0.8907 + 0.2]))
+    assert CompensationFilter(B, A, nk=NK).pole_radius == pytest.approx(
+        np.exp(-0.1 * WN / FS), rel=1e-9)
+
+
+def test_reset_returns_to_rest():
+    acc = acceleration(3000)
+    f = CompensationFilter(B, A, nk=NK)
+    first = f.induced(acc)
+    assert not np.array_equal(f.induced(acc), first)  # the state carried over
+    f.reset()
+    assert np.array_equal(f.induced(acc), first)
+
+
+def test_process_subtracts_and_checks_shapes():
+    acc = acceleration(1000)
+    raw = np.random.default_rng(3).standard_normal(1000) * 1e4
+    compensated, induced = CompensationFilter(B, A, nk=NK).process(acc, raw[np.newaxis])
+    assert np.array_equal(compensated, raw - induced)
+    with pytest.raises(CompensationError, match='same samples'):
+        CompensationFilter(B, A, nk=NK).process(acc, raw[:10])
+    with pytest.raises(CompensationError, match='n_inputs=2'):
+        CompensationFilter(B, A, nk=NK, inputs=('a_z', 'a_x'))
+    with pytest.raises(CompensationError, match='nk'):
+        CompensationFilter(B, A, nk=-1)
+    with pytest.raises(InputError, match='unknown model input'):
+        CompensationFilter(B, A, inputs=('jerk',))
+
+
+def test_rate_mismatch_is_an_error():
+    acc = acceleration(1000)
+    rec = Recording(fs=2 * FS, t0_ns=0, pressure=np.zeros(1000), acceleration=acc)
+    with pytest.raises(CompensationError, match='resample'):
+        compensate_recording(model(), rec)
+
+
+def test_input_channels_derivative_carries_state():
+    ramp = np.zeros((3, 10))
+    ramp[0] = 5.0 * np.arange(10) / FS  # 5 m/s³
+    state = {}
+    first = input_channels(('a_x', 'da_x'), ramp[:, :4], state, fs=FS)
+    second = input_channels(('a_x', 'da_x'), ramp[:, 4:], state, fs=FS)
+    rows = np.concatenate([first, second], axis=1)
+    assert np.array_equal(rows[0], ramp[0])
+    assert rows[1, 0] == 0.0 and np.allclose(rows[1, 1:], 5.0)
+    with pytest.raises(InputError, match='sample rate'):
+        input_channels(('da_z',), ramp, {})
+
+
+def test_peak_residual_percent():
+    raw = np.array([0.0, 1.0, -4.0, 2.0])
+    assert peak_residual_percent(raw, np.array([0.0, 0.2, -0.4, 0.1])) == pytest.approx(10.0)
+    with pytest.raises(CompensationError, match='zero'):
+        peak_residual_percent(np.zeros(4), np.zeros(4))
