@@ -1,0 +1,216 @@
+"""
+Measured against simulated induced pressure per shot, as MATLAB's ``compare`` reports it.
+
+Each model is *simulated* (not one-step predicted) from the measured acceleration over every
+shot window, from a zero state at the window start (windows start in the quiet
+pre-trigger), with the windows' baselines removed (:func:`~sensor_comp.core.shots.segments`).
+Per shot and model:
+
+- fit % ``100·(1 − ‖y − ŷ‖/‖y − ȳ‖)``; the overall fit takes the norms over all the windows
+  together (each window's own mean), so it depends on the window lengths, which are given
+  with every shot;
+- peak error: the model's peak (largest-magnitude value, sign kept) minus the measured one,
+  in MPa and in % of the measured peak (the seed paper: 0.1448 vs 0.1402 MPa);
+- peak residual: peak ``|y − ŷ|`` in % of peak ``|y|``, the compensated residual of the
+  window (the paper's < 11 %); the overall value is the worst shot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .compensation import CompensationError, LinearModel, peak_residual_percent
+from .ident.metrics import fit_percent
+from .ident.simulate import simulate
+from .shots import segments, Shot, ShotError
+from ..streams import Recording
+
+__all__ = ['Comparison', 'ShotComparison', 'compare', 'format_table']
+
+_WINDOWS = ('shot windows from the pre-trigger to the post-trigger, baselines removed, each '
+            'simulated from rest; overall fit over all windows together')
+
+
+def _signed_peak(x: np.ndarray) -> float:
+    return float(x[np.argmax(np.abs(x))]) if x.size else math.nan
+
+
+@dataclass(frozen=True)
+class ShotComparison:
+    """
+    One model against one shot window.
+
+    Args:
+        index: The shot's index.
+        start_s: Window start in seconds since the recording start.
+        stop_s: Window end in seconds.
+        fit_percent: Fit of the simulation in this window.
+        peak_mpa: Measured peak (largest magnitude, sign kept) in MPa.
+        model_peak_mpa: Simulated peak in MPa.
+        peak_error_mpa: ``model_peak_mpa − peak_mpa``.
+        peak_error_percent: The peak error in % of ``|peak_mpa|``.
+        peak_residual_percent: Peak ``|y − ŷ|`` in % of peak ``|y|``.
+        t: Sample times in s since the recording start (not in :meth:`to_dict`).
+        measured: Measured pressure in the window, Pa, baseline removed (denoised if asked).
+        simulated: Simulated induced pressure, Pa.
+
+    """
+
+    index: int
+    start_s: float
+    stop_s: float
+    fit_percent: float
+    peak_mpa: float
+    model_peak_mpa: float
+    peak_error_mpa: float
+    peak_error_percent: float
+    peak_residual_percent: float
+    t: np.ndarray = field(repr=False, compare=False)
+    measured: np.ndarray = field(repr=False, compare=False)
+    simulated: np.ndarray = field(repr=False, compare=False)
+
+    def to_dict(self) -> dict:
+        """Return the numbers (no arrays) as JSON-ready values."""
+        return {'index': self.index, 'start_s': self.start_s, 'stop_s': self.stop_s,
+                'fit_percent': self.fit_percent, 'peak_mpa': self.peak_mpa,
+                'model_peak_mpa': self.model_peak_mpa, 'peak_error_mpa': self.peak_error_mpa,
+                'peak_error_percent': self.peak_error_percent,
+                'peak_residual_percent': self.peak_residual_percent}
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """
+    One model against all the shot windows.
+
+    Args:
+        label: The model's name in tables and plots.
+        fit_percent: Fit over all windows together.
+        peak_residual_percent: Worst peak residual of the shots.
+        shots: Per-shot numbers and traces.
+        denoised: Whether the measured pressure was denoised before comparing.
+
+    """
+
+    label: str
+    fit_percent: float
+    peak_residual_percent: float
+    shots: tuple[ShotComparison, ...]
+    denoised: bool = False
+
+    def to_dict(self) -> dict:
+        """Return the numbers as JSON-ready values (for ``--json``)."""
+        return {'label': self.label, 'fit_percent': self.fit_percent,
+                'peak_residual_percent': self.peak_residual_percent,
+                'denoised': self.denoised, 'windows': _WINDOWS,
+                'n_samples': int(sum(s.t.size for s in self.shots)),
+                'shots': [s.to_dict() for s in self.shots]}
+
+
+def _label(model: LinearModel, position: int) -> str:
+    for name in ('label', 'name', 'structure'):
+        value = getattr(model, name, None)
+        if isinstance(value, str) and value:
+            return value
+    return f'model {position}'
+
+
+def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence[Shot], *,
+            labels: Sequence[str] | None = None,
+            denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Comparison]:
+    """
+    Compare several models with the measured pressure of the same shots.
+
+    Args:
+        models: Models with ``b``, ``a``, ``nk``, ``inputs`` and ``fs``; a single model is
+            accepted too.
+        recording: Pressure and acceleration.
+        shots: The shots to compare on (say which: calibration or validation).
+        labels: One name per model; default the model's ``label``/``name``/``structure``
+            attribute or ``'model i'``.
+        denoise: Applied once to each measured window before comparing (e.g. an
+            :class:`~sensor_comp.core.denoise.EmdDenoiser`); None compares with the
+            measured pressure.
+
+    Returns:
+        One :class:`Comparison` per model, in order.
+
+    Raises:
+        ShotError: With no shot, a window with missing samples, or labels that do not match.
+        CompensationError: When a model's sample rate differs from the recording's.
+
+    """
+    if hasattr(models, 'a'):
+        models = [models]
+    models = list(models)
+    if not shots:
+        raise ShotError('no shots to compare on')
+    if labels is not None and len(labels) != len(models):
+        raise ShotError(f'{len(labels)} labels given for {len(models)} models')
+    labels = list(labels) if labels is not None else [_label(m, i)
+                                                      for i, m in enumerate(models)]
+    for model, label in zip(models, labels):
+        if not math.isclose(model.fs, recording.fs, rel_tol=1e-9):
+            raise CompensationError(f'{label}: identified at {model.fs:g} Hz, recording '
+                                    f'sampled at {recording.fs:g} Hz')
+    measured = [y for _, y in segments(recording, shots, inputs=(), denoise=denoise)]
+    times = [np.arange(s.start, s.stop) / recording.fs for s in shots]
+    inputs_cache: dict[tuple[str, ...], list[np.ndarray]] = {}
+    out = []
+    for model, label in zip(models, labels):
+        inputs = tuple(model.inputs)
+        if inputs not in inputs_cache:
+            inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
+        simulated = simulate(model, inputs_cache[inputs])
+        rows = []
+        for shot, t, y, yhat in zip(shots, times, measured, simulated):
+            peak, model_peak = _signed_peak(y) / 1e6, _signed_peak(yhat) / 1e6
+            try:
+                residual = peak_residual_percent(y, y - yhat)
+            except CompensationError as err:
+                raise ShotError(f'shot {shot.index}: {err}') from None
+            rows.append(ShotComparison(
+                index=shot.index, start_s=shot.start_s, stop_s=shot.stop_s,
+                fit_percent=float(fit_percent(y, yhat)), peak_mpa=peak,
+                model_peak_mpa=model_peak,
+                peak_error_mpa=model_peak - peak,
+                peak_error_percent=100.0 * (model_peak - peak) / abs(peak),
+                peak_residual_percent=residual, t=t, measured=y, simulated=yhat))
+        out.append(Comparison(label=label,
+                              fit_percent=float(fit_percent(measured, simulated)),
+                              peak_residual_percent=max(r.peak_residual_percent for r in rows),
+                              shots=tuple(rows), denoised=denoise is not None))
+    return out
+
+
+def format_table(comparisons: Sequence[Comparison]) -> str:
+    """
+    Return a text table: one row per shot, fit / peak error / residual per model.
+
+    The last row holds the overall fit and the worst residual of each model.
+    """
+    if not comparisons:
+        return 'no models compared\n'
+    cell = f'{"fit %":>7} {"peak err %":>10} {"resid %":>8}'
+    width = len(cell)
+    head = f'{"":>4} {"window (s)":>17}'
+    lines = [head + ''.join(f' | {c.label[:width]:^{width}}' for c in comparisons),
+             f'{"shot":>4} {"":>17}' + ''.join(f' | {cell}' for _ in comparisons)]
+    lines.append('-' * len(lines[-1]))
+    for row in zip(*(c.shots for c in comparisons)):
+        first = row[0]
+        line = f'{first.index:>4} {first.start_s:>8.4f}-{first.stop_s:<8.4f}'
+        line += ''.join(f' | {s.fit_percent:>7.2f} {s.peak_error_percent:>+10.2f} '
+                        f'{s.peak_residual_percent:>8.2f}' for s in row)
+        lines.append(line)
+    lines.append('-' * len(lines[1]))
+    lines.append(f'{"all":>4} {"(worst resid.)":>17}' +
+                 ''.join(f' | {c.fit_percent:>7.2f} {"":>10} {c.peak_residual_percent:>8.2f}'
+                         for c in comparisons))
+    if any(c.denoised for c in comparisons):
+        lines.append('measured pressure denoised (EMD) before comparing')
+    return '\n'.join(lines) + '\n'
