@@ -1,0 +1,290 @@
+"""
+Write rosbag2-compatible MCAP bags (``ros2 bag play``, ``rosbags``, Foxglove read them).
+
+The layout follows rosbag2's MCAP storage (see :mod:`sensor_comp.io.rosbag2_layout`): profile
+``ros2``, one ``ros2msg`` schema per type with the full definition text, ``cdr`` channels with
+``offered_qos_profiles``, chunked and compressed, with a summary (statistics, chunk and
+message indexes) so that readers can seek.
+
+:func:`write_streams` and :func:`write_recording` lay signal streams out the way a live
+recording of the rig looks: the latched ``stream_info`` first, then the blocks of all streams
+interleaved in time order, each block's ``log_time`` and ``publish_time`` equal to its stamp.
+"""
+
+from __future__ import annotations
+
+import heapq
+import os
+from pathlib import Path
+from typing import Sequence
+
+from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
+
+from .. import __version__
+from ..blocks import iter_blocks
+from ..streams import Recording, STREAM_INFO, Stream
+from .messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info, IMAGE
+from .msgdefs import message_definition, type_hash
+from .rosbag2_layout import (BagError, MESSAGE_ENCODING, offered_qos_profiles, PROFILE,
+                             SCHEMA_ENCODINGS)
+
+__all__ = ['BagWriter', 'topic_name', 'write_recording', 'write_streams']
+
+_COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                 'none': CompressionType.NONE}
+_LIBRARY = f'sensor_comp/{__version__}; {LIBRARY_IDENTIFIER}'
+_UINT32 = 2 ** 32
+_UINT64 = 2 ** 64
+
+
+def topic_name(namespace: str, relative: str) -> str:
+    """
+    Return the absolute topic of ``relative`` (e.g. ``'pressure/raw'``) in ``namespace``.
+
+    ``'/rig'``, ``'rig'`` and ``'/rig/'`` all give ``'/rig/pressure/raw'``; ``''`` and ``'/'``
+    give ``'/pressure/raw'``.
+    """
+    namespace = namespace.strip('/')
+    return f'/{namespace}/{relative}' if namespace else f'/{relative}'
+
+
+class BagWriter:
+    """
+    Write one rosbag2-layout MCAP file.
+
+    Use it as a context manager::
+
+        with BagWriter('run.mcap', atomic=True) as bag:
+            bag.add_topic('/rig/acceleration', IMAGE)
+            bag.write('/rig/acceleration', cdr_bytes, log_time_ns=stamp)
+
+    Args:
+        path: The ``.mcap`` file to create (replaced if it exists). Its directory must exist.
+        compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
+        chunk_size: Uncompressed bytes after which a chunk is closed and written.
+        atomic: Write ``<path>.partial`` and rename it to ``path`` only when :meth:`close`
+            succeeds, so that ``path`` never holds a half-written bag. After an exception
+            inside the ``with`` block the ``.partial`` file is closed and kept for
+            inspection (the exception says where).
+
+    Raises:
+        BagError: On an unknown compression, a bad chunk size or a missing directory.
+
+    """
+
+    def __init__(self, path, *, compression: str = 'zstd', chunk_size: int = 4 << 20,
+                 atomic: bool = False):
+        if compression not in _COMPRESSIONS:
+            raise BagError(f'unknown bag compression {compression!r}; use one of '
+                           f'{", ".join(_COMPRESSIONS)}')
+        if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
+            raise BagError(f'chunk_size must be a positive number of bytes, got {chunk_size!r}')
+        self.path = Path(path)
+        self.atomic = atomic
+        self._file_path = (self.path.with_name(self.path.name + '.partial') if atomic
+                           else self.path)
+        try:
+            self._file = open(self._file_path, 'wb')
+        except OSError as exc:
+            raise BagError(f'cannot create bag {self._file_path}: {exc.strerror}') from None
+        self._writer = Writer(self._file, chunk_size=chunk_size,
+                              compression=_COMPRESSIONS[compression])
+        self._writer.start(profile=PROFILE, library=_LIBRARY)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[int, int] = {}
+        self._closed = False
+
+    @property
+    def file_path(self) -> Path:
+        """File being written: ``path``, or ``<path>.partial`` until an atomic bag closes."""
+        return self._file_path
+
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        if exc is None:
+            self.close()
+            return
+        self._finish()
+        if self.atomic:
+            exc.add_note(f'the unfinished bag is kept for inspection at {self._file_path}; '
+                         f'{self.path} was not written')
+        else:
+            exc.add_note(f'bag {self.path} was closed early; it holds only the messages '
+                         f'written before the error')
+
+    def add_topic(self, topic: str, msgtype: str, *, latched: bool = False) -> None:
+        """
+        Declare a topic before writing to it.
+
+        Args:
+            topic: Absolute topic name, e.g. ``'/rig/acceleration'``.
+            msgtype: ``pkg/msg/Type``; its definition must be installed (see
+                :func:`~sensor_comp.io.msgdefs.message_definition`).
+            latched: Offer the topic transient-local on replay (e.g. ``stream_info``).
+
+        Raises:
+            BagError: If the writer is closed, the name is not absolute or already added.
+            MessageDefinitionError: If the message type is not installed.
+
+        """
+        self._check_open()
+        if not topic.startswith('/') or topic.endswith('/') or '//' in topic:
+            raise BagError(f'topic {topic!r} must be an absolute ROS name such as /rig/data')
+        if topic in self._channels:
+            raise BagError(f'topic {topic} was already added to {self.path}')
+        if msgtype not in self._schemas:
+            self._schemas[msgtype] = self._writer.register_schema(
+                name=msgtype, encoding=SCHEMA_ENCODINGS[0],
+                data=message_definition(msgtype).encode())
+        metadata = {'offered_qos_profiles': offered_qos_profiles(latched=latched)}
+        digest = type_hash(msgtype)
+        if digest:
+            metadata['topic_type_hash'] = digest
+        channel = self._writer.register_channel(topic=topic, message_encoding=MESSAGE_ENCODING,
+                                                schema_id=self._schemas[msgtype],
+                                                metadata=metadata)
+        self._channels[topic] = channel
+        self._sequence[channel] = 0
+
+    def write(self, topic: str, data: bytes, *, log_time_ns: int,
+              publish_time_ns: int | None = None) -> None:
+        """
+        Append one serialized message.
+
+        Args:
+            topic: A topic declared with :meth:`add_topic`.
+            data: CDR bytes of the message.
+            log_time_ns: Receive time in integer nanoseconds (rosbag2's ``recv_timestamp``).
+            publish_time_ns: Send time; defaults to ``log_time_ns``.
+
+        Raises:
+            BagError: If the writer is closed, the topic unknown or a time negative.
+
+        """
+        self._check_open()
+        try:
+            channel = self._channels[topic]
+        except KeyError:
+            raise BagError(f'topic {topic} was not added to {self.path}; call add_topic '
+                           f'first (added: {", ".join(self._channels) or "none"})') from None
+        publish_time_ns = log_time_ns if publish_time_ns is None else publish_time_ns
+        for name, value in (('log_time_ns', log_time_ns), ('publish_time_ns', publish_time_ns)):
+            if not 0 <= value < _UINT64:
+                raise BagError(f'{topic}: {name} {value} is outside 0..2^64-1 ns; bags store '
+                               f'unsigned times since the epoch')
+        sequence = self._sequence[channel]
+        self._sequence[channel] = (sequence + 1) % _UINT32
+        self._writer.add_message(channel_id=channel, log_time=int(log_time_ns), data=data,
+                                 publish_time=int(publish_time_ns), sequence=sequence)
+
+    def flush(self) -> None:
+        """
+        Close the current chunk and push it to the file (a crash then loses nothing).
+
+        Raises:
+            BagError: If the writer is closed.
+
+        """
+        self._check_open()
+        self._writer.flush()
+
+    def close(self) -> None:
+        """
+        Finish the file (summary and footer) and, for an atomic bag, rename it to ``path``.
+
+        Calling it again does nothing.
+        """
+        if self._closed:
+            return
+        self._finish()
+        if self.atomic:
+            os.replace(self._file_path, self.path)
+            self._file_path = self.path
+
+    def _finish(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._file.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise BagError(f'bag {self.path} is already closed')
+
+
+def _indexed(index: int, blocks):
+    # (stamp, stream index, block): merging keeps time order, and equal stamps keep the
+    # order of the streams.
+    for stamp, block in blocks:
+        yield stamp, index, block
+
+
+def write_streams(path, streams: Sequence[Stream], *, namespace: str = '/rig',
+                  block_width: int = 1000, atomic: bool = True,
+                  compression: str = 'zstd') -> None:
+    """
+    Write streams as a bag that looks like a live recording of the rig.
+
+    ``<namespace>/stream_info`` (latched) comes first with one status per stream, then the
+    ``64FC1`` Image blocks of every stream on ``<namespace>/<stream topic>``, interleaved in
+    stamp order. Streams with the same ``t0_ns`` and rate get identical block stamps. Gaps of
+    a stream are left out (no block covers them), so reading restores them.
+
+    Args:
+        path: The ``.mcap`` file to write.
+        streams: Streams with distinct relative topics (``info.topic``).
+        namespace: Rig namespace of the topics.
+        block_width: Samples per block.
+        atomic: Write to ``<path>.partial`` and rename on success.
+        compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
+
+    Raises:
+        BagError: On no streams, duplicate topics, absolute stream topics or negative stamps.
+        StreamError: On a bad block width.
+
+    """
+    streams = list(streams)
+    if not streams:
+        raise BagError(f'no streams to write to {path}')
+    topics = [s.info.topic for s in streams]
+    bad = [t for t in topics if t.startswith('/') or not t or t == STREAM_INFO]
+    if bad:
+        raise BagError(f'stream topics must be relative to the namespace and not '
+                       f'{STREAM_INFO!r}, got {bad!r}')
+    if len(set(topics)) != len(topics):
+        raise BagError(f'stream topics must be distinct, got {topics!r}')
+    start = min(s.t0_ns for s in streams)
+    if start < 0:
+        raise BagError(f'stream stamps must not be negative (bags store unsigned times), '
+                       f'got t0_ns = {start}')
+    per_stream = [_indexed(i, iter_blocks(s, width=block_width)) for i, s in enumerate(streams)]
+    with BagWriter(path, atomic=atomic, compression=compression) as bag:
+        info_topic = topic_name(namespace, STREAM_INFO)
+        bag.add_topic(info_topic, DIAGNOSTIC_ARRAY, latched=True)
+        names = [topic_name(namespace, t) for t in topics]
+        for name in names:
+            bag.add_topic(name, IMAGE)
+        bag.write(info_topic, encode_stream_info([s.info for s in streams], stamp_ns=start),
+                  log_time_ns=start)
+        for stamp, i, block in heapq.merge(*per_stream, key=lambda item: item[:2]):
+            bag.write(names[i],
+                      encode_block(block, stamp_ns=stamp, frame_id=streams[i].info.frame_id),
+                      log_time_ns=stamp)
+
+
+def write_recording(path, recording: Recording, *, namespace: str = '/rig',
+                    block_width: int = 1000, atomic: bool = True,
+                    compression: str = 'zstd') -> None:
+    """
+    Write a recording's ``acceleration`` and ``pressure/raw`` streams as a bag.
+
+    See :func:`write_streams` for the layout and arguments.
+    """
+    write_streams(path, recording.streams(), namespace=namespace, block_width=block_width,
+                  atomic=atomic, compression=compression)
