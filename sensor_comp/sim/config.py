@@ -61,7 +61,9 @@ class RigConfig:
         t0_ns: Acquisition time of the first sample in ns.
         frame_id: Sensor frame of the recording.
         max_step_s: Largest integration step; the pressure channel is integrated on the
-            sample grid refined by an integer factor until the step is at most this.
+            sample grid refined by an integer factor until the step is at most this. At the
+            default 0.5 µs the first-order-hold error at a pulse corner (see :mod:`.lti`)
+            stays below 0.5 % of the default noise even with a 10 kHz second mode.
 
     Raises:
         SimConfigError: On any invalid value, naming it and the valid range.
@@ -81,7 +83,7 @@ class RigConfig:
     seed: int = 0
     t0_ns: int = 0
     frame_id: str = 'sensor'
-    max_step_s: float = 1e-6
+    max_step_s: float = 0.5e-6
 
     def __post_init__(self):
         shots = tuple(self.shots) if isinstance(self.shots, Sequence) else ()

@@ -5,96 +5,116 @@ The simulator integrates every linear element of the sensor (mechanical modes, c
 amplifier) in continuous time. A state-space model ``x' = A x + B u, y = C x + D u`` is
 discretised with the first-order hold (triangle hold): the discrete model is *exact* when the
 input is linear between samples, so the only error is how far the true input departs from
-its piecewise-linear interpolant. For a half-sine of width ``T`` sampled every ``h`` that is
-at most ``(pi h / T)**2 / 8`` of its peak (1.2e-6 at 1 µs and 1 ms), far below any realistic
-noise floor. Unlike a bilinear or impulse-invariant design there is no frequency warping.
+its piecewise-linear interpolant. Inside a half-sine of width ``T`` sampled every ``h`` that
+is at most ``(pi h / T)**2 / 8`` of its peak; at a pulse corner (slope jump ``A pi / T``)
+the chord misses an area of at most ``A pi h**2 / (8 T)``, which rings a mode of natural
+frequency ``wn`` by at most ``wn`` times that area (2e-5 of the static response for 5 kHz,
+1 ms and h = 1 µs). There is no frequency warping, unlike a bilinear design.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 
 import numpy as np
 from scipy import signal
 
 __all__ = [
+    'FohFilter',
+    'StateSpace',
     'first_order_highpass',
-    'first_order_highpass_response',
-    'foh_filter',
     'second_order_lowpass',
 ]
 
 
-def foh_filter(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
-               x: np.ndarray, *, fs: float) -> np.ndarray:
+@dataclass(frozen=True, eq=False)
+class StateSpace:
     """
-    Run a single-input single-output continuous system over samples of its input.
-
-    The system starts at rest; the input is taken as linear between samples.
+    A single-input single-output continuous system ``x' = A x + B u, y = C x + D u``.
 
     Args:
         a: ``(n, n)`` state matrix (1/s).
         b: ``(n, 1)`` input matrix.
         c: ``(1, n)`` output matrix.
         d: ``(1, 1)`` feed-through.
-        x: Input samples on the last axis.
-        fs: Sample rate of ``x`` in Hz.
-
-    Returns:
-        The output samples, same shape as ``x``.
 
     """
-    ad, bd, cd, dd, _ = signal.cont2discrete((a, b, c, d), 1.0 / fs, method='foh')
-    num, den = signal.ss2tf(ad, bd, cd, dd)
-    return signal.lfilter(num[0], den, x, axis=-1)
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+
+    @classmethod
+    def second_order_lowpass(cls, *, fn: float, zeta: float, gain: float = 1.0) -> StateSpace:
+        """
+        Return ``gain * wn**2 / (s**2 + 2 zeta wn s + wn**2)`` (paper eq. 3, up to sign).
+
+        This is a spring-mass-damper driven by its base acceleration: the relative
+        displacement times ``wn**2``, so the static gain is ``gain``.
+
+        Args:
+            fn: Undamped natural frequency in Hz.
+            zeta: Damping ratio.
+            gain: Static gain.
+
+        Returns:
+            The system.
+
+        """
+        wn = 2.0 * math.pi * fn
+        return cls(np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]]),
+                   np.array([[0.0], [1.0]]), np.array([[gain * wn * wn, 0.0]]),
+                   np.zeros((1, 1)))
+
+    @classmethod
+    def first_order_highpass(cls, *, tau: float) -> StateSpace:
+        """Return ``tau s / (tau s + 1)``: the state is the charge that has leaked away."""
+        return cls(np.array([[-1.0 / tau]]), np.array([[1.0 / tau]]), np.array([[-1.0]]),
+                   np.array([[1.0]]))
+
+    def response(self, freq_hz: float) -> complex:
+        """Return the complex frequency response at ``freq_hz``."""
+        s = 2j * math.pi * freq_hz
+        n = self.a.shape[0]
+        x = np.linalg.solve(s * np.eye(n) - self.a, self.b)
+        return complex((self.c @ x + self.d)[0, 0])
+
+
+class FohFilter:
+    """
+    A continuous system discretised with the first-order hold, fed chunk after chunk.
+
+    The filter starts at rest; consecutive calls continue from the state the previous call
+    left, so a long signal can be processed in pieces with the same result.
+
+    Args:
+        system: The continuous system.
+        fs: Sample rate of the input in Hz.
+
+    """
+
+    def __init__(self, system: StateSpace, *, fs: float):
+        ad, bd, cd, dd, _ = signal.cont2discrete((system.a, system.b, system.c, system.d),
+                                                 1.0 / fs, method='foh')
+        num, den = signal.ss2tf(ad, bd, cd, dd)
+        self._b = num[0]
+        self._a = den
+        self._zi = np.zeros(max(len(self._a), len(self._b)) - 1)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """Return the output for the next input samples ``x`` (1-D)."""
+        y, self._zi = signal.lfilter(self._b, self._a, x, zi=self._zi)
+        return y
 
 
 def second_order_lowpass(x: np.ndarray, *, fs: float, fn: float, zeta: float,
                          gain: float = 1.0) -> np.ndarray:
-    """
-    Filter with ``gain * wn**2 / (s**2 + 2 zeta wn s + wn**2)`` (paper eq. 3, up to sign).
-
-    This is a spring-mass-damper driven by the base acceleration: the relative displacement
-    times ``wn**2``, so the static gain is ``gain``.
-
-    Args:
-        x: Input samples (last axis).
-        fs: Sample rate in Hz.
-        fn: Undamped natural frequency in Hz.
-        zeta: Damping ratio.
-        gain: Static gain.
-
-    Returns:
-        The output samples.
-
-    """
-    wn = 2.0 * math.pi * fn
-    a = np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]])
-    b = np.array([[0.0], [1.0]])
-    c = np.array([[gain * wn * wn, 0.0]])
-    return foh_filter(a, b, c, np.zeros((1, 1)), x, fs=fs)
+    """Filter ``x`` (1-D, from rest) with :meth:`StateSpace.second_order_lowpass`."""
+    return FohFilter(StateSpace.second_order_lowpass(fn=fn, zeta=zeta, gain=gain), fs=fs)(x)
 
 
 def first_order_highpass(x: np.ndarray, *, fs: float, tau: float) -> np.ndarray:
-    """
-    Filter with ``tau s / (tau s + 1)``, a charge amplifier's discharge, from rest.
-
-    Args:
-        x: Input samples (last axis).
-        fs: Sample rate in Hz.
-        tau: Time constant in s.
-
-    Returns:
-        The output samples.
-
-    """
-    a = np.array([[-1.0 / tau]])
-    b = np.array([[1.0 / tau]])
-    # y = u - (low-passed u): the state is the charge that has leaked away.
-    return foh_filter(a, b, np.array([[-1.0]]), np.array([[1.0]]), x, fs=fs)
-
-
-def first_order_highpass_response(f: float | np.ndarray, *, tau: float) -> np.ndarray:
-    """Return the complex frequency response of ``tau s / (tau s + 1)`` at ``f`` Hz."""
-    s = 2j * math.pi * np.asarray(f, dtype=float) * tau
-    return s / (s + 1.0)
+    """Filter ``x`` (1-D, from rest) with ``tau s / (tau s + 1)``, tau in s."""
+    return FohFilter(StateSpace.first_order_highpass(tau=tau), fs=fs)(x)

@@ -32,13 +32,15 @@ import numpy as np
 from .config import RigConfig
 from .effects import Mode
 from .hammer import acceleration, draw_touches, Motion, Touch
-from .lti import second_order_lowpass
+from .lti import FohFilter, StateSpace
 from ..streams import G0, Recording
 
 __all__ = ['Simulation', 'simulate']
 
 # Independent random streams of one seed.
 _TOUCHES, _ACCEL_NOISE, _PRESSURE_NOISE, _EFFECTS = 1, 2, 3, 100
+#: Output samples integrated at a time.
+_CHUNK = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -101,41 +103,62 @@ def _induced_and_transient(config: RigConfig, touches: tuple[Touch, ...],
     effects = config.ordered_effects()
     step = config.oversample
     fine_fs = config.fs * step
-    t = np.arange((n - 1) * step + 1) / fine_fs - config.delay_s
-    motion = Motion(touches, t)
-    force = motion.axial
-    for effect in effects:
-        force = effect.drive(force, motion)
+    gain = config.sensor.gain_pa_per_ms2
     modes = [Mode(fn_hz=config.sensor.fn_hz, zeta=config.sensor.zeta, gain=1.0)]
     modes += [mode for effect in effects for mode in effect.modes(config.sensor)]
-    gain = config.sensor.gain_pa_per_ms2
-    induced = sum(second_order_lowpass(force, fs=fine_fs, fn=m.fn_hz, zeta=m.zeta,
-                                       gain=gain * m.gain) for m in modes)
-    transient = np.zeros_like(induced)
-    for effect in effects:
-        for target, part in ((induced, effect.element(motion)),
-                             (transient, effect.transient(motion))):
+    mechanics = [FohFilter(StateSpace.second_order_lowpass(fn=m.fn_hz, zeta=m.zeta,
+                                                           gain=gain * m.gain), fs=fine_fs)
+                 for m in modes]
+    systems = [system for system in (e.channel() for e in effects) if system is not None]
+    channel = [FohFilter(system, fs=fine_fs) for system in systems]
+    channel_transient = [FohFilter(system, fs=fine_fs) for system in systems]
+    induced = np.empty(n)
+    transient = np.zeros(n)
+    started = False
+    # Integrate in pieces of whole output samples: memory stays bounded for long runs.
+    for first in range(0, n, _CHUNK):
+        count = min(_CHUNK, n - first)
+        t = np.arange(first * step, (first + count) * step) / fine_fs - config.delay_s
+        motion = Motion(touches, t)
+        force = motion.axial
+        for effect in effects:
+            force = effect.drive(force, motion)
+        pressure = sum(mode(force) for mode in mechanics)
+        extra = None
+        for effect in effects:
+            element = effect.element(motion)
+            if element is not None:
+                pressure += element
+            part = effect.transient(motion)
             if part is not None:
-                target += part
-    for effect in effects:
-        induced = effect.channel(induced, fs=fine_fs)
-        if transient.any():
-            transient = effect.channel(transient, fs=fine_fs)
-    return induced[::step], transient[::step]
+                extra = part if extra is None else extra + part
+        for stage in channel:
+            pressure = stage(pressure)
+        induced[first:first + count] = pressure[::step]
+        if extra is None and started:
+            extra = np.zeros_like(pressure)  # the channel's state keeps decaying
+        if extra is not None:
+            started = True
+            for stage in channel_transient:
+                extra = stage(extra)
+            transient[first:first + count] = extra[::step]
+    return induced, transient
 
 
 def _stationary(config: RigConfig, n: int) -> np.ndarray:
     """Return the stationary pickup through the channel, in steady state, at ``fs``."""
     out = np.zeros(n)
     t = np.arange(n) / config.fs
+    systems = [system for system in (e.channel() for e in config.effects) if system is not None]
     for effect in config.ordered_effects():
         rng = np.random.default_rng([config.seed, _EFFECTS, zlib.crc32(effect.id.encode())])
         for line in effect.lines(rng):
             h = np.exp(-2j * math.pi * line.freq_hz * config.delay_s)
-            for channel in config.effects:
-                h *= channel.response(line.freq_hz)
-            out += abs(h) * line.amplitude_pa * np.sin(
-                2 * math.pi * line.freq_hz * t + line.phase_rad + np.angle(h))
+            for system in systems:
+                h *= system.response(line.freq_hz)
+            phase = np.multiply(t, 2 * math.pi * line.freq_hz)
+            phase += line.phase_rad + np.angle(h)
+            out += abs(h) * line.amplitude_pa * np.sin(phase, out=phase)
     return out
 
 

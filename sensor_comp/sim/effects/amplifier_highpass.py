@@ -14,10 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from .base import Effect, param
-from ..lti import first_order_highpass, first_order_highpass_response
+from ..lti import StateSpace
 
 __all__ = ['AmplifierHighpass']
 
@@ -37,10 +35,6 @@ class AmplifierHighpass(Effect):
         """Return five time constants."""
         return 5.0 * self.tau_ms * 1e-3
 
-    def channel(self, x: np.ndarray, *, fs: float) -> np.ndarray:
-        """Return the high-passed channel."""
-        return first_order_highpass(x, fs=fs, tau=self.tau_ms * 1e-3)
-
-    def response(self, freq_hz: float) -> complex:
-        """Return ``tau s / (tau s + 1)`` at ``freq_hz``."""
-        return complex(first_order_highpass_response(freq_hz, tau=self.tau_ms * 1e-3))
+    def channel(self) -> StateSpace:
+        """Return ``tau s / (tau s + 1)``."""
+        return StateSpace.first_order_highpass(tau=self.tau_ms * 1e-3)

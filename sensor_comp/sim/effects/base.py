@@ -13,9 +13,13 @@ every enabled effect, in ascending ``order``, along the signal path of the press
 3. :meth:`Effect.modes` — further mechanical modes driven by that force.
 4. :meth:`Effect.element` — further acceleration-driven pressure at the element (Pa).
 5. :meth:`Effect.transient` — shock-locked additive disturbance (Pa).
-6. :meth:`Effect.channel` / :meth:`Effect.response` — linear filtering of the whole channel,
-   in time (for signals that start at rest) and in frequency (for stationary lines).
+6. :meth:`Effect.channel` — a linear system filtering the whole channel (the simulator
+   integrates it from rest for shock-driven signals and applies its frequency response to
+   stationary lines).
 7. :meth:`Effect.lines` — stationary sinusoidal pickup (Pa), rendered analytically.
+
+Hooks 2, 4 and 5 see the signal in consecutive pieces of the time grid, so they must be
+memoryless (or compute from ``motion.t`` and ``motion.touches`` alone).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from ..errors import SimConfigError
 
 if TYPE_CHECKING:
     from ..hammer import Motion
+    from ..lti import StateSpace
     from ..sensor import SensorConfig
 
 __all__ = ['Effect', 'Line', 'Mode', 'param', 'registry']
@@ -199,13 +204,9 @@ class Effect:
         """Return a shock-locked additive disturbance in Pa, or None."""
         return None
 
-    def channel(self, x: np.ndarray, *, fs: float) -> np.ndarray:
-        """Return the channel's output for input ``x`` sampled at ``fs`` Hz, from rest."""
-        return x
-
-    def response(self, freq_hz: float) -> complex:
-        """Return the channel's complex frequency response at ``freq_hz``."""
-        return 1.0
+    def channel(self) -> StateSpace | None:
+        """Return a continuous linear system the whole channel passes through, or None."""
+        return None
 
     def lines(self, rng: np.random.Generator) -> tuple[Line, ...]:
         """Return stationary sinusoidal pickup, drawing random phases from ``rng``."""
