@@ -175,10 +175,14 @@ class BagReader:
         self._cut = None
         self._partial_chunk = None
         self._partial_messages = 0
-        self._data_start = self._read_header()
-        counts = self._read_summary()
-        if counts is None:
-            counts = self._scan()
+        try:
+            self._data_start = self._read_header()
+            counts = self._read_summary()
+            if counts is None:
+                counts = self._scan()
+        except BaseException:
+            self.close()
+            raise
         self.topics = {c.topic: TopicInfo(c.msgtype, c.latched, counts.get(cid, 0))
                        for cid, c in sorted(self._channels.items())}
 
@@ -275,23 +279,19 @@ class BagReader:
                     self._add_channel(body)
                 elif opcode == _STATISTICS:
                     stats = body
-        except (_Cut, struct.error):
-            stats = None
-        if stats is None:
+            # Without statistics, or with channels missing from the summary, the scan counts
+            # (keeping the channels found here: they may have no message in the data section).
+            if stats is None:
+                return None
+            fields = _STATISTICS_HEAD.unpack_from(stats, 0)
+            if fields[2] != len(self._channels):
+                return None
+            pairs = struct.iter_unpack('<HQ', stats[_STATISTICS_HEAD.size:][:fields[-1]])
+            return dict(pairs)
+        except (_Cut, struct.error):  # a damaged summary: trust only the data section
             self._schemas.clear()
             self._channels.clear()
             return None
-        fields = _STATISTICS_HEAD.unpack_from(stats, 0)
-        channel_count, size = fields[2], fields[-1]
-        if channel_count != len(self._channels):  # summary without channels: scan instead
-            return None
-        pos = _STATISTICS_HEAD.size
-        counts = {}
-        for _ in range(size // 10):
-            cid, count = struct.unpack_from('<HQ', stats, pos)
-            counts[cid] = count
-            pos += 10
-        return counts
 
     def _data(self, counts: dict[int, int] | None = None,
               wanted: set[int] | None = None) -> Iterator[RawMessage]:
