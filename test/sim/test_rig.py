@@ -17,58 +17,29 @@ def _prony2(y, fs):
     return wn / (2 * math.pi), -s[0].real / wn
 
 
-def _expected_induced(sim, half_sine_response, delay=0.0):
-    """Return the closed-form induced pressure of the linear sensor at the sample instants."""
-    sensor = sim.config.sensor
-    t = sim.recording.times()
-    out = np.zeros(t.shape)
-    for touch in sim.touches:
-        out += touch.peak_ms2 * half_sine_response(
-            t - touch.onset_s - delay, width=touch.shot.width_s, fn=sensor.fn_hz,
-            zeta=sensor.zeta)
-    return sensor.gain_pa_per_ms2 * out
-
-
-def _kink_error_bound(config):
-    """
-    Return a bound of the first-order-hold error of the induced pressure, in Pa.
-
-    Between two integration steps ``h`` the hold replaces the input by its chord. Where a
-    pulse starts or ends the acceleration has a corner (slope jump ``A pi / T``); the chord
-    misses an area of at most ``A pi / T * h**2 / 8``, which excites each mode ``i`` like
-    an impulse: at most ``|gain_i| S wn_i`` per unit area. Two corners per pulse; 50 %
-    margin for the smaller terms (curvature within the pulse, lateral corners, the strain
-    step through the amplifier).
-    """
-    h = 1.0 / (config.fs * config.oversample)
-    modes = [(config.sensor.fn_hz, 1.0)] + [
-        (m.fn_hz, m.gain) for e in config.effects for m in e.modes(config.sensor)]
-    rate = sum(abs(g) * 2 * math.pi * f for f, g in modes)
-    corner = max(s.peak_g * G0 * math.pi / s.width_s for s in config.shots)
-    return 1.5 * 2 * abs(config.sensor.gain_pa_per_ms2) * corner * h * h / 8 * rate
-
-
 @pytest.mark.parametrize('fs', [1e6, 2e5])
-def test_linear_response_matches_closed_form(fs, short_rig, half_sine_response):
+def test_linear_response_matches_closed_form(fs, short_rig, linear_induced,
+                                             corner_error_bound):
     sim = simulate(short_rig(fs=fs))
-    expected = _expected_induced(sim, half_sine_response)
-    assert np.max(np.abs(sim.induced - expected)) < _kink_error_bound(sim.config)
+    expected = linear_induced(sim)
+    assert np.max(np.abs(sim.induced - expected)) < corner_error_bound(sim.config)
     # "Far below the noise": that bound is under 1 % of the noise standard deviation ...
-    assert _kink_error_bound(sim.config) < 0.01 * sim.pressure_noise_pa
+    assert corner_error_bound(sim.config) < 0.01 * sim.pressure_noise_pa
     # ... and the comparison is not vacuous: the response is hundreds of deviations high.
     assert np.max(np.abs(expected)) > 100 * sim.pressure_noise_pa
     assert not sim.disturbance.any()
 
 
 @pytest.mark.parametrize('fs', [1e6, 2e5])
-def test_discretisation_error_far_below_noise_against_finer_grid(fs, short_rig):
+def test_discretisation_error_far_below_noise_against_finer_grid(
+        fs, short_rig, corner_error_bound):
     effects = ('channel_delay', 'transverse_sensitivity', 'nonlinear_sensitivity',
                'second_resonance', 'strain_sensitivity', 'zero_shift', 'amplifier_highpass',
                'mains_hum')
     coarse = simulate(short_rig(fs=fs, effects=effects))
     fine = simulate(short_rig(fs=fs, effects=effects, max_step_s=0.5e-6 / 8))
     assert coarse.config.oversample * 8 == fine.config.oversample
-    bound = _kink_error_bound(coarse.config)
+    bound = corner_error_bound(coarse.config)
     assert bound < 0.02 * coarse.pressure_noise_pa
     assert np.max(np.abs(coarse.induced - fine.induced)) < bound
     # The disturbance is smooth (no corners): its error is smaller still.
