@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from numbers import Integral
 from typing import Sequence
 
 from .effects import Effect, parse_effect
@@ -102,9 +103,10 @@ class RigConfig:
             set_(self, 'post_shot_s', _number('post_shot_s', self.post_shot_s, low=0.0))
         for name in ('seed', 't0_ns'):
             value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            if not isinstance(value, Integral) or isinstance(value, bool) or value < 0:
                 raise SimConfigError(f'rig {name} must be a non-negative integer, got '
                                      f'{value!r}')
+            object.__setattr__(self, name, int(value))
         if not isinstance(self.sensor, SensorConfig):
             raise SimConfigError(f'rig sensor must be a SensorConfig, got {self.sensor!r}')
         self._check_timing()

@@ -10,9 +10,10 @@ s + wn**2) * a`` (eq. 3) with ``S`` the static acceleration sensitivity.
 Default ``fn = 5 kHz``, ``zeta = 0.05``: the criterion is that the free ringing left after
 the shortest Table-2 pulses (0.94–0.99 ms, the 1963 g and 2185 g shots) stands clearly above
 the default 0.5 % noise. The closed-form response of this system to those half-sines leaves a
-ringing envelope of 10–12 % of the static response at the pulse end, i.e. about 20 noise
-standard deviations, that stays above the noise for about 2 ms (ten cycles); the longest
-Table-2 pulse (2.94 ms) still rings at 3.4 %. The quasi-static overshoot of the peak is 2–5 %
+ringing envelope of 10–12 % of their static response at the pulse end, about 20 standard
+deviations of the noise (0.5 % of the largest peak), which stays above the noise for about
+2 ms (ten cycles). Softer, longer shots ring less (the 180 g, 2.94 ms shot at 3.4 % of its
+own 25 kPa, below the noise). The peak overshoots the static response by 0–5 %
 (fn·T = 4.7–15). ``S = 1.4e-4 MPa/g`` is the paper's sensitivity near 1000 g
 (0.1402 MPa at 1006 g); ``charge_sensitivity = 100 pC/MPa`` is its 14.33 pC ↔ 0.1402 MPa.
 """
