@@ -43,7 +43,7 @@ _TOUCHES, _ACCEL_NOISE, _PRESSURE_NOISE, _EFFECTS = 1, 2, 3, 100
 _CHUNK = 1 << 18
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Simulation:
     """
     The result of a simulated rig run, with the truth behind it.
@@ -204,11 +204,15 @@ def simulate(config: RigConfig) -> Simulation:
     disturbance = transient + _stationary(config, n)
     pressure_sd = config.pressure_noise * float(np.max(np.abs(induced)))
     accel_sd = config.accel_noise * max(s.peak_g for s in config.shots) * G0
-    noise_p = np.random.default_rng([config.seed, _PRESSURE_NOISE]).standard_normal(n)
-    noise_a = np.random.default_rng([config.seed, _ACCEL_NOISE]).standard_normal((3, n))
-    recording = Recording(fs=fs, t0_ns=config.t0_ns,
-                          pressure=induced + disturbance + pressure_sd * noise_p,
-                          acceleration=clean_accel + accel_sd * noise_a,
+    # In place: long runs hold several arrays of every sample.
+    pressure = np.random.default_rng([config.seed, _PRESSURE_NOISE]).standard_normal(n)
+    pressure *= pressure_sd
+    pressure += induced
+    pressure += disturbance
+    accel = np.random.default_rng([config.seed, _ACCEL_NOISE]).standard_normal((3, n))
+    accel *= accel_sd
+    accel += clean_accel
+    recording = Recording(fs=fs, t0_ns=config.t0_ns, pressure=pressure, acceleration=accel,
                           frame_id=config.frame_id, metadata=_metadata(config))
     return Simulation(recording=recording, induced=induced, disturbance=disturbance,
                       onsets=onsets, config=config, acceleration=clean_accel,

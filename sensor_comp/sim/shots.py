@@ -95,7 +95,7 @@ def random_shots(count: int, *, seed: int, peak_g: tuple[float, float] = PEAK_G_
         if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
             raise SimConfigError(f'shot range {name} must be 0 < min <= max, got '
                                  f'({low!r}, {high!r})')
-    rng = np.random.default_rng([seed, 4])
+    rng = np.random.default_rng([seed, 4])  # the rig draws from streams 1-3 and 100
     position = rng.uniform(0.0, 1.0, count)
     scatter = rng.uniform(-0.1, 0.1, count)
     peaks = peak_g[0] * (peak_g[1] / peak_g[0]) ** position
