@@ -26,12 +26,11 @@ def _pair(effect, **overrides):
 
 def _peak_lag(x, y, max_lag):
     """Return the lag (samples, parabolic interpolation) at which y best matches x."""
-    lags = np.arange(-max_lag, max_lag + 1)
-    core = slice(max_lag, len(x) - max_lag)
-    xc = np.array([np.dot(x[core], y[max_lag + k:len(y) - max_lag + k]) for k in lags])
+    # xc[j] = sum x[m] y[m + j - max_lag] over the core of x.
+    xc = np.correlate(y, x[max_lag:len(x) - max_lag], mode='valid')
     i = int(np.argmax(xc))
     left, mid, right = xc[i - 1:i + 2]
-    return lags[i] + 0.5 * (left - right) / (left - 2 * mid + right)
+    return i - max_lag + 0.5 * (left - right) / (left - 2 * mid + right)
 
 
 def _prony2(y, fs):
