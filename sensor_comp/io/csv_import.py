@@ -1,41 +1,47 @@
 """
 Import oscilloscope and transient-recorder CSV exports as a :class:`Recording`.
 
-File format (one recording per file, UTF-8, Latin-1 or UTF-16 with BOM):
+File format (one recording per file; UTF-8, Latin-1, or UTF-16 with byte-order mark):
 
-- ``#`` comment lines may appear anywhere. Those before the header of the form
-  ``# key: value`` become :attr:`Recording.metadata`, e.g.
-  ``# charge_sensitivity_pC_per_MPa: 100`` (validated: a positive number) or
-  ``# frame_id: hammer`` (the default sensor frame). Blank lines are skipped.
+- ``#`` comment lines may appear anywhere; blank lines are skipped. Comment lines of the
+  form ``# key: value`` before the header become :attr:`Recording.metadata`, e.g.
+  ``# charge_sensitivity_pC_per_MPa: 100`` (checked to be a positive number); only
+  ``# frame_id: hammer`` is taken out of it and sets the default sensor frame.
 - The first other line is the header: ``time_<unit>``, ``pressure_<unit>``,
   ``accel_z_<unit>`` and optionally ``accel_x_<unit>``, ``accel_y_<unit>``, in any order,
-  matched case-insensitively, surrounding whitespace and quotes tolerated. Units: see
-  :data:`TIME_UNITS`, :data:`PRESSURE_UNITS`, :data:`ACCEL_UNITS`. Other columns are
-  skipped and listed in metadata ``ignored_columns``, but a column named ``time``,
-  ``pressure`` or ``accel_...`` must carry a known unit. Missing lateral channels become
-  zeros and metadata ``lateral_channels`` says ``absent``, ``x_only`` or ``y_only``
-  (``present`` otherwise), so transverse analysis knows it cannot run.
+  matched case-insensitively; surrounding whitespace and quotes are tolerated. Units:
+  :data:`TIME_UNITS`, :data:`PRESSURE_UNITS`, :data:`ACCEL_UNITS`. Other columns are skipped
+  (listed in metadata ``ignored_columns`` if named; a separator ending every line makes an
+  unnamed one), but a column named ``time``, ``pressure`` or ``accel_...`` must carry a
+  known unit. Missing lateral channels become zeros and metadata ``lateral_channels`` says
+  ``absent``, ``x_only`` or ``y_only`` (else ``present``): transverse analysis cannot run.
 - Separator: whichever of tab, semicolon and comma occurs most often in the header line.
   With tab or semicolon separators a decimal comma is accepted as well as a point
   (``1,5`` = 1.5, as German spreadsheets write); with commas only the point. Numbers are
-  plain (no quotes, no thousands separators, no units in cells).
+  plain: no quotes, no thousands separators, no units in cells, no trailing comments.
 
 Time base: the rate comes from the time column, which must increase uniformly. Exports print
-time stamps with few digits, so each stamp is only known to half its printed quantum (the
-coarser of the last printed digit, inferred from the digits the column needs, and float32
-resolution, as many recorders keep time in float32). A sample interval may deviate from the
-median interval by that rounding (never by half a sample or more), and a stamp from the
-straight line through the first and last stamp likewise; anything more is jitter or a
-missing sample and raises :class:`CsvError`. The rate is the straight line's slope, rounded
-to the shortest decimal rate or interval within its uncertainty (1e6 Hz, not 999999.9999).
+time stamps with few digits, so each stamp is only known to half its rounding quantum: the
+coarser of its last printed digit (inferred from the digits the whole column needs) and
+float32 resolution, as many recorders keep time in float32. A sample interval may deviate
+from the median interval by that rounding, a stamp from the straight line through the first
+and last stamp likewise, and neither ever by half a sample or more; anything beyond is
+jitter or a missing sample and raises :class:`CsvError` (``time_tolerance_s`` overrides the
+tolerance). The rate is that line's slope, rounded to the shortest decimal rate or interval
+within its uncertainty (1e6 Hz, not 999999.9999). Stamps are compared as float64, so
+absolute (e.g. UNIX) times are checked only to about a microsecond.
 
 Time origin: ``t0_ns`` is the first stamp in integer nanoseconds, converted exactly from its
 decimal text. Scope exports put time zero at the trigger, so pre-trigger stamps are negative;
 because bag log times are unsigned, a negative first stamp is shifted to ``t0_ns = 0``. File
 time ``t`` thus lies at stamp ``t + trigger_time_ns``, with metadata ``trigger_time_ns`` the
-stamp of the file's time zero (``'0'`` when the file starts at or after it). Importer facts
-(``source_file``, ``lateral_channels``, ``trigger_time_ns``, ``ignored_columns``) override
-metadata lines of the same name.
+stamp of the file's time zero (``'0'`` when the file starts at or after it). These importer
+facts (``source_file``, ``lateral_channels``, ``trigger_time_ns``, ``ignored_columns``)
+replace metadata lines of the same name.
+
+Speed: rows are parsed in chunks by numpy's C reader (about half a million rows of five
+columns per second here); a chunk it refuses is re-read line by line to name the first bad
+line and cell.
 """
 
 from __future__ import annotations
@@ -208,9 +214,10 @@ def read_csv(path, *, frame_id: str | None = None,
     })
     if table.ignored:
         metadata['ignored_columns'] = ', '.join(table.ignored)
-    frame = frame_id if frame_id is not None else metadata.get('frame_id') or 'sensor'
+    file_frame = metadata.pop('frame_id', '')  # the frame travels as Recording.frame_id
     return Recording(fs=fs, t0_ns=first_ns + offset, pressure=values[:, 1],
-                     acceleration=acceleration, frame_id=frame, metadata=metadata)
+                     acceleration=acceleration, frame_id=frame_id or file_frame or 'sensor',
+                     metadata=metadata)
 
 
 def _is_data(line: str) -> bool:
@@ -301,7 +308,8 @@ def _header(path, lines: list[str], index: int) -> _Table:
     for position, name in enumerate(names):
         column = _classify(path, line, position, name)
         if column is None:
-            ignored.append(name or f'(unnamed column {position + 1})')
+            if name:  # an unnamed column is usually a trailing separator
+                ignored.append(name)
             continue
         if column.quantity in found:
             other = found[column.quantity]
@@ -382,7 +390,7 @@ def _parse_fast(table: _Table, chunk: list[str]) -> np.ndarray:
     if table.decimal_comma:
         chunk = [line.replace(',', '.') for line in chunk]
     indices = [column.index for column in table.columns]
-    if not table.ignored:
+    if table.ncols == len(table.columns):
         block = np.loadtxt(chunk, delimiter=table.sep, comments=None, ndmin=2)
         if block.shape[1] != table.ncols:  # loadtxt only checks that rows agree
             raise ValueError('rows disagree with the header')
@@ -459,9 +467,9 @@ def _time_base(table: _Table, t: np.ndarray, tolerance_s: float | None) -> tuple
         step_limit = grid_limit = tolerance_s / scale + slop
         dt_error = (2 * tolerance_s / scale + slop) / (n - 1)
         origin = 'given'
-    remedy = ('The importer needs uniformly sampled data: split the file at the gap, or if '
-              'the samples are uniform and only the time stamps imprecise, allow more with '
-              'time_tolerance_s (sensor-comp import --time-tolerance)')
+    remedy = ('The importer needs uniformly sampled data: cut the file where the sampling '
+              'breaks, or, if the samples are uniform and only the time stamps imprecise, '
+              'allow more with time_tolerance_s (sensor-comp import --time-tolerance)')
     uneven = np.flatnonzero(np.abs(step - dt_median) > step_limit)
     if uneven.size:
         row = int(uneven[0]) + 1

@@ -108,6 +108,24 @@ def test_column_order_case_whitespace_quotes_crlf_and_bom(tmp_path):
     assert rec.frame_id == 'f1'
 
 
+@pytest.mark.parametrize('encoding, end', [('utf-16', '\n'), ('latin-1', '\r'),
+                                           ('utf-8', '\r\n')])
+def test_encodings_and_line_ends(tmp_path, encoding, end):
+    text = end.join(['# note: 5 \u00b5s Aufl\u00f6sung', 'time_\u00b5s\tpressure_kPa\taccel_z_g',
+                     '0\t1,5\t2', '1\t2,5\t3', ''])
+    path = tmp_path / 'data.txt'
+    path.write_bytes(text.encode(encoding))
+    rec = read_csv(path)
+    assert rec.metadata['note'] == '5 \u00b5s Aufl\u00f6sung'
+    assert rec.fs == 1e6 and rec.pressure.tolist() == [1500.0, 2500.0]
+
+
+def test_separator_ending_every_line(tmp_path):
+    rec = read_csv(write(tmp_path, 'time_s,pressure_Pa,accel_z_g,\n0,1,2,\n0.5,3,4,\n'))
+    assert rec.pressure.tolist() == [1.0, 3.0] and rec.fs == 2.0
+    assert 'ignored_columns' not in rec.metadata
+
+
 # --- time base ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize('fs, fmt', [(1e3, '{:.7g}'), (44.1e3, '{:.6e}'), (1.25e6, '{:.9f}'),
@@ -206,7 +224,9 @@ def test_comments_anywhere_and_metadata_only_before_the_header(tmp_path):
 
 def test_frame_id_argument_wins_over_the_file(tmp_path):
     text = '# frame_id: from_file\ntime_s,pressure_kPa,accel_z_g\n0,1,2\n1,1,2\n'
-    assert read_csv(write(tmp_path, text), frame_id='arg').frame_id == 'arg'
+    rec = read_csv(write(tmp_path, text), frame_id='arg')
+    assert rec.frame_id == 'arg'
+    assert 'frame_id' not in rec.metadata  # it travels as the frame, not twice
 
 
 def test_importer_facts_override_file_metadata(tmp_path):
