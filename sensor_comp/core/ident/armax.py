@@ -65,10 +65,11 @@ def _autoregression(ws: list[np.ndarray], order: int) -> tuple[np.ndarray, np.nd
     Returns ``[1, c1, ...]`` (with roots outside the unit circle reflected) and the
     covariance of ``c1 …``.
     """
+    if order == 0:
+        return np.ones(1), np.empty((0, 0))
     phi, target, _ = lagged_regression(ws, [np.empty((0, w.size)) for w in ws], na=order,
-                                       nb=0, nk=0)
-    # lagged_regression puts −w(k−j) in the columns, so theta holds c_j directly.
-    ls = solve_least_squares(phi, target, names=[f'noise lag {j}' for j in range(1, order + 1)])
+                                       nb=0, nk=0)  # regressors −w(k−j): theta holds c_j
+    ls = solve_least_squares(phi, target, names=[f'w(k-{j})' for j in range(1, order + 1)])
     return (reflect_unstable(np.concatenate([[1.0], ls.theta])),
             ls.noise_variance * ls.unit_covariance)
 

@@ -105,7 +105,7 @@ def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na:
 
     Returns:
         ``(phi, target, names)``: the ``(rows, p)`` regressor matrix, the ``(rows,)``
-        targets and one name per column (``'a1'``, ``'b0[1]'`` for input 0 lag 1, ``'c1'``).
+        targets and one name per column (``'y(k-1)'``, ``'u0(k-2)'``, ``'e(k-1)'``).
 
     Raises:
         IdentError: If the segments hold fewer rows than parameters.
@@ -113,9 +113,9 @@ def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na:
     """
     n_inputs = us[0].shape[0]
     k0 = max(na, nk + nb - 1, nc)
-    names = ([f'a{j}' for j in range(1, na + 1)]
-             + [f'b{i}[{j}]' for i in range(n_inputs) for j in range(nb)]
-             + [f'c{j}' for j in range(1, nc + 1)])
+    names = ([f'y(k-{j})' for j in range(1, na + 1)]
+             + [f'u{i}(k-{nk + j})' for i in range(n_inputs) for j in range(nb)]
+             + [f'e(k-{j})' for j in range(1, nc + 1)])
     blocks, targets = [], []
     for index, (y, u) in enumerate(zip(ys, us)):
         n = y.size
