@@ -214,7 +214,7 @@ def read_csv(path, *, frame_id: str | None = None,
     if table.ignored:
         metadata['ignored_columns'] = ', '.join(table.ignored)
     file_frame = metadata.pop('frame_id', '')  # the frame travels as Recording.frame_id
-    return Recording(fs=fs, t0_ns=first_ns + offset, pressure=values[:, 1],
+    return Recording(fs=fs, t0_ns=first_ns + offset, pressure=values[:, 1].copy(),
                      acceleration=acceleration, frame_id=frame_id or file_frame or 'sensor',
                      metadata=metadata)
 
