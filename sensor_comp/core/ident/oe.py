@@ -177,7 +177,7 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     check_orders(nf=nf, nb=nb, nk=nk, max_iter=max_iter)
     segs = as_segments(segments)
     problem = _OutputError(segs, nf, nb, nk)
-    start = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk)
+    start = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, max_iter=15, tol=1e-6)
     theta = np.concatenate([start.a[1:], start.b.ravel()])
     e, jac = problem.residual(theta, jacobian=True)
     cost = float(e @ e)
