@@ -1,0 +1,243 @@
+"""
+The ``acquisition`` node: publish a rig's pressure and acceleration as block streams.
+
+Run it as ``acquisition --ros-args -p source:=sim -p pacing:=realtime`` (or
+``python -m sensor_comp.nodes.acquisition``). It stands in for the digitiser: it takes a
+recording from the simulator, a bag or a CSV export and publishes it the way the DAQ
+would, then exits (unless ``loop``).
+
+Topics, relative to the node's namespace (default ``/rig``), as in the stream contract:
+
+- ``acceleration``: ``sensor_msgs/msg/Image`` ``64FC1`` blocks, 3 rows x, y, z in m/s².
+- ``pressure/raw``: the same with 1 row in Pa. Both topics get blocks of the same width
+  with the same stamps; ``header.stamp`` is the acquisition time of the block's first
+  sample, ``header.frame_id`` the sensor frame.
+- ``stream_info`` (latched): ``diagnostic_msgs/msg/DiagnosticArray`` with the rate,
+  channels, unit and sensor metadata of both streams, published before the first block.
+
+QoS: blocks are reliable, volatile, keep-all (a slow reader slows the node down, nothing is
+dropped; see :mod:`sensor_comp.nodes._common`); ``stream_info`` is reliable,
+transient-local, depth 1 so that late subscribers get it.
+
+Parameters (read once at start; invalid values stop the node with a message naming them):
+
+- ``source`` (``sim``, ``bag`` or ``csv``; default ``sim``) and ``path`` (the bag or CSV
+  file for ``bag`` and ``csv``).
+- ``block_size`` (samples per block, default 1000).
+- ``pacing`` (default ``realtime``): ``realtime`` publishes each block when its last sample
+  would have been acquired, a number ``k`` does so ``k`` times faster, ``fast`` publishes as
+  fast as the subscribers take the blocks.
+- ``loop`` (bool, default false): start over at the end; stamps keep running on, so the
+  streams stay contiguous.
+- ``stamp_origin`` (``now`` or ``source``; default ``now``): stamp the first sample with the
+  wall-clock time at start, or keep the source's own ``t0``.
+- ``wait_for_subscribers`` (int, default 0) and ``wait_timeout`` (s, default 10.0): wait
+  for this many matched subscriptions on each block topic before the first block.
+- ``ack_timeout`` (s, default 10.0): at the end, how long to wait for subscribers to
+  acknowledge the last blocks.
+- Simulator (``source:=sim``, see :class:`~sensor_comp.sim.RigConfig`): ``sim_shots``
+  (0: the seed paper's Table-2 shots, N: N random shots; default 0), ``sim_fs`` (Hz,
+  default 1e6), ``sim_seed`` (default 0), ``sim_effects`` (``ID[:param=value,...]``
+  strings), ``sim_pressure_noise`` and ``sim_accel_noise`` (relative to the largest peak),
+  ``sim_spacing`` (s between shot onsets; 0: automatic).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+from pathlib import Path
+import sys
+import threading
+import time
+
+from rclpy.node import Node
+
+from ..blocks import iter_blocks
+from ..io.bag_reader import read_recording
+from ..io.csv_import import read_csv
+from ..io.messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info, IMAGE
+from ..sim import random_shots, RigConfig, simulate, TABLE2
+from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO
+from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, finish_publishing,
+                      LATCHED_QOS, message_class, publish_raw, run_main, sleep_until,
+                      wait_for_subscribers)
+
+__all__ = ['Acquisition', 'SOURCES', 'main']
+
+#: Allowed values of the ``source`` parameter.
+SOURCES = ('sim', 'bag', 'csv')
+_PACINGS = {'realtime': 1.0, 'fast': None}
+
+
+class Acquisition(Node):
+    """
+    Publish a recording as block streams (see the module documentation for parameters).
+
+    Call :meth:`run`; it returns when the recording has been published (never with
+    ``loop``) or ``stop`` is set. The node needs no spinning while it runs.
+
+    Args:
+        node_name: Name of the node.
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
+            ``/rig``; ``context``; ``parameter_overrides``; ...).
+
+    Attributes:
+        recording: What the node publishes (stamps as in the source).
+        blocks_published: Blocks published per topic so far.
+        samples_published: Samples published per topic so far.
+
+    Raises:
+        NodeError: On a bad parameter or a missing file.
+        SensorCompError: If the source cannot be read or simulated (the message says why).
+
+    """
+
+    def __init__(self, node_name: str = 'acquisition', **kwargs):
+        kwargs.setdefault('namespace', DEFAULT_NAMESPACE)
+        super().__init__(node_name, **kwargs)
+        source = declare(self, 'source', 'sim', f'where the samples come from: '
+                                                f'{"|".join(SOURCES)}')
+        path = declare(self, 'path', '', 'bag or CSV file for source bag or csv')
+        self.block_size = declare(self, 'block_size', 1000, 'samples per block')
+        pacing = declare(self, 'pacing', 'realtime',
+                         'realtime, fast, or a speed-up factor such as 2.0', dynamic=True)
+        self.loop = declare(self, 'loop', False, 'start over at the end; stamps run on')
+        stamp_origin = declare(self, 'stamp_origin', 'now',
+                               'now: stamp the first sample with the start time; source: '
+                               'keep the source stamps')
+        self.wait_for_subscribers = declare(
+            self, 'wait_for_subscribers', 0,
+            'wait until every block topic has this many subscribers before publishing')
+        self.wait_timeout = declare(self, 'wait_timeout', 10.0,
+                                    'seconds to wait for the subscribers')
+        self.ack_timeout = declare(self, 'ack_timeout', 10.0,
+                                   'seconds to wait for the last acknowledgements')
+        check(self, 'source', source, source in SOURCES, f'one of {", ".join(SOURCES)}')
+        check(self, 'block_size', self.block_size, self.block_size > 0,
+              'a positive number of samples')
+        check(self, 'stamp_origin', stamp_origin, stamp_origin in ('now', 'source'),
+              'now or source')
+        check(self, 'wait_for_subscribers', self.wait_for_subscribers,
+              self.wait_for_subscribers >= 0, 'a number of subscriptions >= 0')
+        for name in ('wait_timeout', 'ack_timeout'):
+            check(self, name, getattr(self, name), getattr(self, name) >= 0,
+                  'a number of seconds >= 0')
+        self.speed = self._parse_pacing(pacing)
+        self._restamp = stamp_origin == 'now'
+        sim = self._declare_sim()
+        if source == 'sim':
+            self.recording = self._simulate(**sim)
+        else:
+            check(self, 'path', path, bool(path) and Path(path).is_file(),
+                  f'an existing {source} file')
+            self.recording = self._read(source, path)
+        self._blocks = {topic: self.create_publisher(message_class(IMAGE), topic, BLOCK_QOS)
+                        for topic in (ACCELERATION, PRESSURE_RAW)}
+        self._info = self.create_publisher(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
+                                           LATCHED_QOS)
+        self.blocks_published = 0
+        self.samples_published = 0
+
+    def _parse_pacing(self, pacing) -> float | None:
+        if isinstance(pacing, str) and pacing in _PACINGS:
+            return _PACINGS[pacing]
+        try:
+            speed = float(pacing)
+        except (TypeError, ValueError):
+            speed = 0.0
+        check(self, 'pacing', pacing, speed > 0 and math.isfinite(speed),
+              'realtime, fast or a positive speed-up factor')
+        return speed
+
+    def _declare_sim(self) -> dict:
+        return {
+            'shots': declare(self, 'sim_shots', 0,
+                             'simulated shots: 0 for the Table-2 shots, N for N random ones'),
+            'fs': declare(self, 'sim_fs', 1e6, 'simulated sample rate in Hz'),
+            'seed': declare(self, 'sim_seed', 0, 'seed of every random draw'),
+            'effects': declare(self, 'sim_effects', [],
+                               'simulated effects as ID[:param=value,...]'),
+            'pressure_noise': declare(self, 'sim_pressure_noise', 0.005,
+                                      'pressure noise relative to the largest peak'),
+            'accel_noise': declare(self, 'sim_accel_noise', 0.001,
+                                   'acceleration noise relative to the largest peak'),
+            'spacing': declare(self, 'sim_spacing', 0.0,
+                               'seconds between shot onsets; 0: automatic'),
+        }
+
+    def _simulate(self, *, shots: int, spacing: float, **config) -> Recording:
+        check(self, 'sim_shots', shots, shots >= 0, '0 (Table 2) or a number of shots')
+        check(self, 'sim_spacing', spacing, spacing >= 0, 'a number of seconds >= 0')
+        chosen = random_shots(shots, seed=config['seed']) if shots else TABLE2
+        return simulate(RigConfig(shots=chosen, spacing_s=spacing or None,
+                                  effects=tuple(config.pop('effects')), **config)).recording
+
+    @staticmethod
+    def _read(source: str, path: str) -> Recording:
+        return read_recording(path) if source == 'bag' else read_csv(path)
+
+    def run(self, stop: threading.Event | None = None) -> None:
+        """
+        Publish ``stream_info`` and then the blocks, paced as configured.
+
+        Args:
+            stop: Set it to stop between two blocks.
+
+        Raises:
+            NodeError: If too few subscribers show up, or they stop taking blocks.
+
+        """
+        stop = stop or threading.Event()
+        accel, press = self.recording.streams()
+        t0 = time.time_ns() if self._restamp else self.recording.t0_ns
+        accel = replace(accel, t0_ns=t0)
+        info = encode_stream_info([accel.info, press.info], stamp_ns=t0)
+        if not publish_raw(self._info, info, stop):
+            return
+        publishers = list(self._blocks.values())
+        if not wait_for_subscribers(self, publishers, self.wait_for_subscribers,
+                                    timeout=self.wait_timeout, stop=stop):
+            return
+        n, fs, frame = self.recording.n_samples, self.recording.fs, self.recording.frame_id
+        self.get_logger().info(f'publishing {n} samples at {fs:g} Hz in blocks of '
+                               f'{self.block_size} ({self._describe_pacing()})')
+        start = time.monotonic()
+        passes = 0
+        while not stop.is_set():
+            offset = passes * n  # samples of earlier passes: stamps run on
+            blocks = zip(iter_blocks(replace(accel, t0_ns=accel.stamp_ns(offset)),
+                                     width=self.block_size),
+                         iter_blocks(press, width=self.block_size))
+            for index, ((stamp, a), (_, p)) in enumerate(blocks):
+                if self.speed is not None:
+                    acquired = offset + index * self.block_size + a.shape[-1]
+                    if not sleep_until(start + acquired / fs / self.speed, stop):
+                        return
+                for topic, block in ((ACCELERATION, a), (PRESSURE_RAW, p)):
+                    if not publish_raw(self._blocks[topic],
+                                       encode_block(block, stamp_ns=stamp, frame_id=frame),
+                                       stop):
+                        return
+                self.blocks_published += 1
+                self.samples_published += a.shape[-1]
+            passes += 1
+            if not self.loop:
+                break
+        finish_publishing(self, publishers + [self._info], timeout=self.ack_timeout)
+        self.get_logger().info(f'published {self.blocks_published} blocks '
+                               f'({self.samples_published} samples) per topic')
+
+    def _describe_pacing(self) -> str:
+        if self.speed is None:
+            return 'as fast as the subscribers take them'
+        return 'in real time' if self.speed == 1 else f'{self.speed:g}x real time'
+
+
+def main(args=None) -> int:
+    """Publish the configured source (until SIGINT/SIGTERM with ``loop``); return exit code."""
+    return run_main(args, Acquisition, Acquisition.run)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,216 @@
+"""
+The ``player`` node: publish the messages of a bag with their original timing.
+
+Run it as ``player --ros-args -p bag:=run.mcap`` (or ``python -m sensor_comp.nodes.player``);
+it exits when the bag has been played (unless ``loop``), so scripts and tests can wait for it.
+
+Parameters (read once at start):
+
+- ``bag`` (string, required): the MCAP file (or rosbag2 directory holding one).
+- ``topics`` (string array, default empty = all): absolute topic names to play.
+- ``rate`` (default 1.0): time scale; 2.0 plays twice as fast as recorded.
+- ``start_offset`` (s, default 0.0): skip this much of the bag, counted from its first
+  message that is not latched.
+- ``loop`` (bool, default false): play again from ``start_offset`` until stopped. The
+  messages are published unchanged, so their stamps repeat on every pass.
+- ``as_fast_as_possible`` (bool, default false): ignore the timing and publish as fast as
+  the subscribers take the messages.
+- ``wait_for_subscribers`` (int, default 0): before playing, wait until every topic has
+  this many matched subscriptions (e.g. 1 for a recorder), at most ``wait_timeout`` (s,
+  default 10.0).
+- ``namespace_remap`` (string ``OLD:=NEW``, default empty): publish the topics under
+  ``OLD`` (e.g. ``/rig``) under ``NEW`` instead (e.g. ``/bench``). The bag's topic names are
+  absolute, so the node's own namespace does not move them; ``--ros-args -r`` remaps single
+  topics as usual.
+- ``ack_timeout`` (s, default 10.0): at the end, how long to wait for subscribers to
+  acknowledge the last messages before exiting.
+
+Timing follows each message's ``log_time`` (its receive time when recorded, as
+``ros2 bag play`` does), in file order; a message logged earlier than its predecessor goes
+out at once.
+
+QoS and loss: latched topics (``transient_local`` in the bag's ``offered_qos_profiles``)
+are published first, transient-local with a depth of their message count, so a late
+subscriber gets all of them (e.g. every ``stream_info``). Every other topic is published
+reliable, volatile, **keep-all**: no message leaves the publisher's history before every
+matched subscriber has acknowledged it, a full history makes the player wait (see
+:func:`~sensor_comp.nodes._common.publish_raw`), and the player waits for the last
+acknowledgements before it exits. Nothing is lost to a subscriber that is matched before
+playing starts (``wait_for_subscribers``) and keeps all messages (keep-all history, like
+the recorder); a keep-last subscriber may still drop what it does not take in time.
+
+The messages are published as raw CDR bytes, never deserialised; their types must be
+installed as rclpy message packages.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+from rclpy.node import Node
+
+from ..io.bag_reader import BagReader
+from ._common import (BLOCK_QOS, check, declare, finish_publishing, latched_qos, message_class,
+                      NodeError, publish_raw, sleep_until, wait_for_subscribers)
+from ._common import run_main
+
+__all__ = ['Player', 'main']
+
+_NS_PER_S = 1_000_000_000
+
+
+class Player(Node):
+    """
+    Publish the messages of a bag (see the module documentation for the parameters).
+
+    Call :meth:`play`; it returns when the bag has been played or ``stop`` is set. The node
+    needs no spinning while it plays.
+
+    Args:
+        node_name: Name of the node.
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``context``,
+            ``parameter_overrides``, ...).
+
+    Raises:
+        NodeError: On a bad parameter, or a message type that is not installed.
+        BagError: If the bag cannot be read.
+
+    """
+
+    def __init__(self, node_name: str = 'player', **kwargs):
+        super().__init__(node_name, **kwargs)
+        bag = declare(self, 'bag', '', 'MCAP file (or rosbag2 directory) to play')
+        topics = declare(self, 'topics', [], 'absolute topics to play; empty: all')
+        self.rate = declare(self, 'rate', 1.0, 'time scale: 2.0 plays twice as fast')
+        self.start_offset = declare(self, 'start_offset', 0.0,
+                                    'seconds of the bag to skip')
+        self.loop = declare(self, 'loop', False, 'play again and again until stopped')
+        self.as_fast_as_possible = declare(
+            self, 'as_fast_as_possible', False,
+            'ignore the timing; publish as fast as the subscribers take the messages')
+        self.wait_for_subscribers = declare(
+            self, 'wait_for_subscribers', 0,
+            'wait until every topic has this many subscribers before playing')
+        self.wait_timeout = declare(self, 'wait_timeout', 10.0,
+                                    'seconds to wait for the subscribers')
+        remap = declare(self, 'namespace_remap', '',
+                        'OLD:=NEW publishes topics under namespace OLD under NEW')
+        self.ack_timeout = declare(self, 'ack_timeout', 10.0,
+                                   'seconds to wait for the last acknowledgements')
+        check(self, 'bag', bag, bool(bag), 'the path of a bag to play')
+        check(self, 'rate', self.rate, self.rate > 0, 'a positive time scale')
+        check(self, 'start_offset', self.start_offset, self.start_offset >= 0,
+              'a number of seconds >= 0')
+        check(self, 'wait_for_subscribers', self.wait_for_subscribers,
+              self.wait_for_subscribers >= 0, 'a number of subscriptions >= 0')
+        for name in ('wait_timeout', 'ack_timeout'):
+            check(self, name, getattr(self, name), getattr(self, name) >= 0,
+                  'a number of seconds >= 0')
+        old, new = self._parse_remap(remap)
+        self._reader = BagReader(bag)
+        unknown = sorted(set(topics) - set(self._reader.topics))
+        check(self, 'topics', topics, not unknown,
+              f'topics of {self._reader.path} ({", ".join(self._reader.topics)}); '
+              f'unknown: {", ".join(unknown)}')
+        played = {t: i for t, i in self._reader.topics.items() if not topics or t in topics}
+        self._latched = sorted(t for t, info in played.items() if info.latched)
+        self._timed = sorted(t for t, info in played.items() if not info.latched)
+        self._topic_publishers = {}
+        for topic, info in played.items():
+            name = new + topic[len(old):] if old and topic.startswith(old + '/') else topic
+            qos = latched_qos(info.message_count) if info.latched else BLOCK_QOS
+            self._topic_publishers[topic] = self.create_publisher(
+                message_class(info.msgtype, topic=topic), name, qos)
+        self.published = 0
+
+    def _parse_remap(self, remap: str) -> tuple[str, str]:
+        if not remap:
+            return '', ''
+        old, sep, new = remap.partition(':=')
+        old, new = old.rstrip('/'), new.rstrip('/')
+        check(self, 'namespace_remap', remap,
+              bool(sep) and old.startswith('/') and (not new or new.startswith('/')),
+              'OLD:=NEW with absolute namespaces, e.g. /rig:=/bench')
+        return old, new
+
+    def play(self, stop: threading.Event | None = None) -> int:
+        """
+        Publish the bag; return the number of messages published.
+
+        Args:
+            stop: Set it to stop playing between two messages.
+
+        Raises:
+            NodeError: If too few subscribers show up, or they stop taking messages.
+
+        """
+        stop = stop or threading.Event()
+        publishers = list(self._topic_publishers.values())
+        if not wait_for_subscribers(self, publishers, self.wait_for_subscribers,
+                                    timeout=self.wait_timeout, stop=stop):
+            return self.published
+        self.get_logger().info(f'playing {self._reader.path}')
+        if self._latched:
+            for msg in self._reader.messages(self._latched):
+                if not self._publish(msg, stop):
+                    return self.published
+        while self._timed and self._play_timed(stop) and self.loop:
+            pass  # every pass re-reads the bag from start_offset
+        finish_publishing(self, publishers, timeout=self.ack_timeout)
+        self.get_logger().info(f'published {self.published} messages')
+        return self.published
+
+    def _play_timed(self, stop: threading.Event) -> bool:
+        """
+        Play the non-latched topics once; return False if stopped.
+
+        Raises:
+            NodeError: If ``start_offset`` skips every message.
+
+        """
+        first = wall = last = None
+        sent = 0
+        for msg in self._reader.messages(self._timed):
+            if first is None:
+                first = msg.log_time_ns + round(self.start_offset * _NS_PER_S)
+            last = msg.log_time_ns
+            if last < first:
+                continue
+            if not self.as_fast_as_possible:
+                if wall is None:
+                    wall = time.monotonic()
+                due = wall + (msg.log_time_ns - first) / _NS_PER_S / self.rate
+                if not sleep_until(due, stop):
+                    return False
+            if not self._publish(msg, stop):
+                return False
+            sent += 1
+        if not sent:
+            length = (last - first) / _NS_PER_S + self.start_offset if last is not None else 0
+            raise NodeError(f'{self._reader.path}: start_offset {self.start_offset:g} s skips '
+                            f'every message; the bag lasts {length:g} s')
+        return True
+
+    def _publish(self, msg, stop: threading.Event) -> bool:
+        if not publish_raw(self._topic_publishers[msg.topic], msg.data, stop):
+            return False
+        self.published += 1
+        return True
+
+    def destroy_node(self) -> None:
+        """Close the bag, then destroy the node."""
+        reader = getattr(self, '_reader', None)
+        if reader is not None:
+            reader.close()
+        super().destroy_node()
+
+
+def main(args=None) -> int:
+    """Play a bag once (or until SIGINT/SIGTERM with ``loop``); return the exit code."""
+    return run_main(args, Player, Player.play)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
