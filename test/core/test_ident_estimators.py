@@ -163,14 +163,17 @@ def test_selection_picks_second_order():
     rng = np.random.default_rng(21)
     calib, _ = shots(fs, 6, rng)
     valid, _ = shots(fs, 4, rng)
-    for criterion in ('aic', 'bic'):
-        sel = select_structure(calib, valid_segments=valid, delays=(0, 1), criterion=criterion)
-        assert sel.estimate.na == 2, sel.table()
-        assert len(sel.candidates) == 4 * 3 * 2
-        assert sel.explanation.startswith(f'nf=2 nb={sel.estimate.nb} nk={sel.estimate.nk}')
-        assert 'validation fit' in sel.explanation and criterion.upper() in sel.explanation
+    sel = select_structure(calib, valid_segments=valid, delays=(0, 1))
+    assert sel.criterion == 'bic' and sel.estimate.na == 2, sel.table()
+    assert len(sel.candidates) == 4 * 3 * 2
+    assert sel.explanation.startswith(f'nf=2 nb={sel.estimate.nb} nk={sel.estimate.nk}: ')
+    assert 'BIC' in sel.explanation and 'validation fit' in sel.explanation
     first_order = [c for c in sel.candidates if c.na == 1]
     assert max(c.valid_fit for c in first_order) < sel.candidates[sel.chosen].valid_fit - 1
+    # AIC may prefer a higher order here (it is not consistent), but never a worse model.
+    aic = select_structure(calib, valid_segments=valid, delays=(0, 1), criterion='aic')
+    assert aic.estimate.na >= 2
+    assert aic.candidates[aic.chosen].valid_fit >= sel.candidates[sel.chosen].valid_fit - 0.1
 
 
 def test_selection_without_validation_and_with_arx():

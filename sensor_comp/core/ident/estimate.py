@@ -197,10 +197,10 @@ class Estimate:
         den = self.a if self.d is None else np.convolve(self.a, self.d)
         return num, den
 
-    def statistics(self) -> dict[str, float | int | bool]:
+    def statistics(self) -> dict[str, float | int | bool | str]:
         """Return the fit statistics as a flat JSON-ready dict."""
         return {'loss': float(self.loss), 'noise_variance': float(self.noise_variance),
                 'n_samples': int(self.n_samples), 'n_parameters': int(self.n_parameters),
                 'aic': float(self.aic), 'aicc': float(self.aicc), 'bic': float(self.bic),
                 'fpe': float(self.fpe), 'iterations': int(self.iterations),
-                'converged': bool(self.converged)}
+                'converged': bool(self.converged), 'method': self.method}

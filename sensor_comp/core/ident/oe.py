@@ -188,7 +188,10 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         gram, grad, scale = _scaled_normal_equations(jac, e)
         while True:
             # Levenberg-Marquardt step in column-scaled coordinates.
-            step = np.linalg.solve(gram + damping * np.eye(gram.shape[0]), grad) / scale
+            try:
+                step = np.linalg.solve(gram + damping * np.eye(gram.shape[0]), grad) / scale
+            except np.linalg.LinAlgError:  # singular at this damping: damp more
+                step = np.full_like(theta, np.nan)
             trial = theta + step
             if np.all(np.isfinite(trial)) and is_stable(problem.unpack(trial)[0]):
                 e_trial = problem.residual(trial)

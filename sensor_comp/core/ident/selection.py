@@ -5,8 +5,8 @@ Choose the model structure: orders and input delay, by information criterion and
 delay of a range and keep the delay with the lowest loss. :func:`select_structure` fits a grid
 of orders and delays, ranks the candidates by an information criterion on the calibration
 segments and, when validation segments are given, keeps only candidates whose validation fit
-comes within ``fit_tolerance`` of the best one before taking the lowest criterion. It returns
-the choice, the whole table and a sentence that says why.
+comes within ``fit_tolerance`` of the best one; among near-equal criteria the simplest
+structure wins. It returns the choice, the whole table and a sentence that says why.
 """
 
 from __future__ import annotations
@@ -222,15 +222,21 @@ def _evaluate(segs, valid, method, criterion, na, nb, nk):
 def select_structure(calib_segments: Segment | Iterable[Segment], *,
                      valid_segments: Segment | Iterable[Segment] | None = None,
                      orders: Iterable[tuple[int, int]] | None = None,
-                     delays: Iterable[int] | None = None, criterion: str = 'aic',
-                     method: str = 'oe', fit_tolerance: float = 0.1) -> Selection:
+                     delays: Iterable[int] | None = None, criterion: str = 'bic',
+                     method: str = 'oe', fit_tolerance: float = 0.1,
+                     criterion_margin: float = 2.0) -> Selection:
     """
     Fit a grid of structures and choose one.
 
-    Without validation segments the candidate with the lowest ``criterion`` wins. With them,
-    candidates whose validation fit is more than ``fit_tolerance`` percentage points below
-    the best validation fit are dropped first, so a structure that only fits the
-    calibration shots is not chosen. Unstable or failed fits are never chosen.
+    1. Unstable or failed fits are dropped.
+    2. With validation segments, candidates whose validation fit is more than
+       ``fit_tolerance`` percentage points below the best validation fit are dropped, so a
+       structure that only fits the calibration shots is not chosen.
+    3. Of the rest, those within ``criterion_margin`` of the lowest ``criterion`` are
+       equivalent (for BIC a difference below 2 is "not worth more than a bare mention",
+       Kass & Raftery); the one with the fewest parameters wins, then the lowest criterion.
+       This matters at high sample rates, where a fast extra pole imitates one sample of
+       delay and ties with the simpler model.
 
     Args:
         calib_segments: Calibration shot windows, each starting at rest.
@@ -239,10 +245,15 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
             ``na`` in 1..4 and ``nb`` in 1..3 when None.
         delays: Delays to try; when None, :func:`estimate_delay` (same method, delays
             0..20) and the delays one sample either side of its result.
-        criterion: ``'aic'``, ``'aicc'``, ``'bic'`` or ``'fpe'``.
+        criterion: ``'bic'`` (default), ``'aic'``, ``'aicc'`` or ``'fpe'``. BIC is the
+            consistent choice: with tens of thousands of samples AIC and FPE reward the few
+            units of loss an extra pole-zero pair buys from noise and model mismatch, and in
+            tests on a second-order truth AIC picked ``nf = 3`` or ``4`` for most seeds.
         method: Estimator, a key of :data:`METHODS` (output error by default: it is not
             biased by output noise).
-        fit_tolerance: Validation fit margin in percentage points (see above).
+        fit_tolerance: Validation fit margin in percentage points (step 2).
+        criterion_margin: Criterion difference below which candidates count as equivalent
+            (step 3); 0 takes the plain minimum.
 
     Returns:
         The chosen estimate with the candidate table and an explanation.
@@ -275,42 +286,56 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
         reasons = '; '.join(f'{_label(c, method)}: {c.error or "unstable"}'
                             for c in candidates[:5])
         raise IdentError(f'select_structure: no candidate gave a stable fit ({reasons})')
-    best_ic = min(usable, key=lambda i: candidates[i].criterion)
     pool = usable
     if valid is not None:
         top = max(candidates[i].valid_fit for i in usable)
         pool = [i for i in usable if candidates[i].valid_fit >= top - fit_tolerance]
-    chosen = min(pool, key=lambda i: (candidates[i].criterion, candidates[i].n_parameters))
-    explanation = _explain(candidates, usable, pool, chosen, best_ic, method, criterion,
-                           valid is not None, fit_tolerance)
+    lowest = min(pool, key=lambda i: candidates[i].criterion)
+    near = [i for i in pool
+            if candidates[i].criterion <= candidates[lowest].criterion + criterion_margin]
+    chosen = min(near, key=lambda i: (candidates[i].n_parameters, candidates[i].criterion))
+    explanation = _explain(candidates, usable, pool, chosen, lowest, method, criterion,
+                           valid is not None, fit_tolerance, criterion_margin)
     return Selection(estimates[chosen], method, criterion, tuple(candidates), chosen,
                      explanation)
 
 
-def _explain(candidates, usable, pool, chosen, best_ic, method, criterion, validated,
-             tolerance) -> str:
+def _explain(candidates, usable, pool, chosen, lowest, method, criterion, validated,
+             tolerance, margin) -> str:
     win = candidates[chosen]
     name = criterion.upper()
-    others = sorted((i for i in usable if i != chosen), key=lambda i: candidates[i].criterion)
-    if not validated:
-        text = f'{_label(win, method)}: lowest {name} of {len(usable)} stable candidates'
-        if others:
-            rival = candidates[others[0]]
+    among = (f'the {len(pool)} candidates within {tolerance:g} pp of the best validation fit'
+             if validated else f'{len(usable)} stable candidates')
+    if chosen == lowest:
+        text = f'{_label(win, method)}: lowest {name} among {among}'
+    else:
+        low = candidates[lowest]
+        text = (f'{_label(win, method)}: fewest parameters within Δ{name} {margin:g} of the '
+                f'lowest {name} among {among} ({_label(low, method)}, '
+                f'{_more(low.n_parameters - win.n_parameters)}, '
+                f'Δ{name} = {low.criterion - win.criterion:+.1f})')
+    rivals = sorted((i for i in pool if i not in (chosen, lowest)),
+                    key=lambda i: candidates[i].criterion)
+    if rivals:
+        rival = candidates[rivals[0]]
+        if validated:
+            more = _more(rival.n_parameters - win.n_parameters)
+            text += (f'; validation fit {win.valid_fit:.2f} % vs {rival.valid_fit:.2f} % for '
+                     f'{_label(rival, method)} with {more}')
+        else:
             text += (f'; next {_label(rival, method)} at Δ{name} = '
                      f'{rival.criterion - win.criterion:+.1f} with '
                      f'{_more(rival.n_parameters - win.n_parameters)}')
-        return text + f'; calibration fit {win.calib_fit:.2f} %'
-    text = (f'{_label(win, method)}: lowest {name} among the {len(pool)} candidates within '
-            f'{tolerance:g} pp of the best validation fit; validation fit '
-            f'{win.valid_fit:.2f} %')
-    if others:
-        rival = candidates[others[0]]
-        text += (f' vs {rival.valid_fit:.2f} % for {_label(rival, method)} with '
-                 f'{_more(rival.n_parameters - win.n_parameters)}')
-    if best_ic != chosen:
-        lower = candidates[best_ic]
-        text += (f' ({_label(lower, method)} has a lower {name} but validation fit only '
-                 f'{lower.valid_fit:.2f} %)')
+    elif validated:
+        text += f'; validation fit {win.valid_fit:.2f} %'
+    if not validated:
+        text += f'; calibration fit {win.calib_fit:.2f} %'
+    dropped = [i for i in usable if i not in pool
+               and candidates[i].criterion < candidates[lowest].criterion]
+    if dropped:
+        low = candidates[min(dropped, key=lambda i: candidates[i].criterion)]
+        text += (f' ({_label(low, method)} has a lower {name} but a validation fit of only '
+                 f'{low.valid_fit:.2f} %)')
     return text
 
 
