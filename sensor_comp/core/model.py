@@ -291,6 +291,17 @@ class Model:
                    provenance=tuple(provenance), effects=tuple(effects),
                    created=created or _now())
 
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Model:
+        """
+        Read a model file; the same as the module function :func:`load`.
+
+        Raises:
+            ModelError: See :func:`load`.
+
+        """
+        return load(path)
+
     @property
     def orders(self) -> dict[str, int]:
         """Orders ``na``, ``nb``, ``nc``, ``nd`` and delay ``nk``."""

@@ -120,7 +120,7 @@ def test_round_trip(tmp_path):
                                                          'nk': 1}
     assert doc['continuous']['natural_frequency_hz'] == pytest.approx(
         m.continuous().natural_frequency_hz)
-    back = load(path)
+    back = Model.load(path)
     for name in ('fs', 'structure', 'inputs', 'nk', 'charge_sensitivity_pC_per_MPa', 'fit',
                  'provenance', 'effects', 'created', 'version'):
         assert getattr(back, name) == getattr(m, name), name
