@@ -6,8 +6,9 @@ QoS choices (all reliable, because a lost block is a gap in the signal):
 - :data:`BLOCK_QOS` for sample blocks: reliable, **keep-all**, volatile. Keep-all makes a
   publisher keep every block until every matched reader has acknowledged it, so a slow
   reader slows the publisher down instead of losing blocks (a keep-last depth of 10 lost
-  10 000-sample blocks at 20 MS/s here, see FIELD-NOTES). A reader must be keep-all too:
-  a keep-last reader overwrites what it has not taken yet.
+  10 000-sample blocks at 20 MS/s here, see FIELD-NOTES). A reader must be keep-all too
+  (a keep-last reader overwrites what it has not taken yet) and able to queue its backlog
+  (see the Fast DDS settings below).
 - :data:`LATCHED_QOS` for ``stream_info``: reliable, transient-local, depth 1, so that a
   reader joining late still gets the description of the streams.
 
@@ -15,12 +16,18 @@ Raw publishing: Fast DDS makes ``publish`` fail ("cannot publish data") when a k
 writer's history stays full for its blocking time (100 ms); the message is then *not* sent.
 :func:`publish_raw` retries, which is what makes keep-all lossless from Python.
 
-Acknowledgements: a Fast DDS reader acknowledges only when the writer sends a heartbeat,
-by default every 3 s. A keep-all writer whose history is full then waits up to 3 s for room,
-and waiting for the last acknowledgements before exiting takes up to 3 s.
-:func:`use_fast_heartbeats` (called by :func:`run_main`) points Fast DDS at a profile with
-50 ms writer heartbeats unless the user chose a profile: measured here, the player's exit
-wait fell from ~2.7 s to ~0.06 s and 10 000-sample blocks flowed about twice as fast.
+Fast DDS settings (:func:`use_fastdds_profile`, called by :func:`run_main`), measured here
+with the Jazzy wheels:
+
+- A keep-all **reader** holds at most 5 000 messages it has not handed to the callback yet;
+  what arrives beyond that is rejected and never delivered, although the writer is
+  reliable (a reader that stalled while 7 000 messages came got 5 000). Our profile lifts
+  the limit, so a recorder that falls behind buffers in memory instead of losing data.
+- A reader acknowledges only when the writer sends a heartbeat, by default every 3 s: a
+  keep-all writer whose history (5 000 messages) is full waits up to 3 s for room, and
+  waiting for the last acknowledgements before exiting takes up to 3 s. Our profile sends
+  heartbeats every 50 ms: the player's exit wait fell from ~2.7 s to ~0.06 s and
+  10 000-sample blocks flowed about twice as fast.
 
 Signals: :func:`run_main` handles SIGINT and SIGTERM itself (rclpy's own handlers shut the
 context down at once) so that a node can finish its work: the recorder takes what its
@@ -65,7 +72,7 @@ __all__ = [
     'publish_raw',
     'run_main',
     'sleep_until',
-    'use_fast_heartbeats',
+    'use_fastdds_profile',
     'wait_for_subscribers',
 ]
 
@@ -79,13 +86,21 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 _FASTDDS = 'rmw_fastrtps_cpp'
-_FAST_HEARTBEATS = """<?xml version="1.0" encoding="UTF-8" ?>
+_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <data_writer profile_name="sensor_comp_writer" is_default_profile="true">
     <times>
       <heartbeatPeriod><sec>0</sec><nanosec>50000000</nanosec></heartbeatPeriod>
     </times>
   </data_writer>
+  <data_reader profile_name="sensor_comp_reader" is_default_profile="true">
+    <topic>
+      <resourceLimitsQos>
+        <max_samples>0</max_samples>
+        <max_samples_per_instance>0</max_samples_per_instance>
+      </resourceLimitsQos>
+    </topic>
+  </data_reader>
 </profiles>
 """
 # How long a failing publish is retried before the reader is declared stuck.
@@ -238,24 +253,25 @@ def finish_publishing(node: Node, publishers: Sequence[Publisher], *, timeout: f
                                       f'acknowledged every message within {timeout:g} s')
 
 
-def use_fast_heartbeats() -> None:
+def use_fastdds_profile() -> None:
     """
-    Give this process's Fast DDS writers 50 ms heartbeats, unless a profile is configured.
+    Give this process unlimited reader queues and 50 ms writer heartbeats (see above).
 
     Does nothing for another RMW, when ``FASTRTPS_DEFAULT_PROFILES_FILE`` or
     ``FASTDDS_DEFAULT_PROFILES_FILE`` is set, or when the working directory holds Fast DDS's
-    ``DEFAULT_FASTRTPS_PROFILES.xml``. Call it before the first ``rclpy`` context starts.
+    ``DEFAULT_FASTRTPS_PROFILES.xml``: the user's choice wins. Call it before the first
+    ``rclpy`` context starts; Fast DDS reads the profile once.
     """
     if os.environ.get('RMW_IMPLEMENTATION', _FASTDDS) != _FASTDDS:
         return
     chosen = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
     if any(os.environ.get(v) for v in chosen) or Path('DEFAULT_FASTRTPS_PROFILES.xml').exists():
         return
-    digest = hashlib.sha256(_FAST_HEARTBEATS.encode()).hexdigest()[:12]
+    digest = hashlib.sha256(_PROFILE.encode()).hexdigest()[:12]
     path = Path(tempfile.gettempdir()) / f'sensor_comp_fastdds_{digest}.xml'
     if not path.exists():
         partial = path.with_name(f'{path.name}.{os.getpid()}')
-        partial.write_text(_FAST_HEARTBEATS)
+        partial.write_text(_PROFILE)
         os.replace(partial, path)  # readers never see a half-written profile
     os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(path)
 
@@ -274,7 +290,7 @@ def run_main(args: Sequence[str] | None, make_node: Callable[[], Node],
         The exit code: 0, or 1 after a :class:`SensorCompError` (logged, no traceback).
 
     """
-    use_fast_heartbeats()
+    use_fastdds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
 

@@ -32,7 +32,8 @@ Parameters (read once at start; invalid values stop the node with a message nami
 - ``stamp_origin`` (``now`` or ``source``; default ``now``): stamp the first sample with the
   wall-clock time at start, or keep the source's own ``t0``.
 - ``wait_for_subscribers`` (int, default 0) and ``wait_timeout`` (s, default 10.0): wait
-  for this many matched subscriptions on each block topic before the first block.
+  for this many matched subscriptions on each topic (``stream_info`` too: a fast run may
+  end before a late subscriber gets it) before the first block.
 - ``ack_timeout`` (s, default 10.0): at the end, how long to wait for subscribers to
   acknowledge the last blocks.
 - Simulator (``source:=sim``, see :class:`~sensor_comp.sim.RigConfig`): ``sim_shots``
@@ -108,7 +109,7 @@ class Acquisition(Node):
                                'keep the source stamps')
         self.wait_for_subscribers = declare(
             self, 'wait_for_subscribers', 0,
-            'wait until every block topic has this many subscribers before publishing')
+            'wait until every topic has this many subscribers before publishing')
         self.wait_timeout = declare(self, 'wait_timeout', 10.0,
                                     'seconds to wait for the subscribers')
         self.ack_timeout = declare(self, 'ack_timeout', 10.0,
@@ -195,7 +196,7 @@ class Acquisition(Node):
         info = encode_stream_info([accel.info, press.info], stamp_ns=t0)
         if not publish_raw(self._info, info, stop):
             return
-        publishers = list(self._blocks.values())
+        publishers = [*self._blocks.values(), self._info]
         if not wait_for_subscribers(self, publishers, self.wait_for_subscribers,
                                     timeout=self.wait_timeout, stop=stop):
             return
@@ -224,7 +225,7 @@ class Acquisition(Node):
             passes += 1
             if not self.loop:
                 break
-        finish_publishing(self, publishers + [self._info], timeout=self.ack_timeout)
+        finish_publishing(self, publishers, timeout=self.ack_timeout)
         self.get_logger().info(f'published {self.blocks_published} blocks '
                                f'({self.samples_published} samples) per topic')
 

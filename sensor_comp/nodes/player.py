@@ -17,7 +17,8 @@ Parameters (read once at start):
   the subscribers take the messages.
 - ``wait_for_subscribers`` (int, default 0): before playing, wait until every topic has
   this many matched subscriptions (e.g. 1 for a recorder), at most ``wait_timeout`` (s,
-  default 10.0).
+  default 10.0). Latched topics count too: the player may be gone before a subscriber
+  that comes late gets them.
 - ``namespace_remap`` (string ``OLD:=NEW``, default empty): publish the topics under
   ``OLD`` (e.g. ``/rig``) under ``NEW`` instead (e.g. ``/bench``). The bag's topic names are
   absolute, so the node's own namespace does not move them; ``--ros-args -r`` remaps single

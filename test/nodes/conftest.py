@@ -23,10 +23,10 @@ import pytest
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 rclpy = pytest.importorskip('rclpy')
 
-from sensor_comp.nodes._common import use_fast_heartbeats  # noqa: E402
+from sensor_comp.nodes._common import use_fastdds_profile  # noqa: E402
 
 # Before the first context of this process: Fast DDS reads its profile once.
-use_fast_heartbeats()
+use_fastdds_profile()
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Domain ids handed out (Fast DDS maps 0..101 to distinct ports on every host).
