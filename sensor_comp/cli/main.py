@@ -14,7 +14,7 @@ from ..errors import SensorCompError
 __all__ = ['main']
 
 #: Sub-command modules of :mod:`sensor_comp.cli`, in the order ``--help`` lists them.
-COMMANDS = ('simulate', 'import_csv', 'info')
+COMMANDS = ('simulate', 'import_csv', 'info', 'identify', 'compare', 'compensate', 'demo')
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -196,48 +196,62 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
         raise IdentError('no calibration recording given')
     progress = progress or _Silent
     excluded: list[str] = []
-    calib, valid = _split([_usable(s, excluded) for s in calibration],
-                          [_usable(s, excluded) for s in validation])
-    for role, sources in (('calibration', calib), ('validation', valid)):
-        if not any(s.shots for s in sources):
+    calibration = [_usable(s, excluded) for s in calibration]
+    validation = [_usable(s, excluded) for s in validation]
+    for role, sources in (('calibration', calibration), ('validation', validation)):
+        if sources and not any(s.shots for s in sources):
             names = ', '.join(s.name for s in sources)
             raise IdentError(f'no usable {role} shot in {names}: check the acceleration '
                              f'channel and the detection threshold')
+    calib, valid = _split(calibration, validation)
     fs = _check_rates(calib + valid)
-    denoiser = EmdDenoiser() if denoise else None
-    calib_segments = []
-    with progress('EMD denoising' if denoise else 'shot windows',
-                  sum(len(s.shots) for s in calib)) as bar:
-        for source in calib:
-            for shot in source.shots:
-                calib_segments += segments(source.recording, [shot], inputs=BASE_INPUTS,
-                                           denoise=denoiser)
-                bar.advance()
+    measured = [seg for s in calib
+                for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
     valid_segments = [seg for s in valid
                       for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
+    denoiser = EmdDenoiser() if denoise else None
+    fit_segments = measured
+    if denoiser is not None:
+        with progress('EMD denoising', len(measured)) as bar:
+            fit_segments = []
+            for u, y in measured:
+                fit_segments.append((u, denoiser(y)))
+                bar.advance()
 
+    # Structure and delay are chosen on the measured pressure: information criteria assume
+    # white residuals, and EMD leaves coloured ones (BIC then rewards spurious poles). The
+    # chosen structure is then fitted to the denoised pressure.
+    na, nb = orders or DEFAULT_ORDERS
     selection = delay_search = None
     if structure == 'auto':
         with progress('structure selection', 1) as bar:
             selection = select_structure(
-                calib_segments, valid_segments=valid_segments,
+                measured, valid_segments=valid_segments,
                 orders=None if orders is None else [orders],
                 delays=None if delay is None else [delay], criterion=criterion)
             bar.advance()
-        estimate = selection.estimate
+        chosen = selection.candidates[selection.chosen]
+        na, nb, delay = chosen.na, chosen.nb, chosen.nk
         explanation = f'output error chosen by {criterion.upper()}: {selection.explanation}'
+        structure_fitted = 'oe'
     else:
-        na, nb = orders or DEFAULT_ORDERS
         if delay is None:
             with progress('delay search', 1) as bar:
-                delay_search = estimate_delay(calib_segments)
+                delay_search = estimate_delay(measured)
                 bar.advance()
             delay = delay_search.nk
             how = f'delay from the search: {delay_search.explanation}'
         else:
             how = 'delay given'
-        estimate = _FITTERS[structure](calib_segments, na, nb, delay)
         explanation = f'{structure} with na={na} nb={nb} nk={delay} as asked; {how}'
+        structure_fitted = structure
+    estimate = (selection.estimate if selection is not None and denoiser is None
+                else _FITTERS[structure_fitted](fit_segments, na, nb, delay))
+    if denoiser is not None:
+        explanation += '; fitted to the EMD-denoised pressure'
+    if not estimate.converged:
+        explanation += (f'; WARNING: the {estimate.method} iteration did not converge in '
+                        f'{estimate.iterations} iterations: prefer oe or auto')
 
     charge = {s.recording.charge_sensitivity for s in calib} - {None}
     fit = {'calibration_shots': sum(len(s.shots) for s in calib),
@@ -251,15 +265,14 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
     draft.check_stable()
     comparisons = tuple(compare([draft], s.recording, s.shots, labels=[structure])[0]
                         for s in valid if s.shots)
-    measured = [shot.measured for c in comparisons for shot in c.shots]
-    simulated = [shot.simulated for c in comparisons for shot in c.shots]
-    valid_fit = float(fit_percent(measured, simulated))
+    valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
+                                  [shot.simulated for c in comparisons for shot in c.shots]))
     worst = max(c.peak_residual_percent for c in comparisons)
     model = Model.from_estimate(
         estimate, fs=fs, inputs=BASE_INPUTS,
         charge_sensitivity_pC_per_MPa=draft.charge_sensitivity_pC_per_MPa,
         fit={**fit, 'calibration_fit_percent': float(fit_percent(
-            [y for _, y in calib_segments], simulate(draft, [u for u, _ in calib_segments]))),
+            [y for _, y in measured], simulate(draft, [u for u, _ in measured]))),
             'validation_fit_percent': valid_fit,
             'validation_peak_residual_percent': worst},
         provenance=provenance, created=draft.created)

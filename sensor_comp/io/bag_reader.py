@@ -38,10 +38,12 @@ from .rosbag2_layout import (BagError, is_latched, MESSAGE_ENCODING, PROFILE,
 __all__ = [
     'BagError',
     'BagReader',
+    'find_namespace',
     'RawMessage',
     'TopicInfo',
     'TruncatedBagWarning',
     'read_recording',
+    'read_stream_infos',
     'read_streams',
 ]
 
@@ -448,7 +450,14 @@ class BagReader:
         yield from self._data(wanted=wanted)
 
 
-def _find_namespace(bag: BagReader) -> str:
+def find_namespace(bag: BagReader) -> str:
+    """
+    Return the rig namespace of a bag: the one with a ``<namespace>/stream_info`` topic.
+
+    Raises:
+        BagError: When the bag has no stream_info topic, or several rigs.
+
+    """
     suffix = '/' + STREAM_INFO
     found = sorted(t[:-len(suffix)] or '/' for t, info in bag.topics.items()
                    if t.endswith(suffix) and info.msgtype == DIAGNOSTIC_ARRAY)
@@ -477,6 +486,25 @@ def _merge_stream_info(infos: dict[str, StreamInfo], msg: RawMessage, path: Path
                            f'differently: {old.fs:g} Hz {old.channels} {old.unit} and '
                            f'{info.fs:g} Hz {info.channels} {info.unit}')
         infos[info.topic] = info  # several publishers may announce it; the latest wins
+
+
+def read_stream_infos(bag: BagReader, *, namespace: str) -> dict[str, StreamInfo]:
+    """
+    Return what the bag's ``<namespace>/stream_info`` messages announce, by stream name.
+
+    Raises:
+        BagError: If the topic is missing or a message does not decode or contradicts
+            another.
+
+    """
+    info_topic = topic_name(namespace, STREAM_INFO)
+    if info_topic not in bag.topics:
+        raise BagError(f'{bag.path} has no topic {info_topic}; its topics: '
+                       f'{", ".join(bag.topics) or "none"}')
+    infos: dict[str, StreamInfo] = {}
+    for msg in bag.messages([info_topic]):
+        _merge_stream_info(infos, msg, bag.path)
+    return infos
 
 
 def read_streams(path, *, namespace: str | None = None,
@@ -509,7 +537,7 @@ def read_streams(path, *, namespace: str | None = None,
     with BagReader(path) as bag:
         if bag.truncated:
             warnings.warn(bag.warning, TruncatedBagWarning, stacklevel=2)
-        namespace = _find_namespace(bag) if namespace is None else namespace
+        namespace = find_namespace(bag) if namespace is None else namespace
         info_topic = topic_name(namespace, STREAM_INFO)
         if info_topic not in bag.topics:
             raise BagError(f'{bag.path} has no topic {info_topic}; its topics: '

@@ -197,8 +197,11 @@ def test_emd_denoising_keeps_the_fit_at_the_noise_ceiling(run, oe):
     assert len(ident.denoising) == len(shot_indices(ident.calibration))
     assert ident.model.fit['emd_denoised'] is True
     assert oe.model.fit['emd_denoised'] is False
-    # The denoised calibration target holds less noise, so the model fits it better.
-    assert ident.model.fit['calibration_fit_percent'] > oe.model.fit['calibration_fit_percent']
+    # The calibration fit is reported against the measured pressure too: OE is unbiased by
+    # white noise, so fitting the denoised target moves it by far less than the 0.5 pp
+    # tolerance of the ceiling criterion.
+    assert abs(ident.model.fit['calibration_fit_percent']
+               - oe.model.fit['calibration_fit_percent']) < 0.1
 
 
 def test_a_clipped_shot_is_left_out_with_a_message():

@@ -1,0 +1,74 @@
+"""``sensor-comp compare``: models against the measured shots of a recording."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+from .sources import load_model, load_shots
+from ..core.compare import compare, format_table
+from ..errors import SensorCompError
+
+__all__ = ['register', 'run']
+
+
+def register(subparsers) -> None:
+    """Add the ``compare`` sub-command."""
+    parser = subparsers.add_parser(
+        'compare', help='compare one or more models with measured shots (MATLAB compare)',
+        description='Simulate each model from the measured acceleration over every shot '
+                    'window of the recording and report fit %%, peak error and peak '
+                    'residual after compensation, per shot and overall. With several models '
+                    'the table shows them side by side (before/after).')
+    parser.add_argument('paths', nargs='+', metavar='MODEL.json ... RECORDING',
+                        help='one or more model files, then the recording (.mcap or .csv)')
+    parser.add_argument('--json', action='store_true',
+                        help='print JSON: the first model\'s fit_percent, '
+                             'peak_residual_percent and shots, and every model under models')
+    parser.add_argument('--plot', metavar='OUT.png',
+                        help='write the overlay of measured and simulated pressure per shot')
+    parser.add_argument('--residual-plot', metavar='OUT.png',
+                        help='write the residual (measured − model) per shot')
+    parser.add_argument('--window', nargs=2, type=float, action='append',
+                        metavar=('START', 'STOP'), help='manual shot window in seconds')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Compare and print the table; return the exit code."""
+    if len(args.paths) < 2:
+        raise SensorCompError('give at least one model file and a recording: '
+                              'sensor-comp compare MODEL.json [MODEL2.json ...] BAG.mcap')
+    *model_paths, recording_path = args.paths
+    for path in model_paths:
+        if not path.endswith('.json'):
+            raise SensorCompError(f'{path}: expected a model file (.json) before the '
+                                  f'recording, which comes last')
+    models = [load_model(p) for p in model_paths]
+    labels = _labels(model_paths)
+    source = load_shots(recording_path, windows=args.window)
+    comparisons = compare(models, source.recording, list(source.shots), labels=labels)
+    if args.plot or args.residual_plot:
+        from ..core.plots import comparison_figure, comparison_residual_figure
+        if args.plot:
+            comparison_figure(comparisons, path=args.plot)
+        if args.residual_plot:
+            comparison_residual_figure(comparisons, path=args.residual_plot)
+    if args.json:
+        first = comparisons[0].to_dict()
+        print(json.dumps({**first, 'recording': recording_path,
+                          'models': [dict(c.to_dict(), path=p)
+                                     for c, p in zip(comparisons, model_paths)]}, indent=2))
+        return 0
+    print(f'{recording_path}: {len(source.shots)} shots')
+    print(format_table(comparisons))
+    for plot in (args.plot, args.residual_plot):
+        if plot:
+            print(f'wrote {plot}')
+    return 0
+
+
+def _labels(paths: list[str]) -> list[str]:
+    names = [os.path.splitext(os.path.basename(p))[0] for p in paths]
+    return names if len(set(names)) == len(names) else paths

@@ -1,0 +1,99 @@
+"""``sensor-comp identify``: fit the induced-pressure model of a sensor from shots."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from .sources import load_shots, progress_factory
+from ..core.identify import identify, STRUCTURES
+from ..core.shots import shot_table
+
+__all__ = ['describe_model', 'register', 'run']
+
+
+def register(subparsers) -> None:
+    """Add the ``identify`` sub-command."""
+    parser = subparsers.add_parser(
+        'identify', help='identify the acceleration-induced pressure model from shots',
+        description='Detect the shots of calibration recordings, EMD-denoise them, choose '
+                    'a structure and fit the model; report its fit on validation shots '
+                    '(--validate recordings, or every second calibration shot).')
+    parser.add_argument('calibration', nargs='+', metavar='CALIB',
+                        help='calibration recordings (.mcap bags or .csv exports)')
+    parser.add_argument('-o', '--output', required=True, metavar='MODEL.json',
+                        help='model file to write')
+    parser.add_argument('--structure', choices=STRUCTURES, default='auto',
+                        help='model structure: auto (output error, orders and delay chosen '
+                             'by BIC and validation fit), arx, armax (extended least '
+                             'squares), gls (the seed paper\'s generalised least squares), '
+                             'oe (default: %(default)s)')
+    parser.add_argument('--orders', nargs=2, type=int, metavar=('NA', 'NB'),
+                        help='denominator and numerator orders (default: chosen for auto, '
+                             '2 2 otherwise)')
+    parser.add_argument('--delay', type=int, metavar='NK',
+                        help='input delay in samples (default: estimated)')
+    parser.add_argument('--no-emd', action='store_true',
+                        help='fit the measured pressure without EMD denoising')
+    parser.add_argument('--validate', nargs='+', metavar='VAL', default=[],
+                        help='validation recordings (default: every second calibration shot)')
+    parser.add_argument('--criterion', choices=('bic', 'aic', 'aicc', 'fpe'), default='bic',
+                        help='information criterion for --structure auto')
+    parser.add_argument('--window', nargs=2, type=float, action='append',
+                        metavar=('START', 'STOP'),
+                        help='manual shot window in seconds (repeat; applies to every '
+                             'calibration recording)')
+    parser.add_argument('--json', action='store_true', help='print a JSON summary')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Identify and write the model; return the exit code."""
+    calibration = [load_shots(p, windows=args.window) for p in args.calibration]
+    validation = [load_shots(p) for p in args.validate]
+    result = identify(calibration, validation=validation, structure=args.structure,
+                      orders=tuple(args.orders) if args.orders else None, delay=args.delay,
+                      denoise=not args.no_emd, criterion=args.criterion,
+                      progress=progress_factory(args.quiet or args.json))
+    result.model.save(args.output)
+    view = result.model.continuous()
+    if args.json:
+        print(json.dumps({'model': args.output, 'structure': result.model.structure,
+                          'orders': result.model.orders, 'explanation': result.explanation,
+                          'continuous': view.to_json(),
+                          'validation_fit_percent': result.validation_fit_percent,
+                          'validation': [c.to_dict() for c in result.comparisons],
+                          'excluded': list(result.excluded)}, indent=2))
+        return 0
+    for source in result.calibration:
+        print(f'calibration shots of {source.name}:')
+        print(shot_table(source.shots))
+    for line in result.excluded:
+        print(f'warning: {line}')
+    if result.selection is not None:
+        print(result.selection.table())
+    print(f'structure: {result.explanation}')
+    if result.denoising:
+        kept = sum(len(d.kept) for d in result.denoising) / len(result.denoising)
+        print(f'EMD: {len(result.denoising)} windows, {kept:.1f} IMFs kept on average')
+    print(describe_model(result.model, view))
+    shots = sum(len(s.shots) for s in result.validation)
+    print(f'validation: fit {result.validation_fit_percent:.2f} % over {shots} held-out '
+          f'shots, worst peak residual '
+          f'{result.model.fit["validation_peak_residual_percent"]:.1f} %')
+    print(f'wrote {args.output}')
+    return 0
+
+
+def describe_model(model, view) -> str:
+    if view.overdamped:
+        dynamics = 'overdamped, time constants ' + ', '.join(
+            f'{1e6 * t:.3g} µs' for t in view.time_constants_s)
+    else:
+        dynamics = (f'natural frequency {view.natural_frequency_hz / 1e3:.3f} kHz, damping '
+                    f'ratio {view.damping_ratio:.4f}')
+    charge = ('' if view.sensitivity_pC_per_g is None
+              else f' = {view.sensitivity_pC_per_g:.4g} pC/g')
+    return (f'model: {model.structure} na={model.orders["na"]} nb={model.orders["nb"]} '
+            f'nk={model.nk} at {model.fs / 1e3:g} kS/s; {dynamics}; static sensitivity '
+            f'{view.sensitivity_MPa_per_g:.4g} MPa/g{charge}')

@@ -1,0 +1,74 @@
+"""Load recordings and models named on the command line, with clear errors."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..core.identify import ShotSource
+from ..core.model import load, Model
+from ..errors import SensorCompError
+from ..streams import Recording
+
+__all__ = ['load_model', 'load_recording', 'load_shots', 'progress_factory']
+
+
+def load_recording(path: str) -> Recording:
+    """
+    Read a recording from an MCAP bag or an oscilloscope CSV export.
+
+    Raises:
+        SensorCompError: If the file is missing or of an unknown kind, or does not read.
+
+    """
+    if not os.path.exists(path):
+        raise SensorCompError(f'{path}: no such file')
+    suffix = Path(path).suffix.lower()
+    if suffix in ('.csv', '.tsv', '.txt'):
+        from ..io.csv_import import read_csv
+        return read_csv(path)
+    if suffix == '.mcap' or os.path.isdir(path):
+        from ..io.bag_reader import read_recording
+        return read_recording(path)
+    raise SensorCompError(f'{path}: expected an MCAP bag (.mcap) or a CSV export (.csv), '
+                          f'got {suffix or "a file without extension"}')
+
+
+def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None) -> ShotSource:
+    """
+    Read a recording and find its shots (or use the manual ``windows`` in seconds).
+
+    Raises:
+        SensorCompError: If the file does not read or holds no shot.
+
+    """
+    from ..core.shots import shots_from_windows
+    recording = load_recording(path)
+    if windows:
+        source = ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
+    else:
+        source = ShotSource.detect(recording, path=path)
+    if not source.shots:
+        raise SensorCompError(f'{path}: no shot found on the axial acceleration (largest '
+                              f'|a_z| {abs(recording.axial).max() / 9.80665:.3g} g); give '
+                              f'--window START STOP in seconds')
+    return source
+
+
+def load_model(path: str) -> Model:
+    """
+    Read a model file.
+
+    Raises:
+        SensorCompError: If it is missing or malformed.
+
+    """
+    if not os.path.exists(path):
+        raise SensorCompError(f'{path}: no such model file')
+    return load(path)
+
+
+def progress_factory(quiet: bool):
+    """Return a ``progress(label, total)`` factory honouring ``--quiet``."""
+    from .progress import Progress
+    return lambda label, total: Progress(label, total, quiet=quiet)
