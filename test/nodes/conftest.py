@@ -72,12 +72,21 @@ def context(ros_domain):
 
 
 @pytest.fixture
+def other_context(ros_domain):
+    """Return a second context on the test's domain: another DDS participant."""
+    ctx = rclpy.Context()
+    ctx.init(domain_id=ros_domain)
+    yield ctx
+    ctx.try_shutdown()
+
+
+@pytest.fixture
 def make_node(context):
     """Return a factory of plain nodes in the test's context, destroyed after the test."""
     nodes = []
 
-    def make(name: str = 'probe', namespace: str = '/rig'):
-        node = rclpy.create_node(name, namespace=namespace, context=context)
+    def make(name: str = 'probe', namespace: str = '/rig', ctx=None):
+        node = rclpy.create_node(name, namespace=namespace, context=ctx or context)
         nodes.append(node)
         return node
 

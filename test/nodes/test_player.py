@@ -6,7 +6,6 @@ import time
 
 import numpy as np
 import pytest
-import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
@@ -243,26 +242,19 @@ def many_strings(tmp_path):
 
 
 def test_a_reader_that_takes_nothing_for_a_while_still_gets_everything(
-        context, ros_domain, many_strings):
-    other = rclpy.Context()  # a second participant, as a subscriber process would have
-    other.init(domain_id=ros_domain)
-    try:
-        node = rclpy.create_node('stalled', namespace='/rig', context=other)
-        got = []
-        node.create_subscription(String, 'text', lambda m: got.append(m.data), BLOCK_QOS)
-        player = _player(context, many_strings, as_fast_as_possible=True,
-                         wait_for_subscribers=1)
-        assert player.play() == 6000  # all acknowledged: queued in the reader
-        player.destroy_node()
-        executor = SingleThreadedExecutor(context=other)
-        executor.add_node(node)
-        deadline = time.monotonic() + 20
-        while len(got) < 6000 and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        executor.shutdown()
-        node.destroy_node()
-    finally:
-        other.try_shutdown()
+        context, other_context, make_node, many_strings):
+    node = make_node('stalled', ctx=other_context)  # another participant, like a process
+    got = []
+    node.create_subscription(String, 'text', lambda m: got.append(m.data), BLOCK_QOS)
+    player = _player(context, many_strings, as_fast_as_possible=True, wait_for_subscribers=1)
+    assert player.play() == 6000  # all acknowledged: queued in the reader
+    player.destroy_node()
+    executor = SingleThreadedExecutor(context=other_context)
+    executor.add_node(node)
+    deadline = time.monotonic() + 20
+    while len(got) < 6000 and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+    executor.shutdown()
     assert got == [str(i) for i in range(6000)]
 
 
