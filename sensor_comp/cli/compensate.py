@@ -12,7 +12,7 @@ from ..core.streaming import BlockCompensator
 from ..errors import SensorCompError
 from ..io.bag_reader import BagReader, find_namespace, read_stream_infos
 from ..io.bag_writer import BagWriter, topic_name
-from ..io.messages import decode_block, encode_block, encode_stream_info, IMAGE
+from ..io.messages import decode_block, encode_block, encode_stream_info, IMAGE, MessageError
 from ..streams import ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_INFO, StreamInfo
 
 __all__ = ['compensate_bag', 'register', 'run']
@@ -92,7 +92,11 @@ def compensate_bag(model, input_path: str, output_path: str, *,
                               log_time_ns=msg.log_time_ns, publish_time_ns=msg.publish_time_ns)
                     announced = True
                 elif msg.topic in (topics[PRESSURE_RAW], topics[ACCELERATION]):
-                    stamp, frame_id, data = decode_block(msg.data)
+                    try:
+                        stamp, _, data = decode_block(msg.data)
+                    except MessageError as exc:
+                        raise SensorCompError(f'{input_path}: {msg.topic} message at log '
+                                              f'time {msg.log_time_ns} ns: {exc}') from None
                     add = (compensator.add_pressure if msg.topic == topics[PRESSURE_RAW]
                            else compensator.add_acceleration)
                     for block in add(stamp, data):

@@ -50,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
               + ('  latched' if t['latched'] else ''))
     print('streams:')
     for name, s in summary['streams'].items():
-        gaps = f', {len(s["gaps"])} gaps' if s['gaps'] else ''
+        count = len(s['gaps'])
+        gaps = f', {count} gap{"s" if count > 1 else ""}' if count else ''
         print(f'  {name:24s} {s["fs_hz"] / 1e3:g} kS/s  {",".join(s["channels"])} '
               f'[{s["unit"]}]  {s["samples"]} samples = {s["duration_s"]:.4g} s{gaps}')
     return 0

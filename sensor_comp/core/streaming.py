@@ -148,6 +148,9 @@ class BlockCompensator:
         return self._add(self._acceleration, self._pressure, int(stamp_ns), block)
 
     def _add(self, mine: dict, theirs: dict, stamp: int, block: np.ndarray):
+        if stamp in mine:  # a repeated block: the first copy can no longer pair
+            self._give_up(mine, stamp, 'unpaired_pressure' if mine is self._pressure
+                          else 'unpaired_acceleration')
         mine[stamp] = block
         out = []
         if stamp in theirs:
