@@ -50,6 +50,7 @@ from typing import Callable, Sequence
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -81,9 +82,6 @@ DEFAULT_NAMESPACE = '/rig'
 
 BLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 _FASTDDS = 'rmw_fastrtps_cpp'
 _PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
@@ -118,6 +116,9 @@ def latched_qos(depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+LATCHED_QOS = latched_qos(1)
+
+
 def declare(node: Node, name: str, default, description: str, *, dynamic: bool = False):
     """
     Declare a read-only parameter and return its value.
@@ -142,10 +143,13 @@ def declare(node: Node, name: str, default, description: str, *, dynamic: bool =
     numeric = isinstance(default, float) and not dynamic
     descriptor = ParameterDescriptor(description=description, read_only=True,
                                      dynamic_typing=numeric or dynamic)
-    if isinstance(default, list):
-        value = node.declare_parameter(name, Parameter.Type.STRING_ARRAY, descriptor).value
-        return list(value or [])
-    value = node.declare_parameter(name, default, descriptor).value
+    try:
+        if isinstance(default, list):
+            value = node.declare_parameter(name, Parameter.Type.STRING_ARRAY, descriptor).value
+            return list(value or [])
+        value = node.declare_parameter(name, default, descriptor).value
+    except InvalidParameterTypeException as exc:
+        raise NodeError(f'{node.get_fully_qualified_name()}: {exc}') from None
     if numeric:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise NodeError(f'{node.get_fully_qualified_name()}: parameter {name!r} must be a '

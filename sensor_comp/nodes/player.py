@@ -50,7 +50,9 @@ import sys
 import threading
 import time
 
+from rclpy.exceptions import NameValidationException
 from rclpy.node import Node
+from rclpy.validate_namespace import validate_namespace
 
 from ..io.bag_reader import BagReader
 from ._common import (BLOCK_QOS, check, declare, finish_publishing, latched_qos, message_class,
@@ -131,8 +133,12 @@ class Player(Node):
             return '', ''
         old, sep, new = remap.partition(':=')
         old, new = old.rstrip('/'), new.rstrip('/')
-        check(self, 'namespace_remap', remap,
-              bool(sep) and old.startswith('/') and (not new or new.startswith('/')),
+        valid = bool(sep) and old.startswith('/')
+        try:
+            validate_namespace(new or '/')
+        except NameValidationException:
+            valid = False
+        check(self, 'namespace_remap', remap, valid,
               'OLD:=NEW with absolute namespaces, e.g. /rig:=/bench')
         return old, new
 

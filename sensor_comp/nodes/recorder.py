@@ -52,7 +52,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ..errors import SensorCompError
 from ..io.bag_writer import BagWriter
-from ._common import check, declare, DEFAULT_NAMESPACE, message_class, run_main
+from ._common import check, declare, DEFAULT_NAMESPACE, message_class, NodeError, run_main
 
 __all__ = ['Recorder', 'main']
 
@@ -105,7 +105,7 @@ class Recorder(Node):
         self.path = Path(output)
         check(self, 'output', output, bool(output) and not self.path.exists(),
               'the name of a file that does not exist yet')
-        self._wanted = {self.resolve_topic_name(t) for t in topics}
+        self._wanted = {self._resolve(t) for t in topics}
         self._writer = BagWriter(self.path, compression=compression, chunk_size=chunk_size)
         self.counts: dict[str, int] = {}
         self._topic_subscriptions = {}
@@ -118,6 +118,13 @@ class Recorder(Node):
         what = ', '.join(sorted(self._wanted)) or f'every topic under {self.get_namespace()}'
         self.get_logger().info(f'recording {what} to {self.path}')
         self.discover()
+
+    def _resolve(self, topic: str) -> str:
+        try:
+            return self.resolve_topic_name(topic)
+        except RuntimeError as exc:  # rclpy's RCLError
+            raise NodeError(f'{self.get_fully_qualified_name()}: parameter \'topics\' lists '
+                            f'{topic!r}, which is not a valid topic name: {exc}') from None
 
     @property
     def received(self) -> int:

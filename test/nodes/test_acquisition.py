@@ -1,6 +1,7 @@
 """The acquisition node: block streams from the simulator, bags and CSV files."""
 
 from pathlib import Path
+import signal
 import threading
 import time
 
@@ -197,6 +198,8 @@ def test_bag_and_csv_sources(context, tmp_path):
     ({'sim_shots': -1}, 'sim_shots'),
     ({'sim_fs': 10.0}, 'sample rate'),
     ({'sim_effects': ['no_such_effect']}, 'no_such_effect'),
+    ({'block_size': 'big'}, 'block_size'),
+    ({'loop': 'yes'}, 'loop'),
 ])
 def test_acquisition_rejects_bad_parameters(context, params, name):
     with pytest.raises(SensorCompError, match=name):
@@ -210,3 +213,10 @@ def test_pacing_accepts_a_speed_factor(context):
     node = _acquisition(context, **SIM, pacing=2)
     assert node.speed == 2.0
     node.destroy_node()
+
+
+def test_acquisition_process_stops_on_sigterm(node_process):
+    node = node_process('acquisition', **SIM, block_size=100, pacing='realtime', loop=True)
+    node.wait_for_log('publishing')
+    assert node.stop(signal.SIGTERM) == 0
+    assert 'Traceback' not in node.output()

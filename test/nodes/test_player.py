@@ -288,8 +288,9 @@ def test_player_waits_while_a_recorder_process_is_paused(context, node_process, 
 def test_player_reports_bad_parameters(context, string_bag, tmp_path):
     with pytest.raises(NodeError, match='rate'):
         _player(context, string_bag, rate=0.0)
-    with pytest.raises(NodeError, match='namespace_remap'):
-        _player(context, string_bag, namespace_remap='rig')
+    for remap in ('rig', '/rig:=bench', '/rig:=/be nch'):
+        with pytest.raises(NodeError, match='namespace_remap'):
+            _player(context, string_bag, namespace_remap=remap)
     with pytest.raises(NodeError, match='/rig/missing'):
         _player(context, string_bag, topics=['/rig/missing'])
     with pytest.raises(Exception, match='missing.mcap'):
@@ -310,3 +311,10 @@ def test_message_class_names_what_to_install():
         message_class('no_such_msgs/msg/Thing', topic='/rig/thing')
     with pytest.raises(NodeError, match='pkg/msg/Type'):
         message_class('sensor_msgs/Image')
+
+
+def test_player_process_reports_a_missing_bag_and_fails(node_process, tmp_path):
+    missing = tmp_path / 'missing.mcap'
+    player = node_process('player', bag=missing)
+    assert player.wait() == 1
+    assert str(missing) in player.output() and 'Traceback' not in player.output()

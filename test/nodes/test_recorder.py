@@ -158,6 +158,7 @@ def test_recorder_records_only_the_listed_topics(context, make_node, in_thread, 
     ({'flush_period': -1.0}, 'flush_period'),
     ({'discovery_period': 0}, 'discovery_period'),
     ({'compression': 'gzip'}, 'compression'),
+    ({'topics': ['bad topic']}, 'bad topic'),
 ])
 def test_recorder_rejects_bad_parameters(context, tmp_path, params, name):
     with pytest.raises(SensorCompError, match=name):
