@@ -56,8 +56,7 @@ from rclpy.validate_namespace import validate_namespace
 
 from ..io.bag_reader import BagReader
 from ._common import (BLOCK_QOS, check, declare, finish_publishing, latched_qos, message_class,
-                      NodeError, publish_raw, sleep_until, wait_for_subscribers)
-from ._common import run_main
+                      NodeError, publish_raw, run_main, sleep_until, wait_for_subscribers)
 
 __all__ = ['Player', 'main']
 
@@ -113,6 +112,14 @@ class Player(Node):
                   'a number of seconds >= 0')
         old, new = self._parse_remap(remap)
         self._reader = BagReader(bag)
+        try:
+            self._create_publishers(topics, old, new)
+        except BaseException:
+            self._reader.close()
+            raise
+        self.published = 0
+
+    def _create_publishers(self, topics: list[str], old: str, new: str) -> None:
         unknown = sorted(set(topics) - set(self._reader.topics))
         check(self, 'topics', topics, not unknown,
               f'topics of {self._reader.path} ({", ".join(self._reader.topics)}); '
@@ -126,7 +133,6 @@ class Player(Node):
             qos = latched_qos(info.message_count) if info.latched else BLOCK_QOS
             self._topic_publishers[topic] = self.create_publisher(
                 message_class(info.msgtype, topic=topic), name, qos)
-        self.published = 0
 
     def _parse_remap(self, remap: str) -> tuple[str, str]:
         if not remap:
