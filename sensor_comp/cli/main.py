@@ -7,6 +7,7 @@ Each sub-command module exposes ``register(subparsers)``, which adds its parser 
 
 import argparse
 import importlib
+import os
 import sys
 
 from ..errors import SensorCompError
@@ -14,7 +15,8 @@ from ..errors import SensorCompError
 __all__ = ['main']
 
 #: Sub-command modules of :mod:`sensor_comp.cli`, in the order ``--help`` lists them.
-COMMANDS = ('simulate', 'import_csv', 'info', 'identify', 'compare', 'compensate', 'demo')
+COMMANDS = ('simulate', 'import_csv', 'info', 'identify', 'show', 'compare', 'compensate',
+            'demo')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,6 +49,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print('sensor-comp: interrupted', file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == '__main__':
