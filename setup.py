@@ -32,6 +32,8 @@ setup(
             'recorder = sensor_comp.nodes.recorder:main',
             'player = sensor_comp.nodes.player:main',
             'acquisition = sensor_comp.nodes.acquisition:main',
+            'identification = sensor_comp.nodes.identification:main',
+            'compensation = sensor_comp.nodes.compensation:main',
         ],
     },
 )
