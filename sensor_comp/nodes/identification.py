@@ -1,0 +1,711 @@
+"""
+The ``identification`` node: detect shots in the live streams and fit the sensor model.
+
+Run it as ``identification --ros-args -p structure:=oe -p min_shots:=4`` (or
+``python -m sensor_comp.nodes.identification``). It does live what ``sensor-comp identify``
+does on a bag: find the shots on the axial acceleration, keep their windows, fit the model
+on alternate shots and report its fit on the others
+(:func:`~sensor_comp.core.identify.identify`, validation as the core does it).
+
+Topics, relative to the node's namespace (default ``/rig``):
+
+- Subscribed: ``acceleration`` and ``pressure/raw`` (block streams, raw CDR, reliable
+  keep-all) and ``stream_info`` (latched: transient-local, reliable; the sample rate and
+  the sensor metadata such as the charge sensitivity come from it).
+- Published: ``model`` (``std_msgs/msg/String``, transient-local depth 1: a node started
+  later still gets the last model): the model as JSON, ``json.dumps(Model.to_json())``,
+  the content of a model file. ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``,
+  status ``sensor_comp: identification``): shots found and kept, and after a fit its
+  statistics (validation fit %, natural frequency, damping ratio, MPa/g, shot counts),
+  every ``diagnostics_period`` and after each shot and fit.
+- Service ``~/fit`` (``std_srvs/srv/Trigger``): fit now on the shots kept so far (at least
+  2: one to fit on, one to validate on); the answer is success with a one-line summary
+  of the fit, or failure with the reason (e.g. ``1 shot kept, need at least 2``).
+
+Parameters (read once at start):
+
+- ``structure`` (``auto``, ``arx``, ``armax``, ``gls``, ``oe``; default ``auto``),
+  ``orders`` (``[na, nb]``, default empty: the structure's default or the ``auto`` grid),
+  ``delay`` (samples, default -1: estimated), ``emd`` (bool, default true: EMD-denoise the
+  calibration windows), ``effects`` (string array, default empty: extra physical effects
+  to fit, given to ``identify(effects=...)`` when this version of the core has it).
+- ``min_shots`` (default 4): fit automatically once this many shots are kept;
+  ``refit_shots`` (default 0 = never): fit again after this many more; ``max_shots``
+  (default 20): keep at most the latest this many shot windows.
+- ``threshold_g`` (g, default 0 = automatic per buffer: the larger of 5 % of the largest
+  peak and 8 noise σ), ``pre_ms`` and ``post_ms`` (window before the pulse onset and after
+  the pulse end, default 5 and 20 ms), ``max_pulse_ms`` (longest pulse expected, default
+  10 ms; sizes the buffer).
+- ``model_file`` (default empty): also write each model to this file (atomically).
+- ``max_pending_blocks`` (default 1000): blocks per topic held until ``stream_info``
+  arrives; older ones are dropped and counted.
+- ``diagnostics_period`` (s, default 1.0), ``fit_timeout`` (s the service waits for a
+  fit, default 300).
+
+Memory is bounded: the streams go through a rolling buffer of about twice ``pre_ms +
+max_pulse_ms + post_ms`` (plus a scan step), never the whole stream; each accepted shot
+keeps a copy of its window only. Shots are found by
+:func:`~sensor_comp.core.shots.detect_shots` on the buffer each time a quarter of that span
+has come in. A shot is taken once the buffer runs ``pre_ms + max_pulse_ms + post_ms +
+holdoff`` past its pulse end, so that a following shot close enough to shorten its window
+(windows never overlap) is complete in the same scan; it is taken once, and shots that are
+clipped or whose window holds a stream gap are left out (logged, counted). Offline
+detection on the whole recording finds the same shots; their windows may differ by a
+sample where the median of the buffer and of the whole recording round a half-amplitude
+crossing differently, so the model states its windows in ``provenance`` (stream sample
+indices since the first sample received, the stamp of each window start) and
+:func:`~sensor_comp.core.identify.identify` run offline on those windows gives the same
+coefficients.
+
+Threads: identification (EMD, the output-error fit) runs in one worker thread of the node,
+so the callbacks that receive blocks return at once and never wait for a fit; a fit works
+on a snapshot of the kept windows. The ``~/fit`` service waits for its fit in the service
+callback, which has a callback group of its own: with a ``MultiThreadedExecutor`` (what
+:func:`main` and :mod:`sensor_comp.nodes.pipeline` use) the blocks keep coming in on the
+other thread meanwhile; with a single-threaded executor they queue in DDS (keep-all,
+nothing lost) until the answer is sent.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError as FutureTimeout
+from dataclasses import dataclass, replace
+import functools
+import hashlib
+import inspect
+import json
+import math
+import sys
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from std_srvs.srv import Trigger
+
+from ..core.identify import identify, ShotSource, STRUCTURES
+from ..core.model import Model, Source
+from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
+                          Shot, ShotError)
+from ..errors import SensorCompError
+from ..io.messages import (decode_block, decode_stream_info, encode_string, IMAGE,
+                           MessageError, STRING)
+from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
+from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
+                      DIAGNOSTICS_QOS, diagnostics, LATCHED_QOS, latched_qos, message_class,
+                      publish_raw, run_main, spin_until, take_queued)
+
+__all__ = ['Identification', 'ShotWindow', 'main']
+
+#: Status name on ``/diagnostics``.
+STATUS_NAME = 'sensor_comp: identification'
+#: Topic of the identified model, relative to the namespace.
+MODEL = 'model'
+# Fewest shots identify() can split into a calibration and a validation set.
+_MIN_FIT_SHOTS = 2
+# Blocks of one topic waiting for their partner before they count as unpaired.
+_MAX_UNPAIRED = 64
+# Messages taken from one subscription per callback (see take_queued).
+_BATCH = 64
+_ORDER_NAMES = ('na', 'nb')
+
+
+@dataclass(frozen=True)
+class ShotWindow:
+    """
+    One shot kept for identification, with a copy of its window's samples.
+
+    Attributes:
+        shot: The shot; sample indices count from the first sample the node received.
+        stamp_ns: Acquisition time of the window's first sample.
+        pressure: ``(n,)`` raw pressure of the window in Pa.
+        acceleration: ``(3, n)`` acceleration of the window in m/s².
+
+    """
+
+    shot: Shot
+    stamp_ns: int
+    pressure: np.ndarray
+    acceleration: np.ndarray
+
+
+class _BlockPairs:
+    """Pair pressure and acceleration blocks by stamp (they may arrive in either order)."""
+
+    def __init__(self):
+        self.pending = {PRESSURE_RAW: {}, ACCELERATION: {}}
+        self.unpaired = 0  # samples given up, both topics together
+
+    def add(self, topic: str, stamp: int, block: np.ndarray):
+        mine = self.pending[topic]
+        theirs = self.pending[ACCELERATION if topic == PRESSURE_RAW else PRESSURE_RAW]
+        if stamp in mine:  # a repeated block: the first copy can no longer pair
+            self.unpaired += mine.pop(stamp).shape[-1]
+        if stamp not in theirs:
+            mine[stamp] = block
+            while len(mine) > _MAX_UNPAIRED:
+                self.unpaired += mine.pop(min(mine)).shape[-1]
+            return None
+        other = theirs.pop(stamp)
+        for pending in self.pending.values():  # older blocks can no longer pair
+            for old in [s for s in pending if s < stamp]:
+                self.unpaired += pending.pop(old).shape[-1]
+        pressure, acceleration = (block, other) if topic == PRESSURE_RAW else (other, block)
+        if pressure.shape[-1] != acceleration.shape[-1]:
+            self.unpaired += pressure.shape[-1] + acceleration.shape[-1]
+            return None
+        return pressure[0], acceleration
+
+
+class _LiveShots:
+    """
+    Assemble paired blocks into a rolling buffer and find the shots that are complete.
+
+    Stream sample indices count from the first sample received; a stamp gap becomes NaN
+    samples (a gap longer than the buffer empties it), an overlapping or out-of-order
+    block is dropped.
+    """
+
+    def __init__(self, *, fs: float, threshold_g: float | None, pre_ms: float,
+                 post_ms: float, max_pulse_ms: float, frame_id: str, metadata: dict):
+        self.fs = fs
+        self.options = {'threshold_g': threshold_g, 'pre_ms': pre_ms, 'post_ms': post_ms}
+        self.frame_id, self.metadata = frame_id, metadata
+        span = math.ceil((pre_ms + max_pulse_ms + post_ms + DEFAULT_HOLDOFF_MS) * fs / 1e3)
+        self.settle = span  # samples after a pulse end before its shot is taken
+        self.scan_step = max(1, span // 4)
+        self.capacity = 2 * span + self.scan_step
+        self.pre = math.ceil(pre_ms * fs / 1e3)
+        self._chunks: list[np.ndarray] = []
+        self.start = 0  # stream index of the buffer's first sample
+        self.length = 0
+        self._since_scan = 0
+        self._taken_until = 0  # stream index: shots with an earlier onset are done
+        self._next_stamp: int | None = None
+        self._ref = (0, 0)  # (stream index, stamp) of the latest block start
+        self.gaps = 0
+        self.dropped = 0  # samples of overlapping or out-of-order blocks
+        self.detected = 0
+
+    @property
+    def received_until(self) -> int:
+        """Return the stream index one past the last sample received."""
+        return self.start + self.length
+
+    def stamp_of(self, index: int) -> int:
+        """Return the stamp of stream sample ``index``."""
+        ref_index, ref_stamp = self._ref
+        return ref_stamp + round((index - ref_index) * 1e9 / self.fs)
+
+    def add(self, stamp: int, pressure: np.ndarray, acceleration: np.ndarray
+            ) -> list[tuple[ShotWindow, str | None]]:
+        """Append a block pair; return the shots now complete, each with a reason to skip."""
+        width = pressure.size
+        if self._next_stamp is not None:
+            offset = (stamp - self._next_stamp) * self.fs / 1e9
+            if offset < -0.5:
+                self.dropped += width
+                return []
+            if offset > 0.5:
+                self._gap(math.floor(offset + 0.5))
+        self._ref = (self.received_until, stamp)
+        self._next_stamp = stamp + round(width * 1e9 / self.fs)
+        self._append(np.vstack((pressure, acceleration)))
+        if self._since_scan < self.scan_step:
+            return []
+        return self._scan()
+
+    def _gap(self, missing: int) -> None:
+        self.gaps += 1
+        if missing >= self.capacity:
+            self._chunks, self.start, self.length = [], self.received_until + missing, 0
+        else:
+            self._append(np.full((4, missing), np.nan))
+
+    def _append(self, block: np.ndarray) -> None:
+        self._chunks.append(block)
+        self.length += block.shape[1]
+        self._since_scan += block.shape[1]
+
+    def _buffer(self) -> np.ndarray:
+        if len(self._chunks) != 1:
+            self._chunks = [np.concatenate(self._chunks, axis=1)]
+        return self._chunks[0]
+
+    def _scan(self) -> list[tuple[ShotWindow, str | None]]:
+        self._since_scan = 0
+        buffer = self._buffer()
+        recording = Recording(fs=self.fs, t0_ns=self.stamp_of(self.start), pressure=buffer[0],
+                              acceleration=buffer[1:], frame_id=self.frame_id,
+                              metadata=self.metadata)
+        try:
+            shots = detect_shots(recording, **self.options)
+        except ShotError:  # no finite acceleration in the buffer (a gap)
+            shots = []
+        found = []
+        for shot in shots:
+            if self.start + shot.onset < self._taken_until:
+                continue
+            if self.received_until < self.start + shot.end + self.settle:
+                break  # a later shot may still shorten its window
+            self._taken_until = self.start + shot.end
+            self.detected += 1
+            found.append(self._window(buffer, shot))
+        if self.length > self.capacity:  # copy: a view would keep the old buffer alive
+            self._chunks = [buffer[:, -self.capacity:].copy()]
+            self.start += self.length - self.capacity
+            self.length = self.capacity
+        return found
+
+    def _window(self, buffer: np.ndarray, shot: Shot) -> tuple[ShotWindow, str | None]:
+        offset = self.start
+        moved = replace(shot, index=self.detected - 1, start=shot.start + offset,
+                        stop=shot.stop + offset, onset=shot.onset + offset,
+                        end=shot.end + offset, peak=shot.peak + offset,
+                        baseline_stop=shot.baseline_stop + offset)
+        window = buffer[:, shot.window]
+        kept = ShotWindow(moved, self.stamp_of(moved.start), window[0].copy(),
+                          window[1:].copy())
+        where = f'shot {moved.index} ({moved.peak_g:.4g} g at stamp {kept.stamp_ns} ns)'
+        if shot.clipped:
+            return kept, f'{where} left out: clipped (the sensor or the recorder saturated)'
+        if not (np.isfinite(window).all()):
+            return kept, f'{where} left out: its window holds a stream gap'
+        if shot.start == 0 and shot.onset - shot.start < self.pre and offset > 0:
+            return kept, (f'{where} left out: its pre-trigger fell out of the buffer (a pulse '
+                          f'longer than max_pulse_ms?)')
+        return kept, None
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """What one fit gave: the model, or why there is none."""
+
+    success: bool
+    message: str
+    model: Model | None = None
+
+
+class Identification(Node):
+    """
+    Find shots in the live streams and identify the model (see the module documentation).
+
+    Spin it with a ``MultiThreadedExecutor`` (or any executor; see the module
+    documentation for what the ``~/fit`` service does to a single-threaded one) and
+    destroy it when done; :meth:`fit` runs a fit from Python.
+
+    Args:
+        node_name: Name of the node.
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
+            ``/rig``; ``context``; ``parameter_overrides``; ...).
+
+    Attributes:
+        model: The latest identified model, or None.
+        windows: The shot windows kept (the latest ``max_shots``).
+        rejected: Shots found but left out; ``rejections`` holds the latest reasons.
+        fits: Fits done (successful or not).
+        samples_received: Samples received per input topic.
+        malformed: Messages skipped because they could not be decoded.
+
+    Raises:
+        NodeError: On a bad parameter.
+
+    """
+
+    def __init__(self, node_name: str = 'identification', **kwargs):
+        kwargs.setdefault('namespace', DEFAULT_NAMESPACE)
+        super().__init__(node_name, **kwargs)
+        self._declare_parameters()
+        self.model: Model | None = None
+        self.windows: deque[ShotWindow] = deque(maxlen=self.max_shots)
+        self.fits = 0
+        self.samples_received = {PRESSURE_RAW: 0, ACCELERATION: 0}
+        self.rejected = 0
+        self.rejections: deque[str] = deque(maxlen=100)  # the latest reasons
+        self.malformed = 0
+        self.held_dropped = 0
+        self._infos: dict[str, StreamInfo] = {}
+        self._live: _LiveShots | None = None
+        self._pairs = _BlockPairs()
+        self._held: deque[tuple[str, bytes]] = deque()
+        self._lock = threading.Lock()
+        self._new_since_fit = 0
+        self._fit_running: Future | None = None
+        self._last_error: str | None = None
+        self._stop = threading.Event()
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='identification')
+        image = message_class(IMAGE)
+        self._block_subscriptions = {
+            topic: self.create_subscription(image, topic, functools.partial(self._on_block,
+                                                                            topic),
+                                            BLOCK_QOS, raw=True)
+            for topic in (PRESSURE_RAW, ACCELERATION)}
+        self.create_subscription(message_class('diagnostic_msgs/msg/DiagnosticArray'),
+                                 STREAM_INFO, self._on_stream_info, latched_qos(16), raw=True)
+        self._model_publisher = self.create_publisher(message_class(STRING), MODEL,
+                                                      LATCHED_QOS)
+        self._diagnostics = self.create_publisher(
+            message_class('diagnostic_msgs/msg/DiagnosticArray'), DIAGNOSTICS, DIAGNOSTICS_QOS)
+        self.create_service(Trigger, '~/fit', self._on_fit,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_timer(self.diagnostics_period, self.publish_diagnostics)
+        self.get_logger().info(
+            f'identifying {self.structure} models from shots on '
+            f'{self.resolve_topic_name(ACCELERATION)}; fit after {self.min_shots} shots')
+
+    def _declare_parameters(self) -> None:
+        self.structure = declare(self, 'structure', 'auto',
+                                 f'model structure: {"|".join(STRUCTURES)}')
+        orders = declare(self, 'orders', [], '[na, nb]; empty: default or auto grid',
+                         item_type=int)
+        delay = declare(self, 'delay', -1, 'input delay in samples; -1: estimated')
+        self.emd = declare(self, 'emd', True, 'EMD-denoise the calibration windows')
+        self.effects = declare(self, 'effects', [], 'extra physical effects to fit')
+        self.min_shots = declare(self, 'min_shots', 4, 'shots kept before the automatic fit')
+        self.max_shots = declare(self, 'max_shots', 20, 'latest shots kept for fitting')
+        self.refit_shots = declare(self, 'refit_shots', 0,
+                                   'fit again after this many more shots; 0: never')
+        threshold = declare(self, 'threshold_g', 0.0, 'trigger level in g; 0: automatic')
+        pre_ms = declare(self, 'pre_ms', DEFAULT_PRE_MS, 'window before the pulse onset, ms')
+        post_ms = declare(self, 'post_ms', DEFAULT_POST_MS, 'window after the pulse end, ms')
+        max_pulse = declare(self, 'max_pulse_ms', 10.0, 'longest pulse expected, ms')
+        self.model_file = declare(self, 'model_file', '', 'write each model to this file')
+        self.max_pending_blocks = declare(self, 'max_pending_blocks', 1000,
+                                          'blocks per topic held until stream_info arrives')
+        self.diagnostics_period = declare(self, 'diagnostics_period', 1.0,
+                                          'seconds between diagnostics')
+        self.fit_timeout = declare(self, 'fit_timeout', 300.0,
+                                   'seconds the ~/fit service waits for the fit')
+        check(self, 'structure', self.structure, self.structure in STRUCTURES,
+              f'one of {", ".join(STRUCTURES)}')
+        check(self, 'orders', orders,
+              not orders or (len(orders) == 2 and min(orders) >= 1),
+              'empty or two integers [na, nb] >= 1')
+        self.orders = tuple(orders) if orders else None
+        check(self, 'delay', delay, delay >= -1, 'a number of samples >= 0, or -1 (estimated)')
+        self.delay = None if delay < 0 else delay
+        check(self, 'min_shots', self.min_shots, self.min_shots >= _MIN_FIT_SHOTS,
+              f'at least {_MIN_FIT_SHOTS} (one shot to fit on, one to validate on)')
+        check(self, 'max_shots', self.max_shots, self.max_shots >= self.min_shots,
+              f'at least min_shots ({self.min_shots})')
+        check(self, 'refit_shots', self.refit_shots, self.refit_shots >= 0, 'a count >= 0')
+        check(self, 'threshold_g', threshold, threshold >= 0, '0 (automatic) or a level in g')
+        self.threshold_g = threshold or None
+        for name, value in (('pre_ms', pre_ms), ('post_ms', post_ms)):
+            check(self, name, value, value >= 0 and math.isfinite(value), 'a number of ms >= 0')
+        check(self, 'max_pulse_ms', max_pulse, max_pulse > 0 and math.isfinite(max_pulse),
+              'a positive number of ms')
+        self._window_ms = {'pre_ms': pre_ms, 'post_ms': post_ms, 'max_pulse_ms': max_pulse}
+        check(self, 'max_pending_blocks', self.max_pending_blocks,
+              self.max_pending_blocks >= 0, 'a number of blocks >= 0')
+        for name in ('diagnostics_period', 'fit_timeout'):
+            check(self, name, getattr(self, name), getattr(self, name) > 0,
+                  'a positive number of seconds')
+        check(self, 'effects', self.effects,
+              not self.effects or 'effects' in inspect.signature(identify).parameters,
+              'empty: this version of sensor_comp identifies no extra effects')
+
+    # Reception (executor thread) -------------------------------------------------------
+
+    @property
+    def fs(self) -> float | None:
+        """Return the streams' sample rate from ``stream_info`` (None before it came)."""
+        return None if self._live is None else self._live.fs
+
+    @property
+    def buffer_samples(self) -> int:
+        """Return the number of samples in the rolling buffer now."""
+        return 0 if self._live is None else self._live.length
+
+    @property
+    def buffer_capacity(self) -> int:
+        """Return the samples the rolling buffer keeps after a scan (0 before stream_info)."""
+        return 0 if self._live is None else self._live.capacity
+
+    def _on_stream_info(self, data: bytes) -> None:
+        try:
+            infos = decode_stream_info(data)
+        except MessageError as exc:
+            self._bad(STREAM_INFO, exc)
+            return
+        for info in infos:
+            if info.topic in (PRESSURE_RAW, ACCELERATION):
+                self._infos.setdefault(info.topic, info)
+        if self._live is not None or len(self._infos) < 2:
+            return
+        pressure, acceleration = self._infos[PRESSURE_RAW], self._infos[ACCELERATION]
+        if pressure.fs != acceleration.fs:
+            self.get_logger().error(
+                f'stream_info gives {pressure.fs:g} Hz for {PRESSURE_RAW} but '
+                f'{acceleration.fs:g} Hz for {ACCELERATION}: cannot pair them')
+            return
+        self._live = _LiveShots(fs=pressure.fs, threshold_g=self.threshold_g,
+                                frame_id=pressure.frame_id, metadata=dict(pressure.metadata),
+                                **self._window_ms)
+        self.get_logger().info(f'streams at {pressure.fs:g} Hz; rolling buffer of '
+                               f'{self._live.capacity} samples')
+        held, self._held = self._held, deque()
+        for topic, message in held:
+            self._handle(topic, message)
+
+    def _on_block(self, topic: str, data: bytes) -> None:
+        self._handle(topic, data)
+        take_queued(self._block_subscriptions[topic],
+                    lambda message, _: self._handle(topic, message), limit=_BATCH)
+
+    def _handle(self, topic: str, data: bytes) -> None:
+        if self._live is None:
+            self._held.append((topic, data))
+            if len(self._held) > 2 * self.max_pending_blocks:
+                self._held.popleft()
+                self.held_dropped += 1
+            return
+        try:
+            stamp, _, block = decode_block(data)
+        except MessageError as exc:
+            self._bad(topic, exc)
+            return
+        rows = 1 if topic == PRESSURE_RAW else 3
+        if block.shape[0] != rows:
+            self._bad(topic, f'block at stamp {stamp} ns has {block.shape[0]} rows, '
+                             f'expected {rows}')
+            return
+        self.samples_received[topic] += block.shape[1]
+        pair = self._pairs.add(topic, stamp, block)
+        if pair is None:
+            return
+        for window, reason in self._live.add(stamp, *pair):
+            self._take(window, reason)
+
+    def _bad(self, topic: str, error) -> None:
+        self.malformed += 1
+        self.get_logger().error(f'{self.resolve_topic_name(topic)}: message skipped: {error}')
+
+    def _take(self, window: ShotWindow, reason: str | None) -> None:
+        if reason is not None:
+            self.rejected += 1
+            self.rejections.append(reason)
+            self.get_logger().warning(reason)
+            return
+        shot = window.shot
+        with self._lock:
+            self.windows.append(window)
+            self._new_since_fit += 1
+            kept = len(self.windows)
+            due = self._fit_running is None and (
+                (self.model is None and kept >= self.min_shots) or
+                (self.refit_shots and self.model is not None and
+                 self._new_since_fit >= self.refit_shots))
+        self.get_logger().info(f'shot {shot.index}: {shot.peak_g:.4g} g, '
+                               f'{shot.width_ms:.3f} ms, {shot.peak_pressure_mpa:.4g} MPa '
+                               f'at stamp {window.stamp_ns} ns ({kept} kept)')
+        if due:
+            self._submit()
+        self.publish_diagnostics()
+
+    # Fitting (worker thread) -------------------------------------------------------------
+
+    def fit(self) -> Future:
+        """
+        Fit on the shots kept now, in the worker thread.
+
+        Returns:
+            A future of the outcome (``success``, ``message``, ``model``); it is done at
+            once, unsuccessful, with fewer than 2 shots kept.
+
+        """
+        return self._submit()
+
+    def _submit(self) -> Future:
+        with self._lock:
+            windows = tuple(self.windows)
+            if len(windows) < _MIN_FIT_SHOTS:
+                done = Future()
+                done.set_result(_Outcome(False, f'{len(windows)} shot'
+                                                f'{"" if len(windows) == 1 else "s"} kept, '
+                                                f'need at least {_MIN_FIT_SHOTS} (one to fit '
+                                                f'on, one to validate on)'))
+                return done
+            self._new_since_fit = 0
+            future = self._worker.submit(self._fit, windows)
+            self._fit_running = future
+        future.add_done_callback(self._fit_done)
+        return future
+
+    def _fit_done(self, future: Future) -> None:
+        with self._lock:
+            if self._fit_running is future:
+                self._fit_running = None
+
+    def _fit(self, windows: tuple[ShotWindow, ...]) -> _Outcome:
+        began = time.monotonic()
+        recording, shots = self._concatenate(windows)
+        options = {'structure': self.structure, 'orders': self.orders, 'delay': self.delay,
+                   'denoise': self.emd}
+        if self.effects:
+            options['effects'] = tuple(self.effects)
+        try:
+            result = identify([ShotSource(recording, shots)], **options)
+            roles = {shot.index: role for role, sources in (
+                ('calibration', result.calibration), ('validation', result.validation))
+                for source in sources for shot in source.shots}
+            model = replace(result.model, provenance=(self._provenance(windows, roles),))
+        except SensorCompError as exc:
+            with self._lock:
+                self.fits += 1
+                self._last_error = str(exc)
+            self.get_logger().error(f'fit on {len(windows)} shots failed: {exc}')
+            self.publish_diagnostics()
+            return _Outcome(False, f'fit on {len(windows)} shots failed: {exc}')
+        seconds = time.monotonic() - began
+        summary = f'{_summary(model)} ({seconds:.2f} s)'
+        try:
+            self._publish(model)
+        except SensorCompError as exc:
+            summary += f'; NOT SAVED: {exc}'
+            self.get_logger().error(f'{self.model_file}: {exc}')
+        with self._lock:
+            self.fits += 1
+            self.model = model
+            self._last_error = None
+        self.get_logger().info(f'model: {summary}')
+        self.publish_diagnostics()
+        return _Outcome(True, summary, model)
+
+    def _concatenate(self, windows: tuple[ShotWindow, ...]
+                     ) -> tuple[Recording, tuple[Shot, ...]]:
+        """Join the windows into one recording; move each shot's indices into it."""
+        shots, position = [], 0
+        for window in windows:
+            shift = position - window.shot.start
+            s = window.shot
+            shots.append(replace(s, start=s.start + shift, stop=s.stop + shift,
+                                 onset=s.onset + shift, end=s.end + shift,
+                                 peak=s.peak + shift, baseline_stop=s.baseline_stop + shift))
+            position += s.n_samples
+        recording = Recording(fs=self._live.fs, t0_ns=windows[0].stamp_ns,
+                              pressure=np.concatenate([w.pressure for w in windows]),
+                              acceleration=np.concatenate([w.acceleration for w in windows],
+                                                          axis=1),
+                              frame_id=self._live.frame_id, metadata=self._live.metadata)
+        return recording, tuple(shots)
+
+    def _provenance(self, windows: tuple[ShotWindow, ...], roles: dict) -> Source:
+        """Describe the windows: stream indices, stamps, and the SHA-256 of their samples."""
+        digest = hashlib.sha256()
+        entries = []
+        for window in windows:
+            digest.update(window.pressure.astype('<f8').tobytes())
+            digest.update(window.acceleration.astype('<f8').tobytes())
+            entries.append({**window.shot.to_dict(), 'role': roles.get(window.shot.index),
+                            'baseline_stop': window.shot.baseline_stop,
+                            'stamp_ns': window.stamp_ns})
+        topics = ' and '.join(self.resolve_topic_name(t) for t in (PRESSURE_RAW, ACCELERATION))
+        return Source(f'live topics {topics}', digest.hexdigest(), tuple(entries))
+
+    def _publish(self, model: Model) -> None:
+        """
+        Publish the model on the latched topic and write the model file if asked.
+
+        Raises:
+            ModelError: If the model file cannot be written.
+
+        """
+        text = json.dumps(model.to_json(), allow_nan=False)
+        publish_raw(self._model_publisher, encode_string(text), self._stop)
+        if self.model_file:
+            model.save(self.model_file)
+
+    def _on_fit(self, request, response):
+        future = self._submit()
+        try:
+            outcome = future.result(timeout=self.fit_timeout)
+        except FutureTimeout:
+            outcome = _Outcome(False, f'the fit is still running after {self.fit_timeout:g} s '
+                                      f'(fit_timeout); its model will be published')
+        response.success = outcome.success
+        response.message = outcome.message
+        return response
+
+    # Diagnostics -------------------------------------------------------------------------
+
+    def publish_diagnostics(self) -> None:
+        """Publish the node's status on ``/diagnostics``."""
+        with self._lock:
+            model, kept, error = self.model, len(self.windows), self._last_error
+            running = self._fit_running is not None
+        live = self._live
+        values = {'samples_received': self.samples_received[PRESSURE_RAW],
+                  'shots_detected': 0 if live is None else live.detected,
+                  'shots_kept': kept, 'shots_rejected': self.rejected,
+                  'min_shots': self.min_shots, 'fits': self.fits, 'fit_running': running,
+                  'buffer_samples': self.buffer_samples,
+                  'gaps': 0 if live is None else live.gaps,
+                  'unpaired_samples': self._pairs.unpaired,
+                  'malformed_messages': self.malformed, 'held_dropped': self.held_dropped}
+        if error is not None:
+            level, message = DiagnosticStatus.ERROR, f'last fit failed: {error}'
+        elif model is not None:
+            level, message = DiagnosticStatus.OK, _summary(model)
+        elif live is None:
+            level, message = DiagnosticStatus.WARN, 'waiting for stream_info'
+        else:
+            level, message = DiagnosticStatus.OK, f'{kept} of {self.min_shots} shots kept'
+        if model is not None:
+            values.update(_statistics(model))
+        self._diagnostics.publish(diagnostics(self, name=STATUS_NAME, level=level,
+                                              message=message, values=values))
+
+    def destroy_node(self) -> None:
+        """Stop the worker (a running fit finishes, queued ones are dropped), then destroy."""
+        self._stop.set()
+        self._worker.shutdown(wait=True, cancel_futures=True)
+        super().destroy_node()
+
+
+def _statistics(model: Model) -> dict:
+    """Return the fit statistics shown on ``/diagnostics``."""
+    view = model.continuous()
+    fit = model.fit
+    values = {'structure': model.structure,
+              'orders': ' '.join(f'{k}={v}' for k, v in model.orders.items()),
+              'natural_frequency_hz': view.natural_frequency_hz,
+              'damping_ratio': view.damping_ratio,
+              'sensitivity_MPa_per_g': view.sensitivity_MPa_per_g}
+    for key in ('validation_fit_percent', 'calibration_fit_percent',
+                'validation_peak_residual_percent', 'calibration_shots', 'validation_shots'):
+        if key in fit:
+            values[key] = fit[key]
+    return {k: ('' if v is None else v) for k, v in values.items()}
+
+
+def _summary(model: Model) -> str:
+    """Return a one-line description of a fitted model."""
+    view = model.continuous()
+    fit = model.fit
+    dynamics = ('overdamped' if view.overdamped else
+                f'fn {view.natural_frequency_hz / 1e3:.4g} kHz, zeta {view.damping_ratio:.4g}')
+    return (f'{model.structure} {" ".join(f"{k}={v}" for k, v in model.orders.items())}: '
+            f'fit {fit.get("validation_fit_percent", math.nan):.2f} % on '
+            f'{fit.get("validation_shots", "?")} validation shots '
+            f'({fit.get("calibration_shots", "?")} calibration), {dynamics}, '
+            f'{view.sensitivity_MPa_per_g:.4g} MPa/g')
+
+
+def _run(node: Identification, stop: threading.Event) -> None:
+    with MultiThreadedExecutor(num_threads=2, context=node.context) as executor:
+        executor.add_node(node)
+        spin_until(executor, stop, progress=lambda: node.samples_received[PRESSURE_RAW])
+
+
+def main(args=None) -> int:
+    """Identify until SIGINT or SIGTERM; return the exit code."""
+    return run_main(args, Identification, _run)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,293 @@
+"""The identification node: live shots from a replayed bag, the same model as offline."""
+
+import json
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+import pytest
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from sensor_comp.blocks import iter_blocks
+from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.model import load, Model
+from sensor_comp.core.shots import detect_shots, Shot
+from sensor_comp.io.bag_reader import read_recording
+from sensor_comp.io.bag_writer import write_recording
+from sensor_comp.io.messages import encode_block, encode_stream_info
+from sensor_comp.nodes import identification as identification_module
+from sensor_comp.nodes._common import DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
+from sensor_comp.nodes.compensation import model_from_text
+from sensor_comp.nodes.identification import Identification, STATUS_NAME
+from sensor_comp.nodes.player import Player
+from sensor_comp.sim import random_shots, RigConfig, simulate
+from sensor_comp.streams import G0
+
+FS = 2e5
+T0_NS = 1_700_000_000_000_000_000
+#: Five shots at 200 kS/s (~0.21 s); the last one's post-trigger runs past the end, so the
+#: node, which cannot know the stream ends, keeps four.
+SHOTS = 5
+FIT = {'structure': 'oe', 'orders': [2, 2], 'delay': 1, 'emd': False}
+#: The simulated sensor (sim.SensorConfig defaults): 5 kHz, 1.4e-4 MPa/g.
+FN_HZ, MPA_PER_G = 5000.0, 1.4e-4
+
+
+@pytest.fixture
+def calibration_bag(tmp_path):
+    """Write a simulated calibration recording; return its path."""
+    path = tmp_path / 'calibration.mcap'
+    rec = simulate(RigConfig(fs=FS, shots=random_shots(SHOTS, seed=3), seed=3,
+                             t0_ns=T0_NS)).recording
+    write_recording(path, rec, block_width=1000)
+    return path
+
+
+def _params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _spin(context, *nodes):
+    """Spin ``nodes`` on a multi-threaded executor in a thread; return the stopper."""
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    for node in nodes:
+        executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+
+    def stop():
+        executor.shutdown()
+        thread.join()
+    return stop
+
+
+def _play(context, bag, subscribers: int = 1) -> int:
+    player = Player(context=context, parameter_overrides=_params(
+        bag=str(bag), as_fast_as_possible=True, wait_for_subscribers=subscribers,
+        wait_timeout=20.0))
+    try:
+        return player.play()
+    finally:
+        player.destroy_node()
+
+
+def _wait(condition, timeout=20.0, what='the condition'):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.01)
+
+
+def _shots_from_provenance(model: Model, recording) -> list[Shot]:
+    """Rebuild the node's shots from the model's provenance, in ``recording``'s indices."""
+    (source,) = model.provenance
+    shots = []
+    for entry in source.shots:
+        start = round((entry['stamp_ns'] - recording.t0_ns) * recording.fs / 1e9)
+        shift = start - entry['start']
+        shots.append(Shot(
+            index=entry['index'], fs=recording.fs, start=start, stop=entry['stop'] + shift,
+            onset=entry['onset'] + shift, end=entry['end'] + shift, peak=entry['peak'] + shift,
+            peak_g=entry['peak_g'], width_ms=entry['width_ms'],
+            peak_pressure_mpa=entry['peak_pressure_mpa'], charge_pc=entry['charge_pc'],
+            mpa_per_g=entry['mpa_per_g'], clipped=entry['clipped'],
+            baseline_stop=entry['baseline_stop'] + shift, baseline_pa=entry['baseline_pa'],
+            baseline_acceleration=tuple(entry['baseline_acceleration']),
+            notes=tuple(entry['notes'])))
+    return shots
+
+
+def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_context,
+                                                               make_node, calibration_bag,
+                                                               tmp_path):
+    model_file = tmp_path / 'live.json'
+    node = Identification(context=context, parameter_overrides=_params(
+        **FIT, min_shots=4, model_file=str(model_file), diagnostics_period=0.2))
+    statuses = []
+    probe = make_node('probe')
+    probe.create_subscription(DiagnosticArray, '/diagnostics',
+                              lambda msg: statuses.extend(s for s in msg.status
+                                                          if s.name == STATUS_NAME),
+                              DIAGNOSTICS_QOS)
+    stop = _spin(context, node, probe)
+    try:
+        _play(context, calibration_bag)
+        _wait(lambda: node.model is not None, what='the model')
+        # A subscriber that comes after the fit still gets the model (latched).
+        texts = []
+        late = make_node('late', ctx=other_context)
+        late.create_subscription(String, 'model', lambda msg: texts.append(msg.data),
+                                 LATCHED_QOS)
+        stop_late = _spin(other_context, late)
+        _wait(lambda: texts and statuses and 'validation_fit_percent' in
+              {v.key for v in statuses[-1].values}, what='the latched model and diagnostics')
+        stop_late()
+    finally:
+        stop()
+    capacity, buffered = node.buffer_capacity, node.buffer_samples
+    node.destroy_node()
+    recording = read_recording(calibration_bag)
+    live = model_from_text(texts[0], where='test')
+    assert live.provenance[0].shots == node.model.provenance[0].shots
+
+    # The node kept the first four shots that offline detection finds, at the same places
+    # (up to a sample where the buffer's median moves a half-amplitude crossing).
+    offline_shots = detect_shots(recording)
+    shots = _shots_from_provenance(live, recording)
+    assert len(shots) == 4 and len(offline_shots) == SHOTS
+    for mine, theirs in zip(shots, offline_shots):
+        assert abs(mine.start - theirs.start) <= 1 and abs(mine.stop - theirs.stop) <= 1
+        assert mine.baseline_pa == pytest.approx(
+            np.mean(recording.pressure[mine.start:mine.baseline_stop]), rel=1e-12)
+
+    # The same fit offline, on the node's windows, from the bag.
+    offline = identify([ShotSource(recording, tuple(shots))], structure='oe', orders=(2, 2),
+                       delay=1, denoise=False).model
+    np.testing.assert_allclose(live.b, offline.b, rtol=1e-9)
+    np.testing.assert_allclose(live.a, offline.a, rtol=1e-9)
+    assert live.nk == offline.nk == 1
+    for key in ('validation_fit_percent', 'calibration_fit_percent', 'calibration_shots',
+                'validation_shots'):
+        assert live.fit[key] == pytest.approx(offline.fit[key], rel=1e-9)
+    roles = [entry['role'] for entry in live.provenance[0].shots]
+    assert roles == ['calibration', 'validation'] * 2
+
+    # The physics is the simulated sensor's.
+    view = live.continuous()
+    assert view.natural_frequency_hz == pytest.approx(FN_HZ, rel=0.02)
+    assert view.sensitivity_MPa_per_g == pytest.approx(MPA_PER_G, rel=0.03)
+    assert live.charge_sensitivity_pC_per_MPa == float(recording.metadata[
+        'charge_sensitivity_pC_per_MPa'])
+
+    # The model file holds the same model; diagnostics carry the fit statistics.
+    np.testing.assert_array_equal(load(model_file).b, live.b)
+    values = {v.key: v.value for v in statuses[-1].values}
+    assert float(values['validation_fit_percent']) == live.fit['validation_fit_percent']
+    assert float(values['natural_frequency_hz']) == pytest.approx(view.natural_frequency_hz)
+    assert float(values['sensitivity_MPa_per_g']) == pytest.approx(
+        view.sensitivity_MPa_per_g)
+    assert values['shots_kept'] == '4' and values['shots_rejected'] == '0'
+    assert int(values['samples_received']) == recording.n_samples
+    # Bounded memory: the buffer spans a few shot windows, not the recording.
+    assert 0 < buffered <= capacity + 1000 < recording.n_samples / 2
+
+
+def test_fit_service_answers_with_the_fit_or_the_reason(context, make_node, calibration_bag):
+    node = Identification(context=context, parameter_overrides=_params(**FIT, min_shots=10))
+    client_node = make_node('client')
+    client = client_node.create_client(Trigger, '/rig/identification/fit')
+    stop = _spin(context, node, client_node)
+
+    def call():
+        future = client.call_async(Trigger.Request())
+        _wait(future.done, what='the service answer')
+        return future.result()
+
+    try:
+        assert client.wait_for_service(timeout_sec=10.0)
+        empty = call()
+        assert not empty.success and empty.message.startswith('0 shots kept, need at least 2')
+        _play(context, calibration_bag)
+        _wait(lambda: len(node.windows) == 4, what='four shots')
+        assert node.model is None  # min_shots not reached: no automatic fit
+        answer = call()
+    finally:
+        stop()
+    node.destroy_node()
+    assert answer.success, answer.message
+    model = node.model
+    assert model is not None and node.fits == 1
+    fit = model.fit['validation_fit_percent']
+    assert f'fit {fit:.2f} %' in answer.message
+    assert f'{model.continuous().natural_frequency_hz / 1e3:.4g} kHz' in answer.message
+
+
+def test_identification_process_writes_the_model(context, node_process, calibration_bag,
+                                                 tmp_path):
+    model_file = tmp_path / 'process.json'
+    proc = node_process('identification', **FIT, min_shots=4, model_file=model_file)
+    proc.wait_for_log('fit after 4 shots')
+    _play(context, calibration_bag)
+    proc.wait_for_log('model: oe')
+    assert proc.stop() == 0, proc.output()
+    model = load(model_file)
+    assert model.fit['calibration_shots'] == 2 and model.fit['validation_shots'] == 2
+    assert 'shot 3:' in proc.output()
+
+
+def test_shots_with_gaps_or_clipping_are_left_out(context, tmp_path):
+    sim = simulate(RigConfig(fs=FS, shots=random_shots(4, seed=5), seed=5, t0_ns=T0_NS))
+    rec = sim.recording
+    onsets = sim.onsets
+    # Clip shot 1 hard; cut a hole into shot 2's window.
+    peak = onsets[1] + np.argmax(rec.acceleration[2, onsets[1]:onsets[1] + 2000])
+    limit = 0.7 * rec.acceleration[2, peak]
+    rec.acceleration[2, onsets[1]:onsets[1] + 2000] = np.minimum(
+        rec.acceleration[2, onsets[1]:onsets[1] + 2000], limit)
+    accel, press = rec.streams()
+    hole = onsets[2] + 3000  # in the post-trigger
+    node = Identification(context=context, parameter_overrides=_params(**FIT, min_shots=4))
+    # Fed directly, without DDS: the callbacks' bodies.
+    node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
+    for (stamp, a), (_, p) in zip(iter_blocks(accel, width=500), iter_blocks(press, width=500)):
+        if stamp == accel.stamp_ns(hole - hole % 500):
+            continue  # a lost block pair
+        node._handle('acceleration', encode_block(a, stamp_ns=stamp, frame_id='s'))
+        node._handle('pressure/raw', encode_block(p, stamp_ns=stamp, frame_id='s'))
+    reasons = list(node.rejections)
+    kept = [w.shot.index for w in node.windows]
+    node.destroy_node()
+    assert kept == [0]
+    assert len(reasons) == 2
+    assert 'shot 1' in reasons[0] and 'clipped' in reasons[0]
+    assert 'shot 2' in reasons[1] and 'gap' in reasons[1]
+    assert node._live.gaps == 1
+    assert limit / G0 > 100  # the clipped shot was a real one
+
+
+@pytest.mark.parametrize('params, name', [
+    ({'structure': 'fir'}, 'structure'),
+    ({'orders': [2]}, 'orders'),
+    ({'orders': [0, 2]}, 'orders'),
+    ({'delay': -2}, 'delay'),
+    ({'min_shots': 1}, 'min_shots'),
+    ({'min_shots': 6, 'max_shots': 5}, 'max_shots'),
+    ({'threshold_g': -1.0}, 'threshold_g'),
+    ({'max_pulse_ms': 0.0}, 'max_pulse_ms'),
+    ({'diagnostics_period': 0.0}, 'diagnostics_period'),
+    ({'min_shots': 'four'}, 'min_shots'),
+])
+def test_identification_rejects_bad_parameters(context, params, name):
+    with pytest.raises(NodeError, match=name):
+        Identification(context=context, parameter_overrides=_params(**params))
+
+
+def test_effects_need_an_identify_that_fits_them(context, monkeypatch):
+    def without_effects(calibration, *, structure='auto'):
+        raise AssertionError('not called')
+
+    def with_effects(calibration, *, structure='auto', effects=()):
+        raise AssertionError('not called')
+
+    effects = _params(effects=['amplifier_highpass'])
+    monkeypatch.setattr(identification_module, 'identify', without_effects)
+    with pytest.raises(NodeError, match='effects'):
+        Identification(context=context, parameter_overrides=effects)
+    monkeypatch.setattr(identification_module, 'identify', with_effects)
+    node = Identification(context=context, parameter_overrides=effects)
+    assert node.effects == ['amplifier_highpass']
+    node.destroy_node()
+
+
+def test_model_json_round_trips(calibration_bag):
+    rec = read_recording(calibration_bag)
+    model = identify([ShotSource.detect(rec)], structure='oe', orders=(2, 2), delay=1,
+                     denoise=False).model
+    again = model_from_text(json.dumps(model.to_json()), where='test')
+    np.testing.assert_array_equal(again.b, model.b)
+    with pytest.raises(Exception, match='model on /rig/model'):
+        model_from_text('{"schema": "sensor_comp.model/1"}', where='model on /rig/model')
