@@ -380,6 +380,7 @@ class AmplitudeTrend:
         excess_rms_pa: :attr:`ShotResidual.excess_rms_pa` of every shot.
         used: Which shots the fit used (excess significantly above the noise).
         reason: Why there is no exponent (empty when there is one).
+        scale_pa: The fitted law's excess at 1 g: ``excess = scale_pa · |g|^exponent``.
 
     """
 
@@ -390,6 +391,7 @@ class AmplitudeTrend:
     excess_rms_pa: tuple[float, ...]
     used: tuple[bool, ...]
     reason: str = ''
+    scale_pa: float | None = None
 
     def to_dict(self) -> dict:
         """Return the numbers as JSON-ready values."""
@@ -397,7 +399,7 @@ class AmplitudeTrend:
                 'ci95': None if self.ci95 is None else list(self.ci95),
                 'peak_g': list(self.peak_g),
                 'excess_rms_pa': [_json(v) for v in self.excess_rms_pa],
-                'used': list(self.used), 'reason': self.reason}
+                'used': list(self.used), 'reason': self.reason, 'scale_pa': self.scale_pa}
 
 
 @dataclass(frozen=True, eq=False)
@@ -986,7 +988,7 @@ def _amplitude(shots: Sequence[Shot], excess: list[float], excess_var: list[floa
     se = math.sqrt(cov[1, 1])
     half = float(stats.t.ppf(0.975, n - 2)) * se
     return AmplitudeTrend(float(beta[1]), se, (float(beta[1] - half), float(beta[1] + half)),
-                          **base)
+                          scale_pa=math.exp(beta[0]), **base)
 
 
 # --- the analysis ------------------------------------------------------------------------
@@ -1197,7 +1199,7 @@ _PROBE_WORDS = {
 }
 
 
-#: Significant probes named in the summary.
+#: Significant probes (and spectral peaks) named in the summary.
 _SUMMARY_PROBES = 3
 
 
@@ -1247,7 +1249,7 @@ def _summary(a: ResidualAnalysis) -> list[str]:
     if len(significant) > _SUMMARY_PROBES:
         lines.append(f'{len(significant) - _SUMMARY_PROBES} more significant probes explain '
                      f'less ({", ".join(significant[_SUMMARY_PROBES:])})')
-    for peak in a.spectrum.peaks:
+    for peak in a.spectrum.peaks[:_SUMMARY_PROBES]:
         where = ('where the model resonates' if peak.model_resonance else
                  'where the model has no resonance')
         lines.append(f'the residual spectrum peaks at {peak.frequency_hz / 1e3:.3g} kHz '
