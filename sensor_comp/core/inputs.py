@@ -4,53 +4,241 @@ Model input channels computed from acceleration, block by block, with carried st
 A model names its inputs (``Model.inputs``); this module turns an acceleration block
 ``(3, w)`` in m/s² (rows x, y, z; z = sensor axis) into those rows. Identification windows
 and the streaming compensation filter both go through :func:`input_channels`, so the model
-sees the same channels offline and online.
+sees the same channels offline and online. A name carries every parameter its channel
+needs, so a model file alone reproduces its channels.
 
-Known names:
+A name is a base channel followed by optional modifiers, ``base[@modifier=value...]``.
+
+Base channels:
 
 - ``a_x``, ``a_y``, ``a_z``: acceleration along one axis, m/s².
 - ``da_x``, ``da_y``, ``da_z``: its time derivative (backward difference × ``fs``), m/s³.
   The previous sample is carried in ``state`` so that blocks of any size give the same
   channel as the whole signal; the first sample of a stream or window has derivative 0
   (windows start at rest).
+- ``a_z_abs_a_z``: ``a_z·|a_z|``, m²/s⁴ (a sensitivity that changes with the load).
+- ``peak_a_z(tau_ms=T)``: a leaky peak detector of ``|a_z|``, m/s²: it follows ``|a_z|``
+  up and decays with the time constant ``T`` ms, ``p[n] = max(|a_z[n]|, p[n−1]·ρ)`` with
+  ``ρ = exp(−1/(T·fs))``: after a shock it is the shock's peak decaying exponentially (a
+  shot-triggered offset such as a zero shift).
+
+Modifiers, applied in the order written (all are linear and time-invariant):
+
+- ``@delay_us=D``: delay by ``D`` µs ≥ 0, fractional samples included, by an 8-tap
+  Lagrange interpolator (its error for a signal at ``f`` is of order ``(2πf/fs)⁸/8!``:
+  below 1e-8 of the signal at ``f < fs/20``, far below any measurement noise here).
+- ``@highpass_ms=T``: the first-order high-pass ``T s/(T s + 1)`` of a charge amplifier
+  with time constant ``T`` ms (matched pole ``exp(−1/(T·fs))``, zero at ``z = 1``).
+
+Stateful stages (derivative, peak detector, modifiers) carry their state in ``state``;
+a non-finite sample gives a non-finite output and restarts the stage from rest after it.
+Parameter values are written with ``repr`` precision, so names round-trip exactly.
 """
 
 from __future__ import annotations
 
 from collections.abc import MutableMapping, Sequence
+from dataclasses import dataclass
+import math
+import re
 
 import numpy as np
+from scipy import signal
 
 from ..errors import SensorCompError
 
-__all__ = ['AXES', 'InputError', 'input_channels', 'needs_rate']
+__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'channel_name',
+           'fractional_delay', 'input_channels', 'needs_rate', 'parse_channel']
 
 #: Row of each axis in an acceleration block.
 AXES = {'x': 0, 'y': 1, 'z': 2}
+
+#: Order of the Lagrange fractional-delay interpolator (order + 1 taps).
+LAGRANGE_ORDER = 7
+
+_MODIFIERS = {'delay_us': 'delay in µs (>= 0)', 'highpass_ms': 'high-pass time constant in ms'}
+_PEAK = re.compile(r'^peak_a_z\(tau_ms=([^()]+)\)$')
 
 
 class InputError(SensorCompError, ValueError):
     """A model input name is unknown or cannot be computed from the data given."""
 
 
-def _parse(name: str) -> tuple[str, int]:
-    for prefix in ('a_', 'da_'):
-        axis = name[len(prefix):] if name.startswith(prefix) else None
-        if axis in AXES:
-            return prefix[:-1], AXES[axis]
-    known = ', '.join(f'{p}_{a}' for p in ('a', 'da') for a in AXES)
-    raise InputError(f'unknown model input {name!r}; known inputs: {known}')
+@dataclass(frozen=True)
+class Channel:
+    """
+    A parsed input name.
+
+    Attributes:
+        name: The name as given.
+        kind: ``'a'``, ``'da'``, ``'a_abs_a'`` or ``'peak'``.
+        axis: Row of the acceleration block it reads.
+        tau_ms: Decay time constant of a ``peak`` channel, else None.
+        modifiers: ``(modifier, value)`` pairs in the order they apply.
+
+    """
+
+    name: str
+    kind: str
+    axis: int
+    tau_ms: float | None
+    modifiers: tuple[tuple[str, float], ...]
+
+    @property
+    def needs_rate(self) -> bool:
+        """Return whether the channel needs the sample rate."""
+        return self.kind in ('da', 'peak') or bool(self.modifiers)
+
+
+def _known() -> str:
+    bases = [f'{p}_{a}' for p in ('a', 'da') for a in AXES]
+    bases += ['a_z_abs_a_z', 'peak_a_z(tau_ms=T)']
+    mods = ', '.join(f'@{m}=<{what}>' for m, what in _MODIFIERS.items())
+    return f'known inputs: {", ".join(bases)}, each optionally followed by {mods}'
+
+
+def _number(text: str, name: str, what: str, *, positive: bool) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or (value <= 0 if positive else value < 0):
+        bound = '> 0' if positive else '>= 0'
+        raise InputError(f'model input {name!r}: {what} must be a finite number {bound}, '
+                         f'got {text!r}')
+    return value
+
+
+def parse_channel(name: str) -> Channel:
+    """
+    Parse a model input name (see the module docs).
+
+    Raises:
+        InputError: On an unknown base or modifier, or a bad parameter value.
+
+    """
+    if not isinstance(name, str):
+        raise InputError(f'model input names must be strings, got {name!r}')
+    base, *mods = name.split('@')
+    tau = None
+    if base in ('a_z_abs_a_z',):
+        kind, axis = 'a_abs_a', AXES['z']
+    elif _PEAK.match(base):
+        kind, axis = 'peak', AXES['z']
+        tau = _number(_PEAK.match(base).group(1), name, 'tau_ms', positive=True)
+    else:
+        kind = axis = None
+        for prefix in ('a_', 'da_'):
+            rest = base[len(prefix):] if base.startswith(prefix) else None
+            if rest in AXES:
+                kind, axis = prefix[:-1], AXES[rest]
+                break
+        if kind is None:
+            raise InputError(f'unknown model input {name!r}; {_known()}')
+    modifiers = []
+    for item in mods:
+        key, eq, text = item.partition('=')
+        if not eq or key not in _MODIFIERS:
+            raise InputError(f'model input {name!r}: unknown modifier {item!r}; {_known()}')
+        modifiers.append((key, _number(text, name, key, positive=key == 'highpass_ms')))
+    return Channel(name, kind, axis, tau, tuple(modifiers))
+
+
+def channel_name(base: str, **modifiers: float | None) -> str:
+    """
+    Return ``base`` with modifiers appended (None values left out), e.g. ``a_z@delay_us=5.0``.
+
+    Raises:
+        InputError: When the result is not a valid name.
+
+    """
+    name = base + ''.join(f'@{key}={float(value)!r}' for key, value in modifiers.items()
+                          if value is not None)
+    parse_channel(name)
+    return name
 
 
 def needs_rate(names: Sequence[str]) -> bool:
     """
-    Return whether any of ``names`` needs the sample rate (derivatives).
+    Return whether any of ``names`` needs the sample rate (derivatives, time constants).
 
     Raises:
         InputError: On an unknown name.
 
     """
-    return any(_parse(name)[0] == 'da' for name in names)
+    return any(parse_channel(name).needs_rate for name in names)
+
+
+def fractional_delay(delay: float) -> np.ndarray:
+    """
+    Return FIR taps delaying a signal by ``delay`` samples (>= 0): ``y = lfilter(taps, 1, x)``.
+
+    Whole samples become leading zeros; the rest is a Lagrange interpolator of order
+    :data:`LAGRANGE_ORDER` centred on the fractional delay where the delay allows it.
+    """
+    n = LAGRANGE_ORDER
+    start = max(0, math.floor(delay - (n - 1) / 2))
+    d = delay - start
+    k = np.arange(n + 1)
+    taps = np.ones(n + 1)
+    for j in range(n + 1):
+        others = k != j
+        taps[others] *= (d - j) / (k[others] - j)
+    return np.concatenate([np.zeros(start), taps])
+
+
+def _runs(x: np.ndarray, state: MutableMapping[str, object], key: str, stage) -> np.ndarray:
+    """Apply ``stage(x, previous_state) -> (y, new_state)`` to the finite runs of ``x``."""
+    finite = np.isfinite(x)
+    if finite.all():
+        if x.size:
+            y, state[key] = stage(x, state.get(key))
+            return y
+        return x.copy()
+    out = np.full(x.shape, np.nan)
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], finite, [False])).astype(int)))
+    for start, stop in zip(edges[::2], edges[1::2]):
+        previous = state.get(key) if start == 0 else None
+        out[start:stop], state[key] = stage(x[start:stop], previous)
+    if not finite[-1]:
+        state.pop(key, None)  # restart from rest after the gap
+    return out
+
+
+def _fir(taps: np.ndarray):
+    def stage(x, zi):
+        if taps.size == 1:
+            return taps[0] * x, None
+        zi = np.zeros(taps.size - 1) if zi is None else zi
+        return signal.lfilter(taps, [1.0], x, zi=zi)
+    return stage
+
+
+def _highpass(tau_ms: float, fs: float):
+    pole = math.exp(-1e3 / (tau_ms * fs))
+    num, den = 0.5 * (1.0 + pole) * np.array([1.0, -1.0]), np.array([1.0, -pole])
+
+    def stage(x, zi):
+        # From rest: the signal before the first sample equals the first sample (as the
+        # derivative), so a window starting at a non-zero level gives no step.
+        zi = signal.lfiltic(num, den, [0.0], [x[0]]) if zi is None else zi
+        return signal.lfilter(num, den, x, zi=zi)
+    return stage
+
+
+def _leaky_peak(tau_ms: float, fs: float):
+    log_rho = -1e3 / (tau_ms * fs)
+
+    def stage(x, previous):
+        # p[n] = rho^n max(rho p[-1], max_k<=n |x_k| rho^-k), evaluated in logarithms.
+        k = np.arange(x.size)
+        with np.errstate(divide='ignore'):
+            top = np.maximum.accumulate(np.log(np.abs(x)) - k * log_rho)
+            if previous is not None and previous > 0:
+                top = np.maximum(top, math.log(previous) + log_rho)
+        y = np.exp(top + k * log_rho)
+        return y, float(y[-1])
+    return stage
 
 
 def input_channels(names: Sequence[str], acceleration: np.ndarray,
@@ -59,18 +247,18 @@ def input_channels(names: Sequence[str], acceleration: np.ndarray,
     Return the model input rows for one acceleration block.
 
     Args:
-        names: Input names, e.g. ``('a_z',)``.
+        names: Input names, e.g. ``('a_z',)`` (see the module docs).
         acceleration: ``(3, w)`` block in m/s²; ``w`` may be 0 or 1.
         state: Carried across the blocks of one stream; start each stream or window with a
             fresh empty dict. Updated in place.
-        fs: Sample rate in Hz; needed by derivative inputs.
+        fs: Sample rate in Hz; needed by derivatives, time constants and delays.
 
     Returns:
         ``(len(names), w)`` float64 array.
 
     Raises:
-        InputError: On an unknown name, a block that is not ``(3, w)``, or a derivative
-            input without ``fs``.
+        InputError: On an unknown name, a block that is not ``(3, w)``, or an input that
+            needs ``fs`` without it.
 
     """
     acceleration = np.asarray(acceleration, dtype=np.float64)
@@ -79,17 +267,27 @@ def input_channels(names: Sequence[str], acceleration: np.ndarray,
                          f'{acceleration.shape}')
     out = np.empty((len(names), acceleration.shape[1]))
     for row, name in enumerate(names):
-        kind, axis = _parse(name)
-        a = acceleration[axis]
-        if kind == 'a':
-            out[row] = a
-            continue
-        if fs is None:
-            raise InputError(f'model input {name!r} is a derivative and needs the sample '
-                             f'rate fs')
-        key = f'previous {name}'
-        if a.size:
-            previous = state.get(key, a[0])
-            out[row] = np.diff(a, prepend=previous) * fs
-            state[key] = a[-1]
+        channel = parse_channel(name)
+        if channel.needs_rate and fs is None:
+            raise InputError(f'model input {name!r} needs the sample rate fs (a derivative, '
+                             f'time constant or delay)')
+        a = acceleration[channel.axis]
+        if channel.kind == 'a':
+            x = a.copy()
+        elif channel.kind == 'a_abs_a':
+            x = a * np.abs(a)
+        elif channel.kind == 'da':
+            key = f'previous {name}'
+            x = np.empty(a.size)
+            if a.size:
+                previous = state.get(key, a[0])
+                x = np.diff(a, prepend=previous) * fs
+                state[key] = a[-1]
+        else:
+            x = _runs(a, state, f'{name}|peak', _leaky_peak(channel.tau_ms, fs))
+        for index, (modifier, value) in enumerate(channel.modifiers):
+            stage = (_fir(fractional_delay(value * 1e-6 * fs)) if modifier == 'delay_us'
+                     else _highpass(value, fs))
+            x = _runs(x, state, f'{name}|{index}', stage)
+        out[row] = x
     return out

@@ -1,0 +1,372 @@
+"""
+The interface of a catalogued physical effect, and what an extended model fit needs.
+
+An effect is a small, self-contained description of something the base model (a 2nd-order
+response to the axial acceleration) leaves out, written for two readers: a test engineer
+(``title``, ``explanation``, ``signature``: the residual it predicts, ``parameters`` with
+units) and the extended fit (:meth:`Effect.extend`: how the model structure changes).
+
+The fit works on a :class:`ModelSpec`. Its input channels are names understood by
+:mod:`sensor_comp.core.inputs` (``'a_z'``, ``'a_x'``, ``'da_z'``, ``'a_z_abs_a_z'``,
+``'peak_a_z(tau_ms={zero_shift.tau_ms})'``...), where ``{key}`` stands for a 1-D nonlinear
+parameter found by a bounded scalar search (:class:`Search`); modifiers (a delay, the
+amplifier's high-pass) apply to every channel, because they act on the whole pressure
+channel. Orders change for extra modes; additive disturbances (not caused by the
+acceleration) bring regressors of their own (:meth:`Effect.columns`), fitted jointly with
+the output-error model.
+
+The physical parameters come back from a fitted model in physical units
+(:meth:`Effect.physical`): those read from the polynomials carry a standard deviation by
+the delta method when the parameter covariance is known (at fit time; the model file
+keeps the numbers in its ``effects`` entry), those found by a scalar search carry the
+curvature of the loss.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+import math
+import re
+from typing import Any, ClassVar, TYPE_CHECKING
+
+import numpy as np
+
+from ..inputs import AXES, parse_channel
+from ...errors import SensorCompError
+
+if TYPE_CHECKING:
+    from ..extended import Window
+    from ..model import Model
+
+__all__ = ['Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical', 'Search', 'delta_std',
+           'effect_entry', 'entry_of', 'modifier_value', 'parameters_text', 'probe_of',
+           'row_of', 'segment_of', 'sentence', 'static_gain', 'stored_std']
+
+_PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
+
+#: Physical parameters: name -> (value, standard deviation or None).
+Physical = dict[str, tuple[float, float | None]]
+
+
+class EffectError(SensorCompError, ValueError):
+    """An effect is unknown, cannot be fitted on the data, or a model lacks its parts."""
+
+
+@dataclass(frozen=True)
+class Search:
+    """
+    A 1-D nonlinear parameter found by a bounded scalar search around the output-error fit.
+
+    Args:
+        key: ``'<effect id>.<parameter>'``, the placeholder in channel names.
+        low: Lower bound.
+        high: Upper bound.
+        log: Search the logarithm (time constants spanning decades).
+        grid: Points of the coarse grid before the bounded refinement.
+        start: Value used before the first search (to fit a first denominator); default
+            ``low``.
+
+    """
+
+    key: str
+    low: float
+    high: float
+    log: bool = False
+    grid: int = 25
+    start: float | None = None
+
+    @property
+    def initial(self) -> float:
+        """Return the value used before the first search."""
+        return self.low if self.start is None else self.start
+
+    def points(self) -> np.ndarray:
+        """Return the coarse grid."""
+        if self.log:
+            return np.geomspace(self.low, self.high, self.grid)
+        return np.linspace(self.low, self.high, self.grid)
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """
+    The structure of a base-plus-effects model, before fitting.
+
+    Args:
+        bases: Input channel bases; ``{key}`` placeholders are filled by searches.
+        modifiers: ``(modifier, key)`` pairs applied to every channel, the value coming
+            from the search ``key`` (see :mod:`sensor_comp.core.inputs`).
+        nf: Order of the common denominator.
+        nb: Numerator coefficients per input.
+        nk: Input delay in samples.
+        searches: The 1-D nonlinear parameters.
+        disturbances: Ids of effects adding regressors that bypass the dynamics.
+        extra_modes: Pole pairs added to the base denominator (their start values come
+            from a grid over frequency and damping, not from Steiglitz–McBride, whose
+            regression is nearly singular for high orders at high sample rates).
+
+    """
+
+    bases: tuple[str, ...] = ('a_z',)
+    modifiers: tuple[tuple[str, str], ...] = ()
+    nf: int = 2
+    nb: int = 2
+    nk: int = 1
+    searches: tuple[Search, ...] = ()
+    disturbances: tuple[str, ...] = ()
+    extra_modes: int = 0
+
+    def with_inputs(self, *bases: str) -> ModelSpec:
+        """Return the spec with further input channel bases."""
+        return replace(self, bases=self.bases + tuple(b for b in bases if b not in self.bases))
+
+    def channels(self, values: Mapping[str, float]) -> tuple[str, ...]:
+        """
+        Return the input names with every search value filled in.
+
+        Raises:
+            EffectError: When a placeholder has no value.
+
+        """
+        def fill(text: str) -> str:
+            def value(match):
+                if match.group(1) not in values:
+                    raise EffectError(f'input {text!r} needs the value of {match.group(1)}')
+                return repr(float(values[match.group(1)]))
+            return _PLACEHOLDER.sub(value, text)
+
+        suffix = ''.join(f'@{mod}={{{key}}}' for mod, key in self.modifiers)
+        return tuple(fill(base + suffix) for base in self.bases)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What the diagnosis measured for one effect (for :meth:`Effect.evidence`)."""
+
+    score: float
+    parameters: Physical
+    statistic: float
+    p_value: float
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+class Effect:
+    """
+    A physical effect the base model leaves out (subclass per module; see the module docs).
+
+    Subclasses set the class attributes and override :meth:`extend` and :meth:`physical`;
+    disturbances (``acceleration_driven = False``) override :meth:`columns` too.
+    """
+
+    #: Canonical id, e.g. ``'channel_delay'``.
+    id: ClassVar[str] = ''
+    #: Short human name.
+    title: ClassVar[str] = ''
+    #: One paragraph for a test engineer: what happens physically.
+    explanation: ClassVar[str] = ''
+    #: The residual signature the effect predicts when the model lacks it.
+    signature: ClassVar[str] = ''
+    #: Physical parameter name -> unit.
+    parameters: ClassVar[dict[str, str]] = {}
+    #: Whether the acceleration drives it (the model predicts it from the acceleration).
+    acceleration_driven: ClassVar[bool] = True
+    #: Position when several effects extend one spec (lower first).
+    order: ClassVar[int] = 50
+
+    def applicable(self, windows: Sequence[Window]) -> str | None:
+        """Return why the effect cannot be fitted on ``windows``, or None when it can."""
+        return None
+
+    def extend(self, spec: ModelSpec) -> ModelSpec:
+        """Return ``spec`` with this effect's extension."""
+        raise NotImplementedError
+
+    def physical(self, model: Model, *, covariance: np.ndarray | None = None) -> Physical:
+        """
+        Return the physical parameters ``name -> (value, std or None)`` of a fitted model.
+
+        Args:
+            model: A model fitted with this effect.
+            covariance: Covariance of ``(a1..ana, b row by row)`` when known (at fit time);
+                otherwise the standard deviations stored in the model's entry are used.
+
+        Raises:
+            EffectError: When the model lacks this effect's channels or entry.
+
+        """
+        raise NotImplementedError
+
+    def choices(self) -> tuple[Mapping[str, float], ...]:
+        """Return the discrete alternatives the fit chooses between (e.g. 50 or 60 Hz)."""
+        return ({},)
+
+    def columns(self, window: Window, *, fs: float, choice: Mapping[str, float]) -> np.ndarray:
+        """Return the disturbance regressors ``(k, n)`` of one window (disturbances only)."""
+        raise NotImplementedError
+
+    def disturbance_parameters(self, coefficients: np.ndarray, covariance: np.ndarray, *,
+                               choice: Mapping[str, float], sources: int) -> Physical:
+        """Return the physical parameters of fitted disturbance coefficients."""
+        raise NotImplementedError
+
+    def tracker(self, entry: Mapping, *, fs: float):
+        """Return a streaming disturbance estimator for compensation, or None."""
+        return None
+
+    def evidence(self, analysis, outcome: Outcome) -> str:
+        """
+        Return one human sentence with numbers saying why the data point at this effect.
+
+        Args:
+            analysis: The base model's residual analysis on the validation shots (a
+                ``sensor_comp.core.residual.ResidualAnalysis``) or None.
+            outcome: What the diagnosis measured for this effect.
+
+        """
+        return sentence([f'{self.title}: the extended model removes '
+                         f'{100 * outcome.score:.1f} % of the validation residual energy'
+                         f'{parameters_text(self, outcome.parameters)}'])
+
+    def describe(self) -> str:
+        """Return the effect for a catalogue listing (id, title, parameters, signature)."""
+        units = ', '.join(f'{name} [{unit}]' for name, unit in self.parameters.items())
+        return f'{self.id}: {self.title} ({units})\n    {self.signature}'
+
+
+def parameters_text(effect: Effect, parameters: Physical) -> str:
+    """Return ``' (name = value ± std unit, ...)'`` for evidence sentences."""
+    if not parameters:
+        return ''
+    parts = []
+    for name, (value, std) in parameters.items():
+        unit = effect.parameters.get(name, '')
+        unit = '' if unit in ('', '1') else f' {unit}'
+        spread = '' if std is None or not math.isfinite(std) else f' ± {std:.2g}'
+        parts.append(f'{name} = {value:.4g}{spread}{unit}')
+    return ' (' + ', '.join(parts) + ')'
+
+
+def segment_of(analysis, name: str):
+    """Return the residual analysis's pooled segment ``name``, or None without one."""
+    for seg in getattr(analysis, 'segments', ()):
+        if seg.name == name:
+            return seg
+    return None
+
+
+def probe_of(analysis, name: str):
+    """Return the residual analysis's probe ``name``, or None without one."""
+    return (getattr(analysis, 'probes', None) or {}).get(name)
+
+
+def sentence(parts: Sequence[str]) -> str:
+    """Join clauses with semicolons into one sentence (capitalised, full stop)."""
+    text = '; '.join(p for p in parts if p)
+    return text[:1].upper() + text[1:] + '.'
+
+
+def row_of(model: Model, kind: str, axis: str = 'z') -> int:
+    """
+    Return the row of ``model.inputs`` whose channel is ``kind`` on ``axis``.
+
+    Raises:
+        EffectError: When the model has no such input.
+
+    """
+    for index, name in enumerate(model.inputs):
+        channel = parse_channel(name)
+        if channel.kind == kind and channel.axis == AXES[axis]:
+            return index
+    raise EffectError(f'the model has no {kind} input on axis {axis} (inputs: '
+                      f'{", ".join(model.inputs)})')
+
+
+def modifier_value(model: Model, modifier: str) -> float:
+    """
+    Return the value of ``@modifier=`` in the model's inputs (the same on every input).
+
+    Raises:
+        EffectError: When no input carries it.
+
+    """
+    for name in model.inputs:
+        for key, value in parse_channel(name).modifiers:
+            if key == modifier:
+                return value
+    raise EffectError(f'the model inputs carry no @{modifier}= ({", ".join(model.inputs)})')
+
+
+def static_gain(a: np.ndarray, b: np.ndarray, row: int) -> float:
+    """Return ``B_row(1)/A(1)``."""
+    return float(np.sum(b[row]) / np.sum(a))
+
+
+def delta_std(func: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b: np.ndarray,
+              covariance: np.ndarray | None) -> float | None:
+    """
+    Return the standard deviation of ``func(a, b)`` by the delta method, or None.
+
+    Args:
+        func: A smooth function of the denominator and numerators.
+        a: ``[1, a1, ...]``.
+        b: ``(n_inputs, nb)``.
+        covariance: Covariance of ``(a1..ana, b row by row)``, or None.
+
+    """
+    if covariance is None or not np.all(np.isfinite(covariance)):
+        return None
+    theta = np.concatenate([a[1:], b.ravel()])
+    if covariance.shape != (theta.size, theta.size):
+        return None
+    na = a.size - 1
+
+    def at(t):
+        return func(np.concatenate([[1.0], t[:na]]), t[na:].reshape(b.shape))
+
+    grad = np.zeros(theta.size)
+    for j in range(theta.size):
+        # Small steps: roots of high-order polynomials with close poles move fast.
+        h = 1e-8 * abs(theta[j]) or 1e-14
+        up, down = theta.copy(), theta.copy()
+        up[j] += h
+        down[j] -= h
+        try:
+            grad[j] = (at(up) - at(down)) / (2 * h)
+        except (EffectError, ArithmeticError, ValueError):
+            return None
+    variance = float(grad @ covariance @ grad)
+    return math.sqrt(variance) if variance >= 0 and math.isfinite(variance) else None
+
+
+def entry_of(model: Model, effect_id: str) -> Mapping:
+    """
+    Return the model's ``effects`` entry with ``effect_id``.
+
+    Raises:
+        EffectError: When the model has none.
+
+    """
+    for entry in model.effects:
+        if entry.get('id') == effect_id:
+            return entry
+    raise EffectError(f'the model has no {effect_id!r} effect (its effects: '
+                      f'{", ".join(e.get("id", "?") for e in model.effects) or "none"})')
+
+
+def stored_std(model: Model, effect_id: str, name: str) -> float | None:
+    """Return the standard deviation stored for a parameter in the model's entry, or None."""
+    try:
+        value = (entry_of(model, effect_id).get('std') or {}).get(name)
+    except EffectError:
+        return None
+    return float(value) if isinstance(value, (int, float)) and math.isfinite(value) else None
+
+
+def effect_entry(effect: Effect, parameters: Physical, **extra) -> dict:
+    """Return the JSON-ready ``Model.effects`` entry of a fitted effect."""
+    return {'id': effect.id, 'title': effect.title,
+            'parameters': {k: float(v) for k, (v, _) in parameters.items()},
+            'std': {k: (None if s is None or not math.isfinite(s) else float(s))
+                    for k, (_, s) in parameters.items()},
+            'units': {k: effect.parameters.get(k, '') for k in parameters}, **extra}

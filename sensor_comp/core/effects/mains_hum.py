@@ -1,0 +1,215 @@
+"""
+Mains hum: 50 or 60 Hz pickup and its odd harmonics, not caused by the acceleration.
+
+Identification model: additive regressors, ``sin`` and ``cos`` of ``(2k + 1)·f`` for
+``k = 0 … HARMONICS`` in *recording time* (the sample index from the recording start, so
+the phase runs on across shots), each window's pre-trigger mean removed as from the
+pressure. Every recording gets its own amplitudes and phases (the mains phase is not
+shared between recordings); the frequency, 50 or 60 Hz, is the one that fits the
+calibration shots better. The coefficients are fitted jointly with the output-error model
+(Levenberg–Marquardt on all parameters from the output-error start).
+
+Compensation: the hum is not caused by the acceleration, and its phase in another recording
+(or live) cannot be known from the calibration, so the fitted amplitudes are *not* replayed.
+:class:`LineTracker` estimates the lines from the compensated pressure itself: a lock-in
+per line (quadrature demodulation at the known frequency, two cascaded first-order low
+passes of ``averaging_s``) whose estimate is subtracted. This is sound for stationary
+pickup at a known mains frequency once the tracker has settled (about five averaging times,
+0.5 s by default, after the start of a stream or a gap: until then part of the hum
+remains). It is *not* sound when the mains frequency drifts by more than about
+``1/(2π·averaging_s)`` (1.6 Hz), when the pickup switches on and off within the averaging
+time, or when the model leaves a large residual at the line frequencies (it then leaks
+into the estimate).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import replace
+import math
+
+import numpy as np
+from scipy import signal
+
+from .base import (Effect, entry_of, ModelSpec, Outcome, parameters_text, Physical, probe_of,
+                   sentence)
+
+__all__ = ['HARMONICS', 'LineTracker', 'MainsHum', 'line_columns']
+
+#: Odd harmonics above the fundamental (3rd, 5th).
+HARMONICS = 2
+#: Default averaging time of the compensation's line tracker, s.
+AVERAGING_S = 0.1
+
+
+def line_columns(freq_hz: float, *, start: int, n: int, fs: float, baseline: int,
+                 harmonics: int = HARMONICS) -> np.ndarray:
+    """
+    Return ``(2·(harmonics + 1), n)`` sin/cos regressors of the odd lines in recording time.
+
+    Args:
+        freq_hz: Fundamental frequency in Hz.
+        start: Recording sample index of the first sample.
+        n: Samples.
+        fs: Sample rate in Hz.
+        baseline: Leading samples whose mean is removed (the window's pre-trigger); 0
+            removes nothing.
+        harmonics: Odd harmonics above the fundamental.
+
+    """
+    index = start + np.arange(n, dtype=np.float64)
+    rows = []
+    for k in range(harmonics + 1):
+        f = (2 * k + 1) * freq_hz
+        # The phase is reduced exactly (f·index is an integer for integer f) before scaling.
+        phase = 2 * math.pi * (np.mod(f * index, fs) / fs)
+        rows += [np.sin(phase), np.cos(phase)]
+    out = np.array(rows)
+    if baseline > 0:
+        out -= out[:, :baseline].mean(axis=1, keepdims=True)
+    return out
+
+
+class LineTracker:
+    """
+    Streaming estimate of stationary lines at known frequencies (see the module docs).
+
+    Args:
+        freqs_hz: Line frequencies in Hz.
+        fs: Sample rate in Hz.
+        averaging_s: Time constant of each of the two cascaded low passes, s.
+
+    """
+
+    def __init__(self, freqs_hz, *, fs: float, averaging_s: float = AVERAGING_S):
+        self.freqs_hz = tuple(float(f) for f in freqs_hz)
+        self.fs = float(fs)
+        lam = math.exp(-1.0 / (averaging_s * self.fs))
+        self._num = np.array([(1.0 - lam) ** 2])
+        self._den = np.array([1.0, -2.0 * lam, lam * lam])
+        self.averaging_s = averaging_s
+        self._n = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the estimate (the sample clock runs on)."""
+        self._zi = np.zeros((2 * len(self.freqs_hz), 2))
+
+    def __call__(self, residual: np.ndarray) -> np.ndarray:
+        """
+        Return the lines' estimate over this block, continuing from the previous blocks.
+
+        Args:
+            residual: ``(w,)`` pressure with the induced part removed, Pa. A non-finite
+                sample gives a non-finite estimate and restarts the averages after it.
+
+        """
+        x = np.asarray(residual, dtype=np.float64)
+        index = self._n + np.arange(x.size, dtype=np.float64)
+        self._n += x.size
+        finite = np.isfinite(x)
+        if finite.all():
+            return self._run(x, index)
+        out = np.full(x.shape, np.nan)
+        edges = np.flatnonzero(np.diff(np.concatenate(([False], finite, [False])).astype(int)))
+        for start, stop in zip(edges[::2], edges[1::2]):
+            if start > 0:
+                self.reset()
+            out[start:stop] = self._run(x[start:stop], index[start:stop])
+        if not finite[-1]:
+            self.reset()
+        return out
+
+    def _run(self, x: np.ndarray, index: np.ndarray) -> np.ndarray:
+        estimate = np.zeros(x.size)
+        for k, f in enumerate(self.freqs_hz):
+            phase = 2 * math.pi * (np.mod(f * index, self.fs) / self.fs)
+            c, s = np.cos(phase), np.sin(phase)
+            i_part, self._zi[2 * k] = signal.lfilter(self._num, self._den, 2 * x * c,
+                                                     zi=self._zi[2 * k])
+            q_part, self._zi[2 * k + 1] = signal.lfilter(self._num, self._den, 2 * x * s,
+                                                         zi=self._zi[2 * k + 1])
+            estimate += i_part * c + q_part * s
+        return estimate
+
+
+class MainsHum(Effect):
+    """Stationary mains pickup (see the module docs)."""
+
+    id = 'mains_hum'
+    title = 'mains hum'
+    explanation = (
+        'Ground loops between the amplifier, the digitiser and the rig, and magnetic '
+        'pickup from transformers and motors, add the mains frequency (50 or 60 Hz) and '
+        'its odd harmonics to the pressure signal. It is there all the time, before the '
+        'trigger and between shots, and has nothing to do with the shock; it is removed '
+        'as a disturbance, not predicted from the acceleration.')
+    signature = (
+        'Residual present before the trigger as much as after it, a slow sinusoid at 50 or '
+        '60 Hz (with 150/250 or 180/300 Hz) whose phase runs on from shot to shot; '
+        'uncorrelated with the acceleration.')
+    parameters = {'freq_hz': 'Hz', 'amplitude_pa': 'Pa'}
+    acceleration_driven = False
+    order = 70
+
+    def extend(self, spec: ModelSpec) -> ModelSpec:
+        """Add the hum regressors as a disturbance."""
+        return replace(spec, disturbances=spec.disturbances + (self.id,))
+
+    def choices(self):
+        """Return the two mains frequencies."""
+        return ({'freq_hz': 50.0}, {'freq_hz': 60.0})
+
+    def columns(self, window, *, fs: float, choice: Mapping[str, float]) -> np.ndarray:
+        """Return the sin/cos regressors of one window (pre-trigger mean removed)."""
+        return line_columns(choice['freq_hz'], start=window.start, n=window.y.size, fs=fs,
+                            baseline=window.baseline)
+
+    def disturbance_parameters(self, coefficients, covariance, *, choice, sources) -> Physical:
+        """Return the frequency and the fundamental's amplitude (mean over recordings)."""
+        per = 2 * (HARMONICS + 1)
+
+        def amplitude(c):
+            return float(np.mean([math.hypot(c[s * per], c[s * per + 1])
+                                  for s in range(sources)]))
+
+        value = amplitude(coefficients)
+        grad = np.zeros(coefficients.size)
+        for s in range(sources):
+            a, b = coefficients[s * per], coefficients[s * per + 1]
+            r = math.hypot(a, b) or 1.0
+            grad[s * per], grad[s * per + 1] = a / r / sources, b / r / sources
+        variance = float(grad @ covariance @ grad) if covariance is not None else math.nan
+        return {'freq_hz': (float(choice['freq_hz']), 0.0),
+                'amplitude_pa': (value, math.sqrt(variance) if variance >= 0 else None)}
+
+    def tracker(self, entry: Mapping, *, fs: float) -> LineTracker:
+        """Return the line tracker of a fitted entry (its frequency and harmonics)."""
+        freq = float((entry.get('parameters') or {}).get('freq_hz', 50.0))
+        harmonics = int(entry.get('harmonics', HARMONICS))
+        lines = [(2 * k + 1) * freq for k in range(harmonics + 1)
+                 if (2 * k + 1) * freq < fs / 2]
+        return LineTracker(lines, fs=fs, averaging_s=float(entry.get('averaging_s',
+                                                                     AVERAGING_S)))
+
+    def physical(self, model, *, covariance=None) -> Physical:
+        """Return the frequency and amplitude stored in the model's entry."""
+        entry = entry_of(model, self.id)
+        std = entry.get('std') or {}
+        return {name: (float(entry['parameters'][name]), std.get(name))
+                for name in self.parameters}
+
+    def evidence(self, analysis, outcome: Outcome) -> str:
+        """Say where the residual sits (before the trigger too) and what the lines remove."""
+        parts = []
+        probe = probe_of(analysis, f'hum_{outcome.parameters.get("freq_hz", (50,))[0]:.0f}')
+        excess = getattr(analysis, 'pretrigger_excess', None)
+        if excess is not None and math.isfinite(excess):
+            parts.append(f'the pre-trigger residual is {excess:.1f}× the sample-to-sample '
+                         f'noise')
+        if probe is not None:
+            parts.append(f'the mains lines explain {100 * probe.fraction:.0f} % of the base '
+                         f'residual')
+        parts.append(f'removing them removes {100 * outcome.score:.1f} % of the validation '
+                     f'residual energy{parameters_text(self, outcome.parameters)}')
+        return sentence(parts)

@@ -1,0 +1,64 @@
+"""
+Base-strain sensitivity: pressure read from the housing strain, which follows the jerk.
+
+Identification model: one more input channel, the rate of change of the axial acceleration
+``da_z`` (m/s³), with its own numerator over the common denominator. Its static gain is the
+strain coefficient, reported in Pa per (g/ms) (1 g/ms = 9806.65 m/s³), the unit hammer
+pulses are naturally described in.
+"""
+
+from __future__ import annotations
+
+from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
+                   probe_of, row_of, sentence, static_gain, stored_std)
+from ...streams import G0
+
+__all__ = ['StrainSensitivity']
+
+#: One g per millisecond in m/s³.
+G_PER_MS = G0 * 1e3
+
+
+class StrainSensitivity(Effect):
+    """Pressure proportional to the rate of change of acceleration (see the module docs)."""
+
+    id = 'strain_sensitivity'
+    title = 'base-strain sensitivity'
+    explanation = (
+        'While the anvil\'s acceleration changes, stress waves strain the face the sensor '
+        'is mounted on, and the sensor reads part of that strain as pressure. The strain '
+        'follows the rate of change of the acceleration (the jerk), so the extra pressure '
+        'is positive while the pulse rises and negative while it falls, and largest for '
+        'short, hard pulses. A torque-sensitive or flush mount in a thin wall shows it '
+        'most.')
+    signature = (
+        'A residual antisymmetric about the pulse peak (positive on the rise, negative on '
+        'the fall), proportional to da/dt and steepest at the pulse corners; it grows with '
+        'peak/width rather than with the peak alone.')
+    parameters = {'pa_per_g_per_ms': 'Pa/(g/ms)'}
+    order = 40
+
+    def extend(self, spec: ModelSpec) -> ModelSpec:
+        """Add the ``da_z`` input."""
+        return spec.with_inputs('da_z')
+
+    def physical(self, model, *, covariance=None) -> Physical:
+        """Return the static gain of the ``da_z`` path in Pa/(g/ms)."""
+        row = row_of(model, 'da')
+
+        def coefficient(a, b):
+            return static_gain(a, b, row) * G_PER_MS
+
+        std = (delta_std(coefficient, model.a, model.b, covariance) if covariance is not None
+               else stored_std(model, self.id, 'pa_per_g_per_ms'))
+        return {'pa_per_g_per_ms': (coefficient(model.a, model.b), std)}
+
+    def evidence(self, analysis, outcome: Outcome) -> str:
+        """Say what the jerk probe and the da/dt path explain."""
+        parts = []
+        probe = probe_of(analysis, 'jerk')
+        if probe is not None:
+            parts.append(f'da/dt explains {100 * probe.fraction:.0f} % of the base residual')
+        parts.append(f'a da/dt path removes {100 * outcome.score:.1f} % of the validation '
+                     f'residual energy{parameters_text(self, outcome.parameters)}')
+        return sentence(parts)

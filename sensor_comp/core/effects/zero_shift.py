@@ -1,0 +1,79 @@
+"""
+Zero shift: an offset left behind by each shock, decaying slowly.
+
+Identification model: one more input channel, a leaky peak detector of ``|a_z|``
+(``peak_a_z(tau_ms=T)`` in :mod:`sensor_comp.core.inputs`): it rises with the pulse and
+then decays from the shot's peak with the time constant ``T``, found by a bounded scalar
+search (log scale, 1 ms to 2 s). Its static gain through the common dynamics is the offset
+per unit of peak acceleration, reported in Pa per g. The offset is not a linear response to
+the acceleration, but it is triggered by it and predictable from it causally, so the
+compensation removes it like the induced pressure (it is *acceleration driven* in that
+sense); an offset that does not scale with the shot's peak is not captured.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
+                   probe_of, row_of, Search, segment_of, sentence, static_gain, stored_std)
+from ..inputs import parse_channel
+from ...streams import G0
+
+__all__ = ['ZeroShift']
+
+KEY = 'zero_shift.tau_ms'
+
+
+class ZeroShift(Effect):
+    """A decaying offset after each shock (see the module docs)."""
+
+    id = 'zero_shift'
+    title = 'zero shift'
+    explanation = (
+        'A hard shock shifts the preload of the crystal stack and releases charge from its '
+        'contact faces, so after the shot the sensor\'s zero sits off and creeps back over '
+        'tens of milliseconds. The offset is roughly proportional to how hard the shot was. '
+        'It is not a pressure and not a response to the acceleration\'s shape: it is left '
+        'over after the pulse.')
+    signature = (
+        'A residual offset of one sign that appears with the pulse and remains after the '
+        'ringing has died out, decaying slowly; its size scales with the shot\'s peak '
+        'acceleration; the pre-trigger is clean.')
+    parameters = {'pa_per_g': 'Pa/g', 'tau_ms': 'ms'}
+    order = 50
+
+    def extend(self, spec: ModelSpec) -> ModelSpec:
+        """Add the leaky-peak channel, its decay time searched."""
+        return replace(spec.with_inputs(f'peak_a_z(tau_ms={{{KEY}}})'),
+                       searches=spec.searches + (Search(KEY, 1.0, 2000.0, log=True,
+                                                        start=50.0),))
+
+    def physical(self, model, *, covariance=None) -> Physical:
+        """Return the offset per g (static gain of the peak channel) and the decay time."""
+        row = row_of(model, 'peak')
+
+        def offset(a, b):
+            return static_gain(a, b, row) * G0
+
+        std = (delta_std(offset, model.a, model.b, covariance) if covariance is not None
+               else stored_std(model, self.id, 'pa_per_g'))
+        return {'pa_per_g': (offset(model.a, model.b), std),
+                'tau_ms': (parse_channel(model.inputs[row]).tau_ms,
+                           stored_std(model, self.id, 'tau_ms'))}
+
+    def evidence(self, analysis, outcome: Outcome) -> str:
+        """Say where the residual sits and what the decaying offset removes."""
+        parts = []
+        tail = segment_of(analysis, 'tail')
+        if tail is not None and tail.sample_fraction > 0:
+            parts.append(f'the tail after the ringing holds {100 * tail.energy_fraction:.0f} '
+                         f'% of the residual energy in {100 * tail.sample_fraction:.0f} % '
+                         f'of the samples')
+        probe = probe_of(analysis, 'zero_shift')
+        if probe is not None:
+            parts.append(f'a decaying offset ∝ peak g explains {100 * probe.fraction:.0f} % '
+                         f'of the base residual')
+        parts.append(f'the offset channel removes {100 * outcome.score:.1f} % of the '
+                     f'validation residual energy{parameters_text(self, outcome.parameters)}')
+        return sentence(parts)
