@@ -20,6 +20,10 @@ from sensor_comp.core.model import Model
 from sensor_comp.core.residual import (
     ALPHA, analyse, autocorrelation, cross_correlation, ResidualError, SEGMENTS)
 from sensor_comp.core.shots import detect_shots, Shot
+from sensor_comp.sim.config import RigConfig
+from sensor_comp.sim.rig import simulate
+from sensor_comp.sim.sensor import SensorConfig
+from sensor_comp.sim.shots import TABLE2
 from sensor_comp.streams import G0, Recording
 
 FS = 200e3
@@ -299,6 +303,48 @@ def test_zero_shift_is_a_decaying_offset_after_each_pulse():
     assert z.parameters['tau_ms'] == 1e3 * tau
     assert z.parameters['pa_per_g'] == pytest.approx(pa_per_g, rel=0.15)
     assert math.isnan(r.probes['integral'].parameters['tau_ms'])   # no undershoot
+
+
+# --- the rig simulator ------------------------------------------------------------------
+
+def simulated(effects, fs):
+    """Return the analysis of a simulated run against the true sensor model."""
+    sim = simulate(RigConfig(fs=fs, shots=TABLE2[:6], effects=effects, seed=1))
+    sensor_ = SensorConfig()
+    wn = 2 * math.pi * sensor_.fn_hz
+    gain = sensor_.sensitivity_mpa_per_g * 1e6 / G0
+    # The simulator integrates with a first-order hold: its exact discrete equivalent.
+    b, a, _ = signal.cont2discrete(([gain * wn ** 2], [1, 2 * sensor_.zeta * wn, wn ** 2]),
+                                   1 / fs, method='foh')
+    true = Model(fs=fs, structure='oe', inputs=('a_z',), b=np.atleast_2d(np.ravel(b)), a=a,
+                 nk=0)
+    return analyse(true, sim.recording, detect_shots(sim.recording))
+
+
+@pytest.mark.parametrize('effect, probe, fs', [
+    ('nonlinear_sensitivity', 'abs_square', 200e3),
+    ('channel_delay', 'delay', 200e3),
+    ('amplifier_highpass', 'integral', 200e3),
+    ('transverse_sensitivity', 'lateral', 200e3),
+    ('strain_sensitivity', 'jerk', 200e3),
+    ('zero_shift:pa_per_g=3', 'zero_shift', 200e3),
+    ('mains_hum:amplitude_pa=3000', 'hum_50', 200e3),
+    ('channel_delay', 'delay', 1e6),
+    ('strain_sensitivity', 'jerk', 1e6),   # da/dt of 1 MS/s accelerometer noise: low-passed
+])
+def test_each_simulated_effect_ranks_its_probe_first(effect, probe, fs):
+    r = simulated((effect,), fs)
+    assert not r.consistent_with_noise
+    first = ranking(r)[0]
+    assert first == probe or {first, probe} == {'abs_square', 'square'}
+    assert r.probes[probe].significant
+
+
+@pytest.mark.parametrize('fs', [200e3, 1e6])
+def test_simulated_clean_run_is_consistent_with_noise(fs):
+    r = simulated((), fs)
+    assert r.consistent_with_noise and not r.significant_probes
+    assert r.matches_pretrigger   # coloured by the accelerometer noise through the sensor
 
 
 # --- the bands ---------------------------------------------------------------------------
