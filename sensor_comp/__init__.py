@@ -10,6 +10,18 @@ Data flow one way: bag/stream → shots → model → residual → diagnosis →
 - :mod:`sensor_comp.core`: the numerical core (shots, identification, compensation).
 - :mod:`sensor_comp.nodes`: rclpy nodes; the only modules that import ROS.
 - :mod:`sensor_comp.cli`: the ``sensor-comp`` command.
+
+``sensor_comp.pipeline(...)`` runs the rig's nodes in this process
+(:func:`sensor_comp.nodes.pipeline.pipeline`); it imports rclpy on first use only, so the
+core stays usable without ROS.
 """
 
 __version__ = '0.1.0'
+
+
+def __getattr__(name: str):
+    """Return :func:`sensor_comp.nodes.pipeline.pipeline` for ``pipeline``, lazily."""
+    if name == 'pipeline':
+        from .nodes.pipeline import pipeline
+        return pipeline
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

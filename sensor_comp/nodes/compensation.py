@@ -1,0 +1,421 @@
+"""
+The ``compensation`` node: subtract the model's induced pressure from the live stream.
+
+Run it as ``compensation --ros-args -p model_file:=sensor.json`` (or
+``python -m sensor_comp.nodes.compensation``), or without a file: it then waits for the
+model the ``identification`` node publishes. It is the live form of ``sensor-comp
+compensate`` and gives the same samples: both run
+:class:`~sensor_comp.core.streaming.BlockCompensator` (blocks paired by stamp, filter
+state carried from block to block, a stamp gap restarts the filter from rest).
+
+Topics, relative to the node's namespace (default ``/rig``):
+
+- Subscribed: ``pressure/raw`` and ``acceleration`` (block streams, raw CDR, reliable
+  keep-all), ``stream_info`` (latched; gives the sample rate) and ``model``
+  (``std_msgs/msg/String`` holding a model file's JSON, latched: a node started after the
+  identification still gets the model).
+- Published: ``pressure/compensated`` (raw minus induced) and ``pressure/induced`` (the
+  model's estimate), Pa, one block per input block pair with the input's stamp and
+  ``frame_id`` (reliable, keep-all: a slow subscriber slows the node down rather than
+  losing blocks); ``stream_info`` (latched) describing those two streams; and
+  ``/diagnostics`` (status ``sensor_comp: compensation``) every ``diagnostics_period``:
+  samples in and out, blocks held, unpaired and unprocessed samples, stamp gaps, model
+  changes, refused models, malformed messages.
+
+Parameters (read once at start):
+
+- ``model_file`` (default empty): a model file to start with; a model arriving on
+  ``model`` later replaces it.
+- ``max_pending_blocks`` (default 1000): while there is no model (or no ``stream_info``)
+  yet, this many blocks per input topic are held (2x as many messages in all, the oldest
+  dropped first); when the model comes they are compensated in order, from rest at the
+  first one, exactly as if the model had been there from the start. Dropped blocks are
+  counted as unprocessed on ``/diagnostics``. Memory: 32 bytes per sample of block width
+  per held pair (a 10 000-sample pair is 320 kB).
+- ``max_unpaired_blocks`` (default 64): blocks of one topic waiting for their partner
+  before the oldest is given up as unpaired.
+- ``diagnostics_period`` (s, default 1.0), ``ack_timeout`` (s, default 10.0: at exit, how
+  long to wait for subscribers to acknowledge the last blocks).
+
+Models: a model is used from the next block on (``BlockCompensator.set_filter``: no sample
+dropped or repeated; the new filter starts from rest). A model is refused, with a logged
+error and the model in use kept, when its sample rate is not the stream's, when it is
+unstable or its inputs are unknown, or when the message is not a model file. The same
+model text received again changes nothing.
+
+Malformed messages (not a ``64FC1`` block, wrong number of rows, a block pair of two
+widths) are logged, counted and skipped; the node keeps running. On SIGINT/SIGTERM it
+compensates what its subscriptions still hold, counts the blocks still without partner as
+unpaired, logs the accounting and waits for the subscribers' last acknowledgements.
+
+Hot path: raw subscriptions, :func:`~sensor_comp.io.messages.decode_block` (a zero-copy
+view of the CDR bytes), the streaming filter (``lfilter`` with carried state), pre-encoded
+CDR published raw; a callback also takes the messages already queued on its subscription
+(up to 64) without an executor round each.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+import functools
+import math
+from pathlib import Path
+import sys
+import tempfile
+import threading
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from ..core.compensation import CompensationError, CompensationFilter
+from ..core.model import load, Model, ModelError
+from ..core.streaming import BlockCompensator, CompensatedBlock, StreamCounters
+from ..errors import SensorCompError
+from ..io.messages import (decode_block, decode_stream_info, decode_string, DIAGNOSTIC_ARRAY,
+                           encode_block, encode_stream_info, IMAGE, MessageError, STRING)
+from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_INFO,
+                       StreamInfo)
+from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
+                      DIAGNOSTICS_QOS, diagnostics, finish_publishing, LATCHED_QOS,
+                      latched_qos, message_class, NodeError, publish_raw, run_main,
+                      spin_until, take_queued)
+
+__all__ = ['Compensation', 'main']
+
+#: Status name on ``/diagnostics``.
+STATUS_NAME = 'sensor_comp: compensation'
+#: Topic of the model, relative to the namespace.
+MODEL = 'model'
+# Messages taken from one subscription per callback (see take_queued).
+_BATCH = 64
+
+
+def model_from_text(text: str, *, where: str) -> Model:
+    """
+    Read a model from the JSON text of a model file.
+
+    Args:
+        text: The JSON, as :meth:`Model.save` writes it or the ``model`` topic carries it.
+        where: Where it came from, for error messages (e.g. the topic name).
+
+    Raises:
+        ModelError: If it is not a valid model (the message names ``where``).
+
+    """
+    # Model files have one strict reader, core.model.load, which reads a path.
+    with tempfile.TemporaryDirectory(prefix='sensor_comp_model_') as tmp:
+        path = Path(tmp) / 'model.json'
+        path.write_text(text, encoding='utf-8')
+        try:
+            return load(path)
+        except ModelError as exc:
+            raise ModelError(str(exc).replace(f'model file {str(path)!r}', where)) from None
+
+
+class Compensation(Node):
+    """
+    Compensate the live pressure stream (see the module documentation for parameters).
+
+    Spin it with any executor and destroy it when done, or call :meth:`run`.
+
+    Args:
+        node_name: Name of the node.
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
+            ``/rig``; ``context``; ``parameter_overrides``; ...).
+
+    Attributes:
+        model: The model in use, or None.
+        compensator: The block compensator (None until a model and ``stream_info`` came);
+            its ``counters`` account for every sample.
+        unprocessed: Samples per input topic dropped while waiting for a model.
+        received: Input block messages received (held ones too; replays not counted).
+        malformed: Messages skipped because they could not be decoded or paired.
+        refused: Models refused.
+        unpublished: Output block pairs not published (a subscriber stuck for 30 s).
+
+    Raises:
+        NodeError: On a bad parameter or an unreadable model file.
+
+    """
+
+    def __init__(self, node_name: str = 'compensation', **kwargs):
+        kwargs.setdefault('namespace', DEFAULT_NAMESPACE)
+        super().__init__(node_name, **kwargs)
+        model_file = declare(self, 'model_file', '', 'model file to start with')
+        self.max_pending_blocks = declare(self, 'max_pending_blocks', 1000,
+                                          'blocks per topic held until a model is in use')
+        self.max_unpaired_blocks = declare(self, 'max_unpaired_blocks', 64,
+                                           'blocks waiting for their partner, per topic')
+        period = declare(self, 'diagnostics_period', 1.0, 'seconds between diagnostics')
+        self.ack_timeout = declare(self, 'ack_timeout', 10.0,
+                                   'seconds to wait for the last acknowledgements at exit')
+        check(self, 'max_pending_blocks', self.max_pending_blocks,
+              self.max_pending_blocks >= 0, 'a number of blocks >= 0')
+        check(self, 'max_unpaired_blocks', self.max_unpaired_blocks,
+              self.max_unpaired_blocks >= 1, 'a number of blocks >= 1')
+        check(self, 'diagnostics_period', period, period > 0, 'a positive number of seconds')
+        check(self, 'ack_timeout', self.ack_timeout, self.ack_timeout >= 0,
+              'a number of seconds >= 0')
+        self.model: Model | None = None
+        self.compensator: BlockCompensator | None = None
+        self.unprocessed = {PRESSURE_RAW: 0, ACCELERATION: 0}
+        self.malformed = 0
+        self.refused = 0
+        self.unpublished = 0
+        self.received = 0
+        self._infos: dict[str, StreamInfo] = {}
+        self._fs: float | None = None
+        self._waiting: tuple[Model, CompensationFilter, str] | None = None  # before the rate
+        self._model_text: str | None = None
+        self._model_source = ''
+        self._held: deque[tuple[str, bytes]] = deque()
+        self._frame = ''
+        self._stream_error: str | None = None
+        self._stop = threading.Event()
+        image = message_class(IMAGE)
+        self._outputs = {topic: self.create_publisher(image, topic, BLOCK_QOS)
+                         for topic in (COMPENSATED, INDUCED)}
+        self._info_publisher = self.create_publisher(message_class(DIAGNOSTIC_ARRAY),
+                                                     STREAM_INFO, LATCHED_QOS)
+        self._diagnostics = self.create_publisher(message_class(DIAGNOSTIC_ARRAY),
+                                                  DIAGNOSTICS, DIAGNOSTICS_QOS)
+        self._inputs = {topic: self.create_subscription(
+            image, topic, functools.partial(self._on_block, topic), BLOCK_QOS, raw=True)
+            for topic in (PRESSURE_RAW, ACCELERATION)}
+        self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
+                                 self._on_stream_info, latched_qos(16), raw=True)
+        self.create_subscription(message_class(STRING), MODEL, self._on_model, LATCHED_QOS,
+                                 raw=True)
+        self.create_timer(period, self.publish_diagnostics)
+        if model_file:
+            check(self, 'model_file', model_file, Path(model_file).is_file(),
+                  'an existing model file')
+            try:
+                model = load(model_file)
+            except ModelError as exc:
+                raise NodeError(f'{self.get_fully_qualified_name()}: {exc}') from None
+            if not self._offer(model, f'file {model_file}'):
+                raise NodeError(f'{self.get_fully_qualified_name()}: parameter \'model_file\' '
+                                f'{model_file!r} cannot be used (see the error above)')
+        source = model_file or self.resolve_topic_name(MODEL)
+        self.get_logger().info(f'compensating {self.resolve_topic_name(PRESSURE_RAW)} with '
+                               f'the model of {source}')
+
+    # Inputs ------------------------------------------------------------------------------
+
+    def _on_block(self, topic: str, data: bytes) -> None:
+        self._receive(topic, data)
+        take_queued(self._inputs[topic], lambda message, _: self._receive(topic, message),
+                    limit=_BATCH)
+
+    def _receive(self, topic: str, data: bytes) -> None:
+        self.received += 1
+        self._handle(topic, data)
+
+    def _handle(self, topic: str, data: bytes) -> None:
+        compensator = self.compensator
+        if compensator is None:
+            self._hold(topic, data)
+            return
+        try:
+            stamp, frame, block = decode_block(data)
+            if topic == PRESSURE_RAW:
+                self._frame = frame
+                done = compensator.add_pressure(stamp, block)
+            else:
+                done = compensator.add_acceleration(stamp, block)
+        except (MessageError, CompensationError) as exc:
+            self._bad(topic, exc)
+            return
+        for block in done:
+            self._publish(block)
+
+    def _publish(self, block: CompensatedBlock) -> None:
+        try:
+            for topic, values in ((COMPENSATED, block.compensated), (INDUCED, block.induced)):
+                publish_raw(self._outputs[topic],
+                            encode_block(values[np.newaxis], stamp_ns=block.stamp_ns,
+                                         frame_id=self._frame), self._stop)
+        except NodeError as exc:  # a subscriber took nothing for a long time
+            self.unpublished += 1
+            self.get_logger().error(str(exc))
+
+    def _hold(self, topic: str, data: bytes) -> None:
+        self._held.append((topic, data))
+        if len(self._held) > 2 * self.max_pending_blocks:
+            old_topic, old = self._held.popleft()
+            try:
+                self.unprocessed[old_topic] += decode_block(old)[2].shape[1]
+            except MessageError as exc:
+                self._bad(old_topic, exc)
+
+    def _bad(self, topic: str, error) -> None:
+        self.malformed += 1
+        self.get_logger().error(f'{self.resolve_topic_name(topic)}: message skipped: {error}')
+
+    def _on_stream_info(self, data: bytes) -> None:
+        try:
+            infos = decode_stream_info(data)
+        except MessageError as exc:
+            self._bad(STREAM_INFO, exc)
+            return
+        for info in infos:
+            if info.topic not in (PRESSURE_RAW, ACCELERATION):
+                continue
+            known = self._infos.setdefault(info.topic, info)
+            if known.fs != info.fs:
+                self.get_logger().error(f'stream_info: {info.topic} now at {info.fs:g} Hz, '
+                                        f'was {known.fs:g} Hz; the first rate stays in use')
+        if self._fs is not None or len(self._infos) < 2:
+            return
+        pressure, acceleration = self._infos[PRESSURE_RAW], self._infos[ACCELERATION]
+        if pressure.fs != acceleration.fs:
+            self._stream_error = (f'stream_info gives {pressure.fs:g} Hz for {PRESSURE_RAW} '
+                                  f'but {acceleration.fs:g} Hz for {ACCELERATION}: the '
+                                  f'blocks cannot be paired')
+            self.get_logger().error(self._stream_error)
+            return
+        self._fs = pressure.fs
+        outputs = [StreamInfo(name, pressure.fs, ('p',), 'Pa', pressure.frame_id,
+                              dict(pressure.metadata)) for name in (COMPENSATED, INDUCED)]
+        stamp = self.get_clock().now().nanoseconds
+        publish_raw(self._info_publisher, encode_stream_info(outputs, stamp_ns=stamp),
+                    self._stop)
+        if self._waiting is not None:
+            model, _, source = self._waiting
+            self._waiting = None
+            self._offer(model, source)
+
+    def _on_model(self, data: bytes) -> None:
+        where = f'model on {self.resolve_topic_name(MODEL)}'
+        try:
+            text = decode_string(data)
+            if text == self._model_text:
+                return
+            model = model_from_text(text, where=where)
+        except (MessageError, ModelError) as exc:
+            self.refused += 1
+            self.get_logger().error(f'{where} refused, the model in use is kept: {exc}')
+            return
+        if self._offer(model, where):
+            self._model_text = text
+
+    def _offer(self, model: Model, source: str) -> bool:
+        """Use ``model`` if it fits the stream; return whether it was accepted."""
+        if self._fs is not None and not math.isclose(model.fs, self._fs, rel_tol=1e-9):
+            return self._refuse(source, f'identified at {model.fs:g} Hz but the stream is '
+                                        f'sampled at {self._fs:g} Hz')
+        try:
+            compensation = CompensationFilter.from_model(model)
+        except SensorCompError as exc:  # unstable, unknown inputs
+            return self._refuse(source, str(exc))
+        if self._fs is None:
+            self._waiting = (model, compensation, source)
+            self.get_logger().info(f'{source}: waiting for stream_info to check its rate')
+            return True
+        self.model, self._model_source = model, source
+        if self.compensator is None:
+            self.compensator = BlockCompensator(compensation, fs=self._fs,
+                                                max_pending=self.max_unpaired_blocks)
+            held, self._held = self._held, deque()
+            self.get_logger().info(f'using the {_describe(model)} of {source}; compensating '
+                                   f'{len(held)} held blocks')
+            for topic, data in held:
+                self._handle(topic, data)
+        else:
+            self.compensator.set_filter(compensation)
+            self.get_logger().info(f'switched to the {_describe(model)} of {source}')
+        return True
+
+    def _refuse(self, source: str, why: str) -> bool:
+        self.refused += 1
+        kept = 'the model in use is kept' if self.model is not None else 'no model in use'
+        self.get_logger().error(f'{source} refused ({kept}): {why}')
+        return False
+
+    # Accounting --------------------------------------------------------------------------
+
+    def accounting(self) -> dict:
+        """Return the sample accounting as JSON-ready values."""
+        counters = (self.compensator.counters if self.compensator else StreamCounters()).to_dict()
+        gaps = counters.pop('gaps')
+        return {**counters, 'gaps': len(gaps),
+                'missing_samples': sum(g['missing_samples'] for g in gaps),
+                'held_blocks': len(self._held),
+                'unprocessed_pressure_samples': self.unprocessed[PRESSURE_RAW],
+                'unprocessed_acceleration_samples': self.unprocessed[ACCELERATION],
+                'malformed_messages': self.malformed, 'models_refused': self.refused,
+                'unpublished_blocks': self.unpublished}
+
+    def publish_diagnostics(self) -> None:
+        """Publish the node's status on ``/diagnostics``."""
+        values = self.accounting()
+        lost = [k for k in ('unpaired_pressure_samples', 'unpaired_acceleration_samples',
+                            'mismatched_blocks', 'gaps', 'unprocessed_pressure_samples',
+                            'unprocessed_acceleration_samples', 'malformed_messages',
+                            'unpublished_blocks') if values.get(k)]
+        if self.model is not None:
+            values.update({'model': _describe(self.model), 'model_source': self._model_source,
+                           'model_created': self.model.created})
+        if self._stream_error is not None:
+            level, message = DiagnosticStatus.ERROR, self._stream_error
+        elif self.compensator is None:
+            level = DiagnosticStatus.WARN
+            message = (f'waiting for {"a model" if self._fs else "stream_info"}: '
+                       f'{len(self._held)} blocks held')
+        else:
+            level = DiagnosticStatus.WARN if lost else DiagnosticStatus.OK
+            message = (f'{values["output_samples"]} of {values["pressure_samples"]} samples '
+                       f'compensated' + (f'; {", ".join(lost)}' if lost else ''))
+        self._diagnostics.publish(diagnostics(self, name=STATUS_NAME, level=level,
+                                              message=message, values=values))
+
+    def run(self, stop: threading.Event) -> None:
+        """
+        Compensate until ``stop`` is set, then what had arrived; log the accounting.
+
+        Args:
+            stop: Set it (from a signal handler or another thread) to stop.
+
+        """
+        with SingleThreadedExecutor(context=self.context) as executor:
+            executor.add_node(self)
+            try:
+                spin_until(executor, stop, progress=lambda: self.received)
+            finally:
+                executor.remove_node(self)
+        self.finish()
+
+    def finish(self) -> None:
+        """Count the blocks still without partner as unpaired; log; wait for the acks."""
+        if self.compensator is not None:
+            self.compensator.flush()
+        self.publish_diagnostics()
+        values = self.accounting()
+        self.get_logger().info(
+            f'compensated {values["output_samples"]} of {values["pressure_samples"]} '
+            f'pressure samples; ' +
+            ', '.join(f'{k} {v}' for k, v in values.items()
+                      if k not in ('output_samples', 'pressure_samples')))
+        finish_publishing(self, list(self._outputs.values()), timeout=self.ack_timeout)
+
+    def destroy_node(self) -> None:
+        """Stop publishing (a blocked publish gives up), then destroy the node."""
+        self._stop.set()
+        super().destroy_node()
+
+
+def _describe(model: Model) -> str:
+    orders = ' '.join(f'{k}={v}' for k, v in model.orders.items())
+    return f'{model.structure} model ({orders}, {model.fs:g} Hz, created {model.created})'
+
+
+def main(args=None) -> int:
+    """Compensate until SIGINT or SIGTERM; return the exit code."""
+    return run_main(args, Compensation, Compensation.run)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

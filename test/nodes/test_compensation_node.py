@@ -1,0 +1,305 @@
+"""The compensation node: live output equal to offline compensation, sample by sample."""
+
+import json
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+
+from sensor_comp.blocks import iter_blocks
+from sensor_comp.cli.compensate import compensate_bag
+from sensor_comp.core.compensation import CompensationFilter
+from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.model import Model
+from sensor_comp.io.bag_reader import read_streams
+from sensor_comp.io.bag_writer import write_recording
+from sensor_comp.io.messages import (decode_block, decode_stream_info, encode_block,
+                                     encode_stream_info, encode_string, IMAGE, STRING)
+from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS,
+                                       message_class, NodeError)
+from sensor_comp.nodes.compensation import Compensation, STATUS_NAME
+from sensor_comp.nodes.player import Player
+from sensor_comp.sim import random_shots, RigConfig, simulate
+
+FS = 2e5
+T0_NS = 1_700_000_000_000_000_000
+WIDTH = 1000
+
+
+@pytest.fixture(scope='module')
+def recording():
+    """Return a simulated calibration recording (4 shots at 200 kS/s)."""
+    return simulate(RigConfig(fs=FS, shots=random_shots(4, seed=7), seed=7,
+                              t0_ns=T0_NS)).recording
+
+
+@pytest.fixture(scope='module')
+def model(recording) -> Model:
+    """Return the output-error model identified offline on the recording."""
+    return identify([ShotSource.detect(recording)], structure='oe', orders=(2, 2), delay=1,
+                    denoise=False).model
+
+
+@pytest.fixture
+def bag(recording, tmp_path):
+    """Write the recording in blocks of 1000 samples; return the path."""
+    path = tmp_path / 'raw.mcap'
+    write_recording(path, recording, block_width=WIDTH)
+    return path
+
+
+def _params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _play(context, bag, subscribers: int = 1) -> int:
+    player = Player(context=context, parameter_overrides=_params(
+        bag=str(bag), as_fast_as_possible=True, wait_for_subscribers=subscribers,
+        wait_timeout=20.0))
+    try:
+        return player.play()
+    finally:
+        player.destroy_node()
+
+
+def _wait(condition, timeout=20.0, what='the condition'):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.01)
+
+
+def _spin(context, *nodes):
+    executor = SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+
+    def stop():
+        executor.shutdown()
+        thread.join()
+    return stop
+
+
+class _Outputs:
+    """Collect the node's output blocks and diagnostics in a probe node."""
+
+    def __init__(self, node):
+        self.blocks = {'pressure/compensated': [], 'pressure/induced': []}
+        self.frames = set()
+        self.statuses = []
+        for topic, blocks in self.blocks.items():
+            node.create_subscription(message_class(IMAGE), topic,
+                                     lambda data, blocks=blocks: self._block(blocks, data),
+                                     BLOCK_QOS, raw=True)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._status,
+                                 DIAGNOSTICS_QOS)
+
+    def _block(self, blocks, data):
+        stamp, frame, block = decode_block(data)
+        self.frames.add(frame)
+        blocks.append((stamp, block[0].copy()))
+
+    def _status(self, msg):
+        self.statuses.extend({v.key: v.value for v in s.values} for s in msg.status
+                             if s.name == STATUS_NAME)
+
+    def samples(self, topic='pressure/compensated') -> int:
+        return sum(b.size for _, b in self.blocks[topic])
+
+    def joined(self, topic) -> np.ndarray:
+        return np.concatenate([b for _, b in sorted(self.blocks[topic], key=lambda x: x[0])])
+
+
+def _latched_model(node, model: Model):
+    publisher = node.create_publisher(message_class(STRING), 'model', LATCHED_QOS)
+    publisher.publish(encode_string(json.dumps(model.to_json())))
+    return publisher
+
+
+def _assert_equal_samples(got, expected):
+    """Equal to offline within 1e-9 of the signal's scale (float64 summation order)."""
+    assert got.shape == expected.shape
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9 * np.max(np.abs(expected)))
+
+
+def test_node_processes_give_the_offline_compensation(context, node_process, bag, model,
+                                                      recording, tmp_path):
+    model_file, out, offline = (tmp_path / 'model.json', tmp_path / 'live.mcap',
+                                tmp_path / 'offline.mcap')
+    model.save(model_file)
+    node = node_process('compensation', model_file=model_file)
+    node.wait_for_log('compensating /rig/pressure/raw')
+    recorder = node_process('recorder', output=out, discovery_period=0.1,
+                            topics=['pressure/compensated', 'pressure/induced', 'stream_info'])
+    recorder.wait_for_log('recording /rig/pressure/induced')
+    _play(context, bag, subscribers=1)
+    assert node.stop() == 0, node.output()
+    assert recorder.stop() == 0, recorder.output()
+    assert 'using the oe model' in node.output()
+    counts = compensate_bag(model, str(bag), str(offline))
+    live, expected = read_streams(out), read_streams(offline)
+    for topic in ('pressure/compensated', 'pressure/induced'):
+        assert live[topic].t0_ns == recording.t0_ns and live[topic].fs == FS
+        assert not live[topic].gaps
+        _assert_equal_samples(live[topic].data, expected[topic].data)
+    # Every input sample has its output sample.
+    assert live['pressure/compensated'].n_samples == recording.n_samples
+    assert counts['output_samples'] == recording.n_samples
+    assert live['pressure/compensated'].info.metadata == recording.metadata
+    assert f'compensated {recording.n_samples} of {recording.n_samples}' in node.output()
+
+
+def test_blocks_before_the_model_are_held_and_a_late_node_gets_the_latched_model(
+        context, other_context, make_node, bag, model, recording):
+    # The model is published before the node exists: it must still reach it.
+    source = make_node('model_source', ctx=other_context)
+    _latched_model(source, model)
+    stop_source = _spin(other_context, source)
+    probe = make_node('probe')
+    outputs = _Outputs(probe)
+    node = Compensation(context=context, parameter_overrides=_params(diagnostics_period=0.1))
+    stop = _spin(context, node, probe)
+    try:
+        _play(context, bag)
+        _wait(lambda: outputs.samples() == recording.n_samples and
+              outputs.samples('pressure/induced') == recording.n_samples,
+              what='every output sample')
+        _wait(lambda: outputs.statuses and
+              outputs.statuses[-1]['output_samples'] == str(recording.n_samples),
+              what='diagnostics')
+    finally:
+        stop()
+        stop_source()
+    assert node.model is not None and node.model.created == model.created
+    node.destroy_node()
+    compensated, induced = CompensationFilter.from_model(model).process(
+        recording.acceleration, recording.pressure)
+    _assert_equal_samples(outputs.joined('pressure/compensated'), compensated)
+    _assert_equal_samples(outputs.joined('pressure/induced'), induced)
+    stamps = [s for s, _ in sorted(outputs.blocks['pressure/compensated'])]
+    assert stamps == [recording.t0_ns + round(k * 1e9 / FS)
+                      for k in range(0, recording.n_samples, WIDTH)]
+    assert outputs.frames == {recording.frame_id}
+    status = outputs.statuses[-1]
+    assert status['pressure_samples'] == status['output_samples'] == str(recording.n_samples)
+    assert status['unpaired_pressure_samples'] == '0' and status['gaps'] == '0'
+    assert status['model_changes'] == '0'
+
+
+def test_models_are_swapped_between_blocks_and_bad_ones_refused(context, model, recording):
+    # The callbacks' bodies are driven directly: a deterministic order, no DDS timing.
+    accel, press = recording.streams()
+    node = Compensation(context=context)
+    node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
+    outputs = []
+    node._publish = outputs.append  # the compensated blocks, unencoded
+    pairs = list(zip(iter_blocks(accel, width=WIDTH), iter_blocks(press, width=WIDTH)))
+    half = len(pairs) // 2
+
+    def feed(chunk):
+        for (stamp, a), (_, p) in chunk:
+            node._handle('pressure/raw', encode_block(p, stamp_ns=stamp, frame_id='s'))
+            node._handle('acceleration', encode_block(a, stamp_ns=stamp, frame_id='s'))
+
+    text = json.dumps(model.to_json())
+    node._on_model(encode_string(text))
+    feed(pairs[:3])
+    other_rate = Model(fs=2 * FS, structure='oe', inputs=('a_z',), b=model.b, a=model.a,
+                       nk=1, created='x')
+    unstable = Model(fs=FS, structure='oe', inputs=('a_z',), b=model.b, a=[1.0, -2.0, 1.1],
+                     nk=1, created='x')
+    node._on_model(encode_string(json.dumps(other_rate.to_json())))
+    node._on_model(encode_string(json.dumps(unstable.to_json())))
+    node._on_model(encode_string('{"not": "a model"}'))
+    node._on_model(b'\x00\x01\x00\x00garbage')
+    node._handle('pressure/raw', b'\x00\x01\x00\x00not an image')  # malformed: skipped
+    feed(pairs[3:half])
+    assert node.refused == 4 and node.malformed == 1
+    assert node.model.created == model.created  # kept
+    swapped = Model(fs=FS, structure='oe', inputs=('a_z',), b=2 * model.b, a=model.a, nk=1,
+                    created='y')
+    node._on_model(encode_string(text))  # the same text again: no change
+    node._on_model(encode_string(json.dumps(swapped.to_json())))
+    feed(pairs[half:])
+    counters = node.compensator.counters
+    node.destroy_node()
+    assert node.refused == 4 and node.malformed == 1
+    assert counters.model_changes == 1
+    assert counters.output_samples == counters.pressure_samples == recording.n_samples
+    induced = np.concatenate([b.induced for b in outputs])
+    cut = half * WIDTH
+    first = CompensationFilter.from_model(model).induced(recording.acceleration[:, :cut])
+    second = CompensationFilter.from_model(swapped).induced(recording.acceleration[:, cut:])
+    _assert_equal_samples(induced[:cut], first)
+    _assert_equal_samples(induced[cut:], second)  # from rest at the swap, no sample lost
+
+
+def test_held_blocks_are_bounded_and_the_dropped_ones_counted(context, model, recording):
+    accel, press = recording.streams()
+    node = Compensation(context=context, parameter_overrides=_params(max_pending_blocks=5))
+    node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
+    outputs = []
+    node._publish = outputs.append
+    pairs = list(zip(iter_blocks(accel, width=WIDTH), iter_blocks(press, width=WIDTH)))
+    for (stamp, a), (_, p) in pairs[:12]:
+        node._receive('acceleration', encode_block(a, stamp_ns=stamp, frame_id='s'))
+        node._receive('pressure/raw', encode_block(p, stamp_ns=stamp, frame_id='s'))
+    assert node.compensator is None and len(node._held) == 10
+    node._on_model(encode_string(json.dumps(model.to_json())))
+    for (stamp, a), (_, p) in pairs[12:]:
+        node._receive('acceleration', encode_block(a, stamp_ns=stamp, frame_id='s'))
+        node._receive('pressure/raw', encode_block(p, stamp_ns=stamp, frame_id='s'))
+    values = node.accounting()
+    node.destroy_node()
+    assert values['unprocessed_pressure_samples'] == 7 * WIDTH
+    assert values['unprocessed_acceleration_samples'] == 7 * WIDTH
+    assert values['output_samples'] + 7 * WIDTH == recording.n_samples
+    assert outputs[0].stamp_ns == pairs[7][0][0]
+    assert node.received == 2 * len(pairs)
+
+
+def test_stream_info_of_the_outputs(context, make_node, recording):
+    infos = []
+    probe = make_node('probe')
+    probe.create_subscription(DiagnosticArray, 'stream_info', lambda d: infos.append(d),
+                              LATCHED_QOS, raw=True)
+    accel, press = recording.streams()
+    node = Compensation(context=context)
+    stop = _spin(context, node, probe)
+    try:
+        node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
+        _wait(lambda: infos, what='the output stream_info')
+    finally:
+        stop()
+    node.destroy_node()
+    by_topic = {info.topic: info for info in decode_stream_info(infos[0])}
+    assert set(by_topic) == {'pressure/compensated', 'pressure/induced'}
+    for info in by_topic.values():
+        assert info.fs == FS and info.unit == 'Pa' and info.channels == ('p',)
+        assert info.metadata == recording.metadata
+
+
+@pytest.mark.parametrize('params, name', [
+    ({'model_file': '/no/such/model.json'}, 'model_file'),
+    ({'max_pending_blocks': -1}, 'max_pending_blocks'),
+    ({'max_unpaired_blocks': 0}, 'max_unpaired_blocks'),
+    ({'diagnostics_period': 0.0}, 'diagnostics_period'),
+])
+def test_compensation_rejects_bad_parameters(context, params, name):
+    with pytest.raises(NodeError, match=name):
+        Compensation(context=context, parameter_overrides=_params(**params))
+
+
+def test_an_unstable_model_file_stops_the_node(context, model, tmp_path):
+    path = tmp_path / 'unstable.json'
+    doc = model.to_json()
+    doc['denominator'] = [1.0, -2.0, 1.1]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(NodeError, match='model_file'):
+        Compensation(context=context, parameter_overrides=_params(model_file=str(path)))

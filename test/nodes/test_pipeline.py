@@ -1,0 +1,127 @@
+"""Launch-free composition: acquisition, identification, compensation and recorder."""
+
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import sensor_comp
+from sensor_comp.core.compensation import compensate_recording
+from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.model import load
+from sensor_comp.core.shots import Shot
+from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
+from sensor_comp.io.messages import decode_string
+from sensor_comp.nodes._common import NodeError
+from sensor_comp.nodes.compensation import model_from_text
+from sensor_comp.nodes.pipeline import pipeline, PipelineTimeout
+from sensor_comp.sim import random_shots, RigConfig, simulate
+
+FS = 2e5
+#: The acquisition simulates five shots at 200 kS/s; the node keeps four (the last one's
+#: post-trigger runs past the end of the recording).
+ACQUISITION = {'source': 'sim', 'sim_fs': FS, 'sim_shots': 5, 'sim_seed': 3,
+               'block_size': 1000, 'pacing': 'fast'}
+IDENTIFICATION = {'structure': 'oe', 'orders': [2, 2], 'delay': 1, 'emd': False,
+                  'min_shots': 4}
+
+
+def _node_shots(model, recording) -> tuple[Shot, ...]:
+    """Return the model's shots (its provenance) in ``recording``'s sample indices."""
+    shots = []
+    for e in model.provenance[0].shots:
+        shift = round((e['stamp_ns'] - recording.t0_ns) * recording.fs / 1e9) - e['start']
+        shots.append(Shot(
+            index=e['index'], fs=recording.fs, start=e['start'] + shift,
+            stop=e['stop'] + shift, onset=e['onset'] + shift, end=e['end'] + shift,
+            peak=e['peak'] + shift, peak_g=e['peak_g'], width_ms=e['width_ms'],
+            peak_pressure_mpa=e['peak_pressure_mpa'], charge_pc=e['charge_pc'],
+            mpa_per_g=e['mpa_per_g'], clipped=e['clipped'],
+            baseline_stop=e['baseline_stop'] + shift, baseline_pa=e['baseline_pa'],
+            baseline_acceleration=tuple(e['baseline_acceleration']), notes=tuple(e['notes'])))
+    return tuple(shots)
+
+
+def test_pipeline_identifies_compensates_and_records_everything(context, tmp_path):
+    out, model_file = tmp_path / 'run.mcap', tmp_path / 'model.json'
+    with sensor_comp.pipeline(context=context, parameters={
+            'acquisition': ACQUISITION,
+            'identification': {**IDENTIFICATION, 'model_file': str(model_file)},
+            'recorder': {'output': str(out), 'discovery_period': 0.1}}) as p:
+        p.wait_for_acquisition(timeout=30)
+        n = p.acquisition.samples_published
+        p.wait_until(lambda p: p.compensation.compensator is not None and
+                     p.compensation.compensator.counters.output_samples == n, timeout=30,
+                     what='every sample compensated')
+        model = p.identification.model
+        assert p.compensation.model.created == model.created
+    truth = simulate(RigConfig(fs=FS, shots=random_shots(5, seed=3), seed=3)).recording
+    recording = read_recording(out)
+    assert n == truth.n_samples == recording.n_samples
+    np.testing.assert_array_equal(recording.pressure, truth.pressure)
+    with BagReader(out) as bag:
+        assert bag.topics['/rig/model'].latched
+        (message,) = bag.messages(['/rig/model'])
+    recorded = model_from_text(decode_string(message.data), where='bag')
+    np.testing.assert_array_equal(recorded.b, model.b)
+    np.testing.assert_array_equal(load(model_file).a, model.a)
+
+    # The model is the offline fit on the same windows of the recorded streams.
+    offline = identify([ShotSource(recording, _node_shots(recorded, recording))],
+                       structure='oe', orders=(2, 2), delay=1, denoise=False).model
+    np.testing.assert_allclose(recorded.b, offline.b, rtol=1e-9)
+    np.testing.assert_allclose(recorded.a, offline.a, rtol=1e-9)
+    assert recorded.fit['validation_fit_percent'] == pytest.approx(
+        offline.fit['validation_fit_percent'], rel=1e-9)
+
+    # Every sample compensated, as offline with that model from the first sample: the
+    # blocks that came before the model were held, not dropped.
+    streams = read_streams(out)
+    compensated, induced = compensate_recording(recorded, recording)
+    for topic, expected in (('pressure/compensated', compensated),
+                            ('pressure/induced', induced)):
+        got = streams[topic]
+        assert got.t0_ns == recording.t0_ns and not got.gaps
+        assert got.n_samples == recording.n_samples
+        np.testing.assert_allclose(got.data[0], expected, rtol=0,
+                                   atol=1e-9 * np.max(np.abs(expected)))
+
+
+def test_a_compensation_started_late_gets_the_latched_model(context, other_context):
+    with pipeline(context=context, nodes=('acquisition', 'identification'),
+                  parameters={'acquisition': ACQUISITION,
+                              'identification': IDENTIFICATION}) as first:
+        first.wait_until(lambda p: p.identification.model is not None, timeout=30,
+                         what='the model')
+        first.wait_for_acquisition(timeout=30)
+        # Another participant, started after the model was published.
+        with pipeline(context=other_context, nodes=('compensation',)) as late:
+            late.wait_until(lambda p: p.compensation.model is not None, timeout=20,
+                            what='the latched model')
+            assert late.compensation.model.created == first.identification.model.created
+            np.testing.assert_array_equal(late.compensation.model.b,
+                                          first.identification.model.b)
+
+
+def test_pipeline_errors(context):
+    with pytest.raises(NodeError, match='unknown node.*player'):
+        pipeline(context=context, nodes=('player',))
+    with pytest.raises(NodeError, match='parameters given for recorder'):
+        pipeline(context=context, nodes=('compensation',), parameters={'recorder': {}})
+    with pytest.raises(NodeError, match='structure'):
+        pipeline(context=context, nodes=('identification',),
+                 parameters={'identification': {'structure': 'fir'}})
+    with pipeline(context=context, nodes=('compensation',)) as p:
+        with pytest.raises(PipelineTimeout, match='a model'):
+            p.wait_until(lambda p: p.compensation.model is not None, timeout=0.05,
+                         what='a model')
+    assert p.nodes == {} and context.ok()  # a given context is left running
+
+
+def test_core_import_does_not_load_ros():
+    code = ('import sys, sensor_comp, sensor_comp.core.identify; '
+            'assert "rclpy" not in sys.modules; '
+            'assert callable(sensor_comp.pipeline); assert "rclpy" in sys.modules')
+    subprocess.run([sys.executable, '-c', code], check=True, cwd=Path(__file__).parents[2])
