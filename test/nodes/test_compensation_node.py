@@ -32,7 +32,7 @@ WIDTH = 1000
 
 @pytest.fixture(scope='module')
 def recording():
-    """Return a simulated calibration recording (4 shots at 200 kS/s)."""
+    """Return a simulated calibration recording: 4 shots at 200 kS/s."""
     return simulate(RigConfig(fs=FS, shots=random_shots(4, seed=7), seed=7,
                               t0_ns=T0_NS)).recording
 
