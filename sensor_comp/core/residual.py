@@ -1107,6 +1107,10 @@ def analyse(model: Model, recording: Recording, shots: Sequence[Shot], *,
     white_sigma = math.sqrt(_pooled_square([s.white_sigma_pa for s in shot_results], pre))
     n_total = sum(w.size for w in e)
     mean_square = sum(float(w @ w) for w in e) / n_total
+    scale = max(float(np.max(np.abs(s.measured))) for s in comparison.shots)
+    if not sigma > 1e-9 * scale:
+        notes.append(f'the pre-trigger holds no noise (σ = {sigma:.3g} Pa against a '
+                     f'{scale:.3g} Pa signal): every comparison with the noise is degenerate')
     # log RMS of n samples varies as B/(2n); log of the MAD σ of first differences (MA(1),
     # Σρ² = 1.5) as 1.36·1.5/n: 3 standard deviations of the log ratio.
     excess_limit = math.exp(3.0 * math.sqrt((0.5 * noise.bartlett + 1.36 * 1.5) / n_pre))
