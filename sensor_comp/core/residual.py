@@ -20,15 +20,21 @@ ever straddles two windows.
   of a cross-correlation between two independent series, ``Var r(k) = Σ_j ρ_ε(j) ρ_u(j)/N``,
   which is exact for a fixed (non-stationary) input and a stationary residual: the sum runs
   over the lags where the input is correlated (twice the lag where ``|ρ_u|`` last exceeds
-  0.05), with ``ρ_ε`` from the residual itself (its value under the null hypothesis).
-- **Probes**: a sign-symmetric nonlinearity (``a|a|``, ``a²``) is invisible to the
+  0.05), with ``ρ_ε`` from the residual itself (its value under the null hypothesis). A
+  residual that is a function of the input without being correlated with it (``a|a|``
+  left by the best linear model) has ``E r = 0`` but a larger scatter: the band, built for
+  independence, may then be exceeded by correlations far smaller than a linear error's.
+- **Probes**: a sign-symmetric nonlinearity (``a|a|``, ``a²``) barely shows in the
   cross-correlation with a zero-mean input, so the residual is projected on candidate
   regressors *passed through the identified dynamics* G (the model's ``a_z`` path) and on a
-  few non-dynamic ones (:data:`PROBES`). Per probe: the fraction of the residual energy its
-  least-squares projection explains and a Wald test of its coefficients whose covariance
-  uses the noise autocovariance measured before the trigger (Bartlett-tapered over L lags):
-  ``Var(X'ε) = Σ_j R_n(j) C_X(j)``, which handles coloured noise (effective sample size)
-  without letting the structured residual widen its own band.
+  few non-dynamic ones (:data:`PROBES`). Every probe but ``gain`` is fitted together with
+  the model output ŷ (a gain correction, as re-identification would make). Per probe: the
+  fraction of the residual energy explained, and a Wald test of its coefficients beyond ŷ
+  and a constant per window (the baseline removed from each window carries the mean of
+  its pre-trigger noise). The test's covariance ``Var(X'ε) = Σ_j R_n(j) C_X(j)`` uses an AR
+  model of the noise before the trigger (order by BIC, white noise giving ``σ² I``),
+  continued over 4 L lags: coloured noise lowers the effective sample size without the
+  structured residual widening its own band.
 - **Localisation**: residual energy per segment (pre-trigger, pulse, ringing for
   ``5/(ζ 2π f_n)`` after the pulse — 2 ms for an overdamped model —, tail), pooled and per
   shot; the pooled Welch spectrum with its significant peaks (χ² level of the pooled
