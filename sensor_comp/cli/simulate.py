@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from ..errors import SensorCompError
 from ..sim import (describe_effects, parse_effect, random_shots, RigConfig, SensorConfig,
@@ -85,6 +86,10 @@ def register(subparsers) -> None:
     parser.add_argument('--spacing-ms', type=float, metavar='MS',
                         help='fixed onset-to-onset interval instead')
     parser.add_argument('--namespace', default='/rig', help='rig namespace of the topics')
+    parser.add_argument('--blind', action='store_true',
+                        help='leave the simulator\'s true settings (sim_* keys) out of the '
+                             'bag\'s stream_info and print no effects: for test data whose '
+                             'answer must stay hidden')
     parser.set_defaults(func=run)
 
 
@@ -130,7 +135,11 @@ def run(args: argparse.Namespace) -> int:
     sim = simulate(config)
     from ..io.bag_writer import write_recording
 
-    write_recording(args.output, sim.recording, namespace=args.namespace)
+    recording = sim.recording
+    if args.blind:
+        recording = replace(recording, metadata={k: v for k, v in recording.metadata.items()
+                                                 if not k.startswith('sim_')})
+    write_recording(args.output, recording, namespace=args.namespace)
     if not args.quiet:
         rec = sim.recording
         peaks = [s.peak_g for s in config.shots]
@@ -138,7 +147,9 @@ def run(args: argparse.Namespace) -> int:
         print(f'{len(peaks)} shots, {min(peaks):.0f}–{max(peaks):.0f} g, '
               f'{min(widths):.2f}–{max(widths):.2f} ms; {rec.n_samples} samples at '
               f'{rec.fs / 1e3:g} kS/s = {rec.n_samples / rec.fs:.3f} s')
-        print('effects: ' + ('; '.join(e.spec() for e in config.ordered_effects()) or 'none'))
+        if not args.blind:
+            print('effects: ' + ('; '.join(e.spec() for e in config.ordered_effects())
+                                 or 'none'))
         print(f'noise: pressure {sim.pressure_noise_pa:.4g} Pa, acceleration '
               f'{sim.accel_noise_ms2:.4g} m/s² (seed {config.seed})')
         print(f'wrote {args.output}')

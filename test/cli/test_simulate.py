@@ -96,3 +96,15 @@ def test_quiet_prints_nothing(tmp_path, capsys):
                  '--post-ms', '5']) == 0
     assert capsys.readouterr().out == ''
     assert path.stat().st_size > 0
+
+
+def test_blind_bag_hides_the_simulator_truth(tmp_path, capsys):
+    from sensor_comp.io.bag_reader import read_streams
+
+    path = tmp_path / 'case.mcap'
+    assert main(['simulate', '-o', str(path), '--shots', '2', '--fs', '200000',
+                 '--effect', 'channel_delay', '--blind']) == 0
+    assert 'channel_delay' not in capsys.readouterr().out
+    for stream in read_streams(path).values():
+        assert not [k for k in stream.info.metadata if k.startswith('sim_')]
+        assert stream.info.metadata['charge_sensitivity_pC_per_MPa'] == '100'
