@@ -123,13 +123,21 @@ class _OutputError:
         return (np.concatenate([[1.0], theta[:self.nf]]),
                 theta[self.nf:].reshape(self.segments[0].n_inputs, self.nb))
 
+    def _columns(self, f: np.ndarray, seg: Segment) -> list[np.ndarray]:
+        x = signal.lfilter([1.0], f, seg.u, axis=-1)
+        return [_shift(x[i], self.nk + j) for i in range(seg.n_inputs) for j in range(self.nb)]
+
+    def numerators(self, f: np.ndarray) -> np.ndarray:
+        """Return the least-squares numerators for a fixed denominator ``f``."""
+        phi = np.concatenate([np.column_stack(self._columns(f, seg)) for seg in self.segments])
+        b, *_ = np.linalg.lstsq(phi, self.y, rcond=None)
+        return b.reshape(self.segments[0].n_inputs, self.nb)
+
     def residual(self, theta: np.ndarray, *, jacobian: bool = False):
         f, b = self.unpack(theta)
         yhats, jacs = [], []
         for seg in self.segments:
-            x = signal.lfilter([1.0], f, seg.u, axis=-1)
-            cols_b = [_shift(x[i], self.nk + j) for i in range(b.shape[0])
-                      for j in range(self.nb)]
+            cols_b = self._columns(f, seg)
             yhat = np.column_stack(cols_b) @ b.ravel()
             yhats.append(yhat)
             if jacobian:
@@ -148,37 +156,9 @@ def _scaled_normal_equations(jac: np.ndarray, e: np.ndarray):
     return js.T @ js, js.T @ e, scale
 
 
-def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, nk: int = 1,
-           max_iter: int = 100, tol: float = 1e-8) -> Estimate:
-    """
-    Estimate a MISO output-error model ``y = Σ B_i/F q^-nk u_i + e``.
-
-    Steiglitz–McBride gives the start value; Levenberg–Marquardt then minimises the sum of
-    squared simulation errors over all segments (each simulated from rest), rejecting any
-    step that makes ``F`` unstable. The covariance is ``σ² (JᵀJ)⁻¹`` from the Jacobian at
-    the optimum, valid for white output noise (infinite when the structure is
-    over-parameterised so that ``JᵀJ`` is singular).
-
-    Args:
-        segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
-        nf: Order of the common denominator ``F``.
-        nb: Coefficients of each numerator ``B_i`` (lags ``nk`` … ``nk+nb−1``).
-        nk: Input delay in samples.
-        max_iter: Most Levenberg–Marquardt iterations.
-        tol: Relative decrease of the squared error below which the iteration stops.
-
-    Returns:
-        The ``'oe'`` estimate; ``loss`` is the mean squared simulation error.
-
-    Raises:
-        IdentError: On bad orders, too little data or inputs that do not excite the model.
-
-    """
-    check_orders(nf=nf, nb=nb, nk=nk, max_iter=max_iter)
-    segs = as_segments(segments)
-    problem = _OutputError(segs, nf, nb, nk)
-    start = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, max_iter=15, tol=1e-6)
-    theta = np.concatenate([start.a[1:], start.b.ravel()])
+def _levenberg_marquardt(problem: _OutputError, theta: np.ndarray, *, max_iter: int,
+                         tol: float):
+    """Minimise the simulation error from ``theta``; keep the denominator stable."""
     e, jac = problem.residual(theta, jacobian=True)
     cost = float(e @ e)
     damping = 1e-4
@@ -212,6 +192,52 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         if decrease <= tol * cost or cost == 0.0:
             converged = True
             break
+    return theta, cost, e, jac, iterations, converged
+
+
+def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, nk: int = 1,
+           max_iter: int = 100, tol: float = 1e-8) -> Estimate:
+    """
+    Estimate a MISO output-error model ``y = Σ B_i/F q^-nk u_i + e``.
+
+    Steiglitz–McBride gives the start value; Levenberg–Marquardt then minimises the sum of
+    squared simulation errors over all segments (each simulated from rest), rejecting any
+    step that makes ``F`` unstable. The covariance is ``σ² (JᵀJ)⁻¹`` from the Jacobian at
+    the optimum, valid for white output noise (infinite when the structure is
+    over-parameterised so that ``JᵀJ`` is singular).
+
+    Args:
+        segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
+        nf: Order of the common denominator ``F``.
+        nb: Coefficients of each numerator ``B_i`` (lags ``nk`` … ``nk+nb−1``).
+        nk: Input delay in samples.
+        max_iter: Most Levenberg–Marquardt iterations.
+        tol: Relative decrease of the squared error below which the iteration stops.
+
+    Returns:
+        The ``'oe'`` estimate; ``loss`` is the mean squared simulation error.
+
+    Raises:
+        IdentError: On bad orders, too little data or inputs that do not excite the model.
+
+    """
+    check_orders(nf=nf, nb=nb, nk=nk, max_iter=max_iter)
+    segs = as_segments(segments)
+    problem = _OutputError(segs, nf, nb, nk)
+    sm = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, max_iter=15, tol=1e-6)
+    # Two starts: Steiglitz-McBride can drift to a degenerate minimum (poles on 1 with a
+    # differentiating numerator) when the data are far from linear; the ARX poles, biased
+    # but in the right place, then start Levenberg-Marquardt in the right basin.
+    starts = [np.concatenate([sm.a[1:], sm.b.ravel()])]
+    arx = fit_arx(segs, na=nf, nb=nb, nk=nk)
+    f0 = reflect_unstable(arx.a)
+    starts.append(np.concatenate([f0[1:], problem.numerators(f0).ravel()]))
+    best = None
+    for theta in starts:
+        result = _levenberg_marquardt(problem, theta, max_iter=max_iter, tol=tol)
+        if best is None or result[1] < best[1]:
+            best = result
+    theta, cost, e, jac, iterations, converged = best
     f, b = problem.unpack(theta)
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
@@ -222,6 +248,6 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         covariance = np.full((p, p), np.inf)
     return Estimate(structure='oe', a=f, b=b, nk=nk, covariance=covariance,
                     noise_variance=variance, loss=cost / n, n_samples=n,
-                    iterations=start.iterations + iterations, converged=converged,
-                    method=f'Steiglitz-McBride ({start.iterations} passes) + '
-                           f'Levenberg-Marquardt ({iterations} iterations)')
+                    iterations=sm.iterations + iterations, converged=converged,
+                    method=f'Levenberg-Marquardt ({iterations} iterations) from the better of '
+                           f'a Steiglitz-McBride ({sm.iterations} passes) and an ARX start')
