@@ -1,0 +1,100 @@
+"""``sensor-comp diagnose``: which physical effect does the model miss?"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from .sources import load_model, load_shots, progress_factory
+from ..core.model import Model, Source
+from ..errors import SensorCompError
+
+__all__ = ['calibration_sources', 'register', 'run', 'run_diagnosis']
+
+
+def register(subparsers) -> None:
+    """Add the ``diagnose`` sub-command."""
+    parser = subparsers.add_parser(
+        'diagnose', help='rank the physical effects the model misses',
+        description='Fit the model plus each catalogued physical effect on the calibration '
+                    'shots (the bags the model was identified from, or --calibration) and '
+                    'score each on the shots of BAG, which it has not seen; print the verdict '
+                    '(missing_effect, adequate or unexplained) and the ranking with evidence.')
+    parser.add_argument('model', help='model file (.json)')
+    parser.add_argument('bag', help='validation recording (.mcap or .csv)')
+    parser.add_argument('--calibration', nargs='+', metavar='CALIB',
+                        help='calibration recordings (default: the model\'s own, from its '
+                             'provenance)')
+    parser.add_argument('--effect', action='append', dest='candidates', metavar='ID',
+                        help='only try these effects (repeat; default: the whole catalogue)')
+    parser.add_argument('--json', action='store_true',
+                        help='print JSON with at least verdict and ranking')
+    parser.set_defaults(func=run)
+
+
+def calibration_sources(model: Model, paths: list[str] | None) -> list:
+    """
+    Return the calibration recordings with their shots: ``paths`` or the model's provenance.
+
+    Raises:
+        SensorCompError: When the model names no calibration file that still exists.
+
+    """
+    if paths:
+        return [load_shots(p) for p in paths]
+    sources: list[Source] = [s for s in model.provenance
+                             if any(isinstance(shot, dict) and shot.get('role') == 'calibration'
+                                    for shot in s.shots)]
+    missing = [s.path for s in sources if not os.path.exists(s.path)]
+    if not sources or missing:
+        raise SensorCompError(
+            'the calibration recordings of the model are needed to fit the candidate effects'
+            + (f'; not found: {", ".join(missing)}' if missing else
+               ': the model file names none') + '; give them with --calibration')
+    loaded = []
+    for source in sources:
+        if Source.from_file(source.path).sha256 != source.sha256:
+            print(f'warning: {source.path} changed since the model was identified (sha256 '
+                  f'differs)', file=sys.stderr)
+        loaded.append(load_shots(source.path))
+    return loaded
+
+
+def run_diagnosis(args: argparse.Namespace, model: Model, validation):
+    """Run the diagnosis of ``model`` on ``validation`` with the command's options."""
+    from ..core.diagnose import diagnose
+    calibration = calibration_sources(model, args.calibration)
+    return diagnose(calibration, [validation], base=model, candidates=args.candidates,
+                    progress=progress_factory(args.quiet or getattr(args, 'json', False)))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Diagnose and print the verdict and ranking; return the exit code."""
+    model = load_model(args.model)
+    validation = load_shots(args.bag)
+    diagnosis = run_diagnosis(args, model, validation)
+    if args.json:
+        print(json.dumps(diagnosis.to_dict(), indent=2))
+        return 0
+    print(f'verdict: {diagnosis.verdict}')
+    print(f'  {diagnosis.explanation}')
+    if diagnosis.ranking:
+        print(f'\n{"#":>2}  {"effect":24s} {"score":>7} {"p":>9}  sig  parameters')
+        for position, entry in enumerate(diagnosis.ranking, 1):
+            parameters = ', '.join(
+                f'{k} = {v:.4g}' + (f' ± {s:.2g}' if s is not None else '')
+                + (f' {entry.units.get(k, "")}' if entry.units.get(k) else '')
+                for k, (v, s) in entry.parameters.items())
+            print(f'{position:>2}  {entry.effect:24s} {entry.score:7.3f} {entry.p_value:9.2g}  '
+                  f'{"yes" if entry.significant else " no"}  {parameters}')
+        print()
+        for entry in diagnosis.ranking:
+            if entry.significant:
+                print(f'{entry.effect}: {entry.evidence}')
+    for skipped in diagnosis.skipped:
+        print(f'{skipped.effect} not tried: {skipped.reason}')
+    for note in diagnosis.notes:
+        print(f'note: {note}')
+    return 0
