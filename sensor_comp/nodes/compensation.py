@@ -32,8 +32,9 @@ Parameters (read once at start):
   first one, exactly as if the model had been there from the start. Dropped blocks are
   counted as unprocessed on ``/diagnostics``. Memory: 32 bytes per sample of block width
   per held pair (a 10 000-sample pair is 320 kB).
-- ``max_unpaired_blocks`` (default 64): blocks of one topic waiting for their partner
-  before the oldest is given up as unpaired.
+- ``max_unpaired_blocks`` (default 1000): blocks of one topic waiting for their partner
+  before the oldest is given up as unpaired. The two topics are delivered independently:
+  under load one ran 40 blocks ahead of the other here, so keep this well above that.
 - ``diagnostics_period`` (s, default 1.0), ``ack_timeout`` (s, default 10.0: at exit, how
   long to wait for subscribers to acknowledge the last blocks).
 
@@ -50,8 +51,9 @@ unpaired, logs the accounting and waits for the subscribers' last acknowledgemen
 
 Hot path: raw subscriptions, :func:`~sensor_comp.io.messages.decode_block` (a zero-copy
 view of the CDR bytes), the streaming filter (``lfilter`` with carried state), pre-encoded
-CDR published raw; a callback also takes the messages already queued on its subscription
-(up to 64) without an executor round each.
+CDR published raw; a callback also takes the messages already queued on both input
+subscriptions (up to 64, one of each in turn, so that pairs stay in step) without an
+executor round each.
 """
 
 from __future__ import annotations
@@ -88,7 +90,7 @@ __all__ = ['Compensation', 'main']
 STATUS_NAME = 'sensor_comp: compensation'
 #: Topic of the model, relative to the namespace.
 MODEL = 'model'
-# Messages taken from one subscription per callback (see take_queued).
+# Queued messages taken per block callback (see take_queued).
 _BATCH = 64
 
 
@@ -146,7 +148,7 @@ class Compensation(Node):
         model_file = declare(self, 'model_file', '', 'model file to start with')
         self.max_pending_blocks = declare(self, 'max_pending_blocks', 1000,
                                           'blocks per topic held until a model is in use')
-        self.max_unpaired_blocks = declare(self, 'max_unpaired_blocks', 64,
+        self.max_unpaired_blocks = declare(self, 'max_unpaired_blocks', 1000,
                                            'blocks waiting for their partner, per topic')
         period = declare(self, 'diagnostics_period', 1.0, 'seconds between diagnostics')
         self.ack_timeout = declare(self, 'ack_timeout', 10.0,
@@ -184,6 +186,8 @@ class Compensation(Node):
         self._inputs = {topic: self.create_subscription(
             image, topic, functools.partial(self._on_block, topic), BLOCK_QOS, raw=True)
             for topic in (PRESSURE_RAW, ACCELERATION)}
+        self._takers = [(subscription, functools.partial(self._take, topic))
+                        for topic, subscription in self._inputs.items()]
         self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
                                  self._on_stream_info, latched_qos(16), raw=True)
         self.create_subscription(message_class(STRING), MODEL, self._on_model, LATCHED_QOS,
@@ -207,12 +211,14 @@ class Compensation(Node):
 
     def _on_block(self, topic: str, data: bytes) -> None:
         self._receive(topic, data)
-        take_queued(self._inputs[topic], lambda message, _: self._receive(topic, message),
-                    limit=_BATCH)
+        take_queued(self._takers, limit=_BATCH)
 
     def _receive(self, topic: str, data: bytes) -> None:
         self.received += 1
         self._handle(topic, data)
+
+    def _take(self, topic: str, data: bytes, info: dict) -> None:
+        self._receive(topic, data)
 
     def _handle(self, topic: str, data: bytes) -> None:
         compensator = self.compensator

@@ -173,7 +173,9 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     assert values['shots_kept'] == '4' and values['shots_rejected'] == '0'
     assert int(values['samples_received']) == recording.n_samples
     # Bounded memory: the buffer spans a few shot windows, not the recording.
-    assert 0 < buffered <= capacity + 1000 < recording.n_samples / 2
+    span = (5 + 10 + 20 + 1) * FS / 1e3  # pre + max pulse + post + holdoff, in samples
+    assert capacity == 2.5 * span
+    assert 0 < buffered <= 3 * span + 1000 < recording.n_samples
 
 
 def test_fit_service_answers_with_the_fit_or_the_reason(context, make_node, calibration_bag):
