@@ -289,10 +289,11 @@ def main(argv=None) -> int:
     os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
     os.environ['ROS_DOMAIN_ID'] = str(random.randrange(102, 200))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    report = {'throughput': [], 'latency': []}
+    report = {'throughput': [], 'latency': [], 'load_average': os.getloadavg()[0]}
     lost = False
     print(f'compensation node, separate processes (ROS_DOMAIN_ID '
-          f'{os.environ["ROS_DOMAIN_ID"]}); publisher as fast as the node takes the blocks')
+          f'{os.environ["ROS_DOMAIN_ID"]}, load average {os.getloadavg()[0]:.2f} on '
+          f'{os.cpu_count()} cores); publisher as fast as the node takes the blocks')
     print(f'{"width":>6} {"pairs":>6} | {"MS/s":>7} {"blocks/s":>9} | {"node CPU":>8} | '
           f'{"received":>17}')
     with tempfile.TemporaryDirectory(prefix='bench_compensation_node_') as tmp:
@@ -325,8 +326,8 @@ def main(argv=None) -> int:
                 **{f'{name}_ms': {'median': float(np.median(x)),
                                   'p99': float(np.percentile(x, 99)), 'max': float(np.max(x))}
                    for name, x in (('publish', published), ('receive', received))}})
-    print('MS/s: million samples per second per stream (acceleration 3 rows, pressure 1); '
-          'CPU in % of one core')
+    print(f'MS/s: million samples per second per stream (acceleration 3 rows, pressure 1); '
+          f'CPU in % of one core; load average now {os.getloadavg()[0]:.2f}')
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2))
     return 1 if lost else 0

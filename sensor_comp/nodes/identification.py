@@ -55,8 +55,9 @@ counted). Offline
 detection on the whole recording finds the same shots; their windows may differ by a
 sample where the median of the buffer and of the whole recording round a half-amplitude
 crossing differently, so the model states its windows in ``provenance`` (stream sample
-indices since the first sample received, the stamp of each window start) and
-:func:`~sensor_comp.core.identify.identify` run offline on those windows gives the same
+indices since the first sample received, the stamp of each window start);
+:func:`provenance_shots` rebuilds those shots in a recording of the same streams, and
+:func:`~sensor_comp.core.identify.identify` run offline on them gives the same
 coefficients.
 
 Threads: identification (EMD, the output-error fit) runs in one worker thread of the node,
@@ -101,7 +102,7 @@ from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
                       DIAGNOSTICS_QOS, diagnostics, LATCHED_QOS, latched_qos, message_class,
                       publish_raw, run_main, spin_until, take_queued)
 
-__all__ = ['Identification', 'ShotWindow', 'main']
+__all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
 #: Status name on ``/diagnostics``.
 STATUS_NAME = 'sensor_comp: identification'
@@ -699,6 +700,54 @@ class Identification(Node):
         self._stop.set()
         self._worker.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
+
+
+def provenance_shots(model: Model, recording: Recording) -> tuple[Shot, ...]:
+    """
+    Return the shots a live model was fitted and validated on, in a recording's samples.
+
+    The node lists its windows in the model's provenance (stamps, indices, baselines);
+    with a recording of the same streams (e.g. made by the recorder) this gives the shots
+    to run :func:`~sensor_comp.core.identify.identify` on offline, which reproduces the
+    model.
+
+    Args:
+        model: A model published by this node.
+        recording: A recording of the streams the node received.
+
+    Returns:
+        The shots, in the order they were kept.
+
+    Raises:
+        ShotError: If the model has no live provenance, or a window lies outside the
+            recording or off its sample grid.
+
+    """
+    live = [source for source in model.provenance if source.path.startswith('live topics')]
+    if len(live) != 1:
+        raise ShotError('the model has no provenance of the identification node (made '
+                        'offline?): no live windows to rebuild')
+    shots = []
+    for entry in live[0].shots:
+        offset = (entry['stamp_ns'] - recording.t0_ns) * recording.fs / 1e9
+        start = round(offset)
+        shift = start - entry['start']
+        stop = entry['stop'] + shift
+        if abs(offset - start) > 0.5e-3 or start < 0 or stop > recording.n_samples:
+            raise ShotError(f'shot {entry["index"]}: window at stamp {entry["stamp_ns"]} ns '
+                            f'({stop - start} samples) is not in the recording (t0 '
+                            f'{recording.t0_ns} ns, {recording.n_samples} samples at '
+                            f'{recording.fs:g} Hz)')
+        shots.append(Shot(
+            index=entry['index'], fs=recording.fs, start=start, stop=stop,
+            onset=entry['onset'] + shift, end=entry['end'] + shift, peak=entry['peak'] + shift,
+            peak_g=entry['peak_g'], width_ms=entry['width_ms'],
+            peak_pressure_mpa=entry['peak_pressure_mpa'], charge_pc=entry['charge_pc'],
+            mpa_per_g=entry['mpa_per_g'], clipped=entry['clipped'],
+            baseline_stop=entry['baseline_stop'] + shift, baseline_pa=entry['baseline_pa'],
+            baseline_acceleration=tuple(entry['baseline_acceleration']),
+            notes=tuple(entry['notes'])))
+    return tuple(shots)
 
 
 def _statistics(model: Model) -> dict:

@@ -7,7 +7,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.parameter import Parameter
 
 from sensor_comp.blocks import iter_blocks
@@ -15,13 +15,15 @@ from sensor_comp.cli.compensate import compensate_bag
 from sensor_comp.core.compensation import CompensationFilter
 from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.core.model import Model
-from sensor_comp.io.bag_reader import read_streams
+from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.bag_writer import write_recording
-from sensor_comp.io.messages import (decode_block, decode_stream_info, encode_block,
-                                     encode_stream_info, encode_string, IMAGE, STRING)
+from sensor_comp.io.messages import (decode_block, decode_stream_info, decode_string,
+                                     encode_block, encode_stream_info, encode_string, IMAGE,
+                                     STRING)
 from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS,
                                        message_class, NodeError)
-from sensor_comp.nodes.compensation import Compensation, STATUS_NAME
+from sensor_comp.nodes.compensation import Compensation, model_from_text, STATUS_NAME
+from sensor_comp.nodes.identification import Identification, provenance_shots
 from sensor_comp.nodes.player import Player
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
@@ -32,8 +34,12 @@ WIDTH = 1000
 
 @pytest.fixture(scope='module')
 def recording():
-    """Return a simulated calibration recording: 4 shots at 200 kS/s."""
-    return simulate(RigConfig(fs=FS, shots=random_shots(4, seed=7), seed=7,
+    """
+    Return a simulated calibration recording: 5 shots at 200 kS/s.
+
+    The identification node keeps four: the last shot's post-trigger runs past the end.
+    """
+    return simulate(RigConfig(fs=FS, shots=random_shots(5, seed=3), seed=3,
                               t0_ns=T0_NS)).recording
 
 
@@ -74,7 +80,7 @@ def _wait(condition, timeout=20.0, what='the condition'):
 
 
 def _spin(context, *nodes):
-    executor = SingleThreadedExecutor(context=context)
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
     for node in nodes:
         executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)
@@ -128,31 +134,52 @@ def _assert_equal_samples(got, expected):
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9 * np.max(np.abs(expected)))
 
 
-def test_node_processes_give_the_offline_compensation(context, node_process, bag, model,
-                                                      recording, tmp_path):
-    model_file, out, offline = (tmp_path / 'model.json', tmp_path / 'live.mcap',
-                                tmp_path / 'offline.mcap')
-    model.save(model_file)
-    node = node_process('compensation', model_file=model_file)
-    node.wait_for_log('compensating /rig/pressure/raw')
+def test_identified_model_compensates_in_node_processes_as_offline(
+        context, node_process, bag, recording, tmp_path):
+    out, offline = tmp_path / 'live.mcap', tmp_path / 'offline.mcap'
+    # Compensation and recorder run as processes; the identification in this one.
+    compensation = node_process('compensation')  # no model file: waits for /rig/model
+    compensation.wait_for_log('compensating /rig/pressure/raw')
     recorder = node_process('recorder', output=out, discovery_period=0.1,
-                            topics=['pressure/compensated', 'pressure/induced', 'stream_info'])
+                            topics=['model', 'pressure/compensated', 'pressure/induced',
+                                    'stream_info'])
     recorder.wait_for_log('recording /rig/pressure/induced')
-    _play(context, bag, subscribers=1)
-    assert node.stop() == 0, node.output()
+    identification = Identification(context=context, parameter_overrides=_params(
+        structure='oe', orders=[2, 2], delay=1, emd=False, min_shots=4))
+    stop = _spin(context, identification)
+    try:
+        _play(context, bag, subscribers=2)
+        _wait(lambda: identification.model is not None, what='the model')
+    finally:
+        stop()
+    identification.destroy_node()
+    compensation.wait_for_log('using the oe model')
+    recorder.wait_for_log('recording /rig/model')
+    assert compensation.stop() == 0, compensation.output()
     assert recorder.stop() == 0, recorder.output()
-    assert 'using the oe model' in node.output()
+
+    # The model in the bag is the offline fit on the node's windows of the replayed bag.
+    with BagReader(out) as reader:
+        (message,) = reader.messages(['/rig/model'])
+    model = model_from_text(decode_string(message.data), where='recorded model')
+    fitted = identify([ShotSource(recording, provenance_shots(model, recording))],
+                      structure='oe', orders=(2, 2), delay=1, denoise=False).model
+    np.testing.assert_allclose(model.b, fitted.b, rtol=1e-9)
+    np.testing.assert_allclose(model.a, fitted.a, rtol=1e-9)
+
+    # The compensated streams are the offline compensation with that model, sample by
+    # sample: the blocks that came before the model were held, none was lost.
     counts = compensate_bag(model, str(bag), str(offline))
     live, expected = read_streams(out), read_streams(offline)
     for topic in ('pressure/compensated', 'pressure/induced'):
         assert live[topic].t0_ns == recording.t0_ns and live[topic].fs == FS
         assert not live[topic].gaps
         _assert_equal_samples(live[topic].data, expected[topic].data)
-    # Every input sample has its output sample.
     assert live['pressure/compensated'].n_samples == recording.n_samples
     assert counts['output_samples'] == recording.n_samples
     assert live['pressure/compensated'].info.metadata == recording.metadata
-    assert f'compensated {recording.n_samples} of {recording.n_samples}' in node.output()
+    n = recording.n_samples
+    assert f'compensated {n} of {n} pressure samples' in compensation.output()
 
 
 def test_blocks_before_the_model_are_held_and_a_late_node_gets_the_latched_model(
@@ -264,19 +291,24 @@ def test_held_blocks_are_bounded_and_the_dropped_ones_counted(context, model, re
     assert node.received == 2 * len(pairs)
 
 
-def test_stream_info_of_the_outputs(context, make_node, recording):
+def test_a_model_file_is_used_once_stream_info_gives_the_rate(context, make_node, model,
+                                                              recording, tmp_path):
     infos = []
     probe = make_node('probe')
     probe.create_subscription(DiagnosticArray, 'stream_info', lambda d: infos.append(d),
                               LATCHED_QOS, raw=True)
+    model.save(tmp_path / 'model.json')
+    node = Compensation(context=context,
+                        parameter_overrides=_params(model_file=str(tmp_path / 'model.json')))
+    assert node.model is None and node.compensator is None  # the rate is not known yet
     accel, press = recording.streams()
-    node = Compensation(context=context)
     stop = _spin(context, node, probe)
     try:
         node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
         _wait(lambda: infos, what='the output stream_info')
     finally:
         stop()
+    assert node.model.created == model.created and node.compensator.fs == FS
     node.destroy_node()
     by_topic = {info.topic: info for info in decode_stream_info(infos[0])}
     assert set(by_topic) == {'pressure/compensated', 'pressure/induced'}

@@ -14,15 +14,16 @@ from std_srvs.srv import Trigger
 
 from sensor_comp.blocks import iter_blocks
 from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.model import load, Model
-from sensor_comp.core.shots import detect_shots, Shot
+from sensor_comp.core.model import load
+from sensor_comp.core.shots import detect_shots, ShotError
 from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
 from sensor_comp.nodes import identification as identification_module
 from sensor_comp.nodes._common import DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
 from sensor_comp.nodes.compensation import model_from_text
-from sensor_comp.nodes.identification import Identification, STATUS_NAME
+from sensor_comp.nodes.identification import (Identification, provenance_shots,
+                                              STATUS_NAME)
 from sensor_comp.nodes.player import Player
 from sensor_comp.sim import random_shots, RigConfig, simulate
 from sensor_comp.streams import G0
@@ -82,25 +83,6 @@ def _wait(condition, timeout=20.0, what='the condition'):
         time.sleep(0.01)
 
 
-def _shots_from_provenance(model: Model, recording) -> list[Shot]:
-    """Rebuild the node's shots from the model's provenance, in ``recording``'s indices."""
-    (source,) = model.provenance
-    shots = []
-    for entry in source.shots:
-        start = round((entry['stamp_ns'] - recording.t0_ns) * recording.fs / 1e9)
-        shift = start - entry['start']
-        shots.append(Shot(
-            index=entry['index'], fs=recording.fs, start=start, stop=entry['stop'] + shift,
-            onset=entry['onset'] + shift, end=entry['end'] + shift, peak=entry['peak'] + shift,
-            peak_g=entry['peak_g'], width_ms=entry['width_ms'],
-            peak_pressure_mpa=entry['peak_pressure_mpa'], charge_pc=entry['charge_pc'],
-            mpa_per_g=entry['mpa_per_g'], clipped=entry['clipped'],
-            baseline_stop=entry['baseline_stop'] + shift, baseline_pa=entry['baseline_pa'],
-            baseline_acceleration=tuple(entry['baseline_acceleration']),
-            notes=tuple(entry['notes'])))
-    return shots
-
-
 def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_context,
                                                                make_node, calibration_bag,
                                                                tmp_path):
@@ -137,7 +119,7 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     # The node kept the first four shots that offline detection finds, at the same places
     # (up to a sample where the buffer's median moves a half-amplitude crossing).
     offline_shots = detect_shots(recording)
-    shots = _shots_from_provenance(live, recording)
+    shots = provenance_shots(live, recording)
     assert len(shots) == 4 and len(offline_shots) == SHOTS
     for mine, theirs in zip(shots, offline_shots):
         assert abs(mine.start - theirs.start) <= 1 and abs(mine.stop - theirs.stop) <= 1
@@ -150,6 +132,10 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     np.testing.assert_allclose(live.b, offline.b, rtol=1e-9)
     np.testing.assert_allclose(live.a, offline.a, rtol=1e-9)
     assert live.nk == offline.nk == 1
+    with pytest.raises(ShotError, match='no provenance of the identification node'):
+        provenance_shots(offline, recording)
+    with pytest.raises(ShotError, match='shot 0: window at stamp .* is not in the recording'):
+        provenance_shots(live, recording.slice(20_000, 40_000))
     for key in ('validation_fit_percent', 'calibration_fit_percent', 'calibration_shots',
                 'validation_shots'):
         assert live.fit[key] == pytest.approx(offline.fit[key], rel=1e-9)

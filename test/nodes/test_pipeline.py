@@ -11,11 +11,11 @@ import sensor_comp
 from sensor_comp.core.compensation import compensate_recording
 from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.core.model import load
-from sensor_comp.core.shots import Shot
 from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
 from sensor_comp.io.messages import decode_string
 from sensor_comp.nodes._common import NodeError
 from sensor_comp.nodes.compensation import model_from_text
+from sensor_comp.nodes.identification import provenance_shots
 from sensor_comp.nodes.pipeline import pipeline, PipelineTimeout
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
@@ -26,22 +26,6 @@ ACQUISITION = {'source': 'sim', 'sim_fs': FS, 'sim_shots': 5, 'sim_seed': 3,
                'block_size': 1000, 'pacing': 'fast'}
 IDENTIFICATION = {'structure': 'oe', 'orders': [2, 2], 'delay': 1, 'emd': False,
                   'min_shots': 4}
-
-
-def _node_shots(model, recording) -> tuple[Shot, ...]:
-    """Return the model's shots (its provenance) in ``recording``'s sample indices."""
-    shots = []
-    for e in model.provenance[0].shots:
-        shift = round((e['stamp_ns'] - recording.t0_ns) * recording.fs / 1e9) - e['start']
-        shots.append(Shot(
-            index=e['index'], fs=recording.fs, start=e['start'] + shift,
-            stop=e['stop'] + shift, onset=e['onset'] + shift, end=e['end'] + shift,
-            peak=e['peak'] + shift, peak_g=e['peak_g'], width_ms=e['width_ms'],
-            peak_pressure_mpa=e['peak_pressure_mpa'], charge_pc=e['charge_pc'],
-            mpa_per_g=e['mpa_per_g'], clipped=e['clipped'],
-            baseline_stop=e['baseline_stop'] + shift, baseline_pa=e['baseline_pa'],
-            baseline_acceleration=tuple(e['baseline_acceleration']), notes=tuple(e['notes'])))
-    return tuple(shots)
 
 
 def test_pipeline_identifies_compensates_and_records_everything(context, tmp_path):
@@ -69,7 +53,7 @@ def test_pipeline_identifies_compensates_and_records_everything(context, tmp_pat
     np.testing.assert_array_equal(load(model_file).a, model.a)
 
     # The model is the offline fit on the same windows of the recorded streams.
-    offline = identify([ShotSource(recording, _node_shots(recorded, recording))],
+    offline = identify([ShotSource(recording, provenance_shots(recorded, recording))],
                        structure='oe', orders=(2, 2), delay=1, denoise=False).model
     np.testing.assert_allclose(recorded.b, offline.b, rtol=1e-9)
     np.testing.assert_allclose(recorded.a, offline.a, rtol=1e-9)
