@@ -95,8 +95,8 @@ from ..core.model import Model, Source
 from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
                           mad_sigma, NOISE_FACTOR, Shot, ShotError)
 from ..errors import SensorCompError
-from ..io.messages import (decode_block, decode_stream_info, encode_string, IMAGE,
-                           MessageError, STRING)
+from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
+                           IMAGE, MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
 from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
                       DIAGNOSTICS_QOS, diagnostics, LATCHED_QOS, latched_qos, message_class,
@@ -115,7 +115,6 @@ _MIN_FIT_SHOTS = 2
 _MAX_UNPAIRED = 1000
 # Queued messages taken per block callback (see take_queued).
 _BATCH = 64
-_ORDER_NAMES = ('na', 'nb')
 
 
 @dataclass(frozen=True)
@@ -370,19 +369,17 @@ class Identification(Node):
         self._stop = threading.Event()
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='identification')
         image = message_class(IMAGE)
-        self._block_subscriptions = {
-            topic: self.create_subscription(image, topic, functools.partial(self._on_block,
-                                                                            topic),
-                                            BLOCK_QOS, raw=True)
+        self._block_subscriptions = {topic: self.create_subscription(
+            image, topic, functools.partial(self._on_block, topic), BLOCK_QOS, raw=True)
             for topic in (PRESSURE_RAW, ACCELERATION)}
         self._takers = [(subscription, functools.partial(self._take_queued, topic))
                         for topic, subscription in self._block_subscriptions.items()]
-        self.create_subscription(message_class('diagnostic_msgs/msg/DiagnosticArray'),
-                                 STREAM_INFO, self._on_stream_info, latched_qos(16), raw=True)
+        self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
+                                 self._on_stream_info, latched_qos(16), raw=True)
         self._model_publisher = self.create_publisher(message_class(STRING), MODEL,
                                                       LATCHED_QOS)
-        self._diagnostics = self.create_publisher(
-            message_class('diagnostic_msgs/msg/DiagnosticArray'), DIAGNOSTICS, DIAGNOSTICS_QOS)
+        self._diagnostics = self.create_publisher(message_class(DIAGNOSTIC_ARRAY), DIAGNOSTICS,
+                                                  DIAGNOSTICS_QOS)
         self.create_service(Trigger, '~/fit', self._on_fit,
                             callback_group=MutuallyExclusiveCallbackGroup())
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
@@ -531,10 +528,7 @@ class Identification(Node):
             self.windows.append(window)
             self._new_since_fit += 1
             kept = len(self.windows)
-            due = self._fit_running is None and (
-                (self.model is None and kept >= self.min_shots) or
-                (self.refit_shots and self.model is not None and
-                 self._new_since_fit >= self.refit_shots))
+            due = self._due()
         self.get_logger().info(f'shot {shot.index}: {shot.peak_g:.4g} g, '
                                f'{shot.width_ms:.3f} ms, {shot.peak_pressure_mpa:.4g} MPa '
                                f'at stamp {window.stamp_ns} ns ({kept} kept)')
@@ -571,10 +565,26 @@ class Identification(Node):
         future.add_done_callback(self._fit_done)
         return future
 
+    def _due(self) -> bool:
+        """
+        Return whether an automatic fit is due (call with the lock held).
+
+        The first fit comes at ``min_shots`` shots (again after each new shot while fits
+        fail), later ones every ``refit_shots`` new shots; never while one runs.
+        """
+        if self._fit_running is not None:
+            return False
+        if self.model is None:
+            return len(self.windows) >= self.min_shots and self._new_since_fit > 0
+        return bool(self.refit_shots) and self._new_since_fit >= self.refit_shots
+
     def _fit_done(self, future: Future) -> None:
         with self._lock:
             if self._fit_running is future:
                 self._fit_running = None
+            due = self._due()  # shots that came during the fit
+        if due:
+            self._submit()
 
     def _fit(self, windows: tuple[ShotWindow, ...]) -> _Outcome:
         began = time.monotonic()
@@ -680,6 +690,7 @@ class Identification(Node):
                   'min_shots': self.min_shots, 'fits': self.fits, 'fit_running': running,
                   'buffer_samples': self.buffer_samples,
                   'gaps': 0 if live is None else live.gaps,
+                  'dropped_samples': 0 if live is None else live.dropped,
                   'unpaired_samples': self._pairs.unpaired,
                   'malformed_messages': self.malformed, 'held_dropped': self.held_dropped}
         if error is not None:

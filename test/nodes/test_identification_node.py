@@ -194,6 +194,20 @@ def test_fit_service_answers_with_the_fit_or_the_reason(context, make_node, cali
     assert f'{model.continuous().natural_frequency_hz / 1e3:.4g} kHz' in answer.message
 
 
+def test_automatic_fit_at_min_shots_and_refit_after_more(context, calibration_bag):
+    node = Identification(context=context, parameter_overrides=_params(
+        **FIT, min_shots=2, refit_shots=2))
+    stop = _spin(context, node)
+    try:
+        _play(context, calibration_bag)
+        _wait(lambda: node.fits == 2 and node._fit_running is None, what='two fits')
+    finally:
+        stop()
+    node.destroy_node()
+    assert node.model.fit['calibration_shots'] == node.model.fit['validation_shots'] == 2
+    assert [entry['index'] for entry in node.model.provenance[0].shots] == [0, 1, 2, 3]
+
+
 def test_identification_process_writes_the_model(context, node_process, calibration_bag,
                                                  tmp_path):
     model_file = tmp_path / 'process.json'
