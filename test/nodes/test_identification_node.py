@@ -208,6 +208,33 @@ def test_automatic_fit_at_min_shots_and_refit_after_more(context, calibration_ba
     assert [entry['index'] for entry in node.model.provenance[0].shots] == [0, 1, 2, 3]
 
 
+def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkeypatch):
+    started, release = threading.Event(), threading.Event()
+
+    def slow_identify(*args, **kwargs):
+        started.set()
+        assert release.wait(20.0)
+        return identify(*args, **kwargs)
+
+    monkeypatch.setattr(identification_module, 'identify', slow_identify)
+    node = Identification(context=context, parameter_overrides=_params(**FIT, min_shots=2))
+    stop = _spin(context, node)
+    try:
+        _play(context, calibration_bag)
+        n = read_recording(calibration_bag).n_samples
+        # The first fit (2 shots) is held in the worker; the rest of the stream still
+        # arrives and its shots are found.
+        _wait(lambda: started.is_set() and node.samples_received['pressure/raw'] == n and
+              len(node.windows) == 4, what='reception during the fit')
+        assert node.model is None
+        release.set()
+        _wait(lambda: node.model is not None, what='the model')
+    finally:
+        release.set()
+        stop()
+    node.destroy_node()
+
+
 def test_identification_process_writes_the_model(context, node_process, calibration_bag,
                                                  tmp_path):
     model_file = tmp_path / 'process.json'
