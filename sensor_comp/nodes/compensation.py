@@ -160,6 +160,7 @@ class Compensation(Node):
         check(self, 'diagnostics_period', period, period > 0, 'a positive number of seconds')
         check(self, 'ack_timeout', self.ack_timeout, self.ack_timeout >= 0,
               'a number of seconds >= 0')
+        model = self._read_model_file(model_file) if model_file else None
         self.model: Model | None = None
         self.compensator: BlockCompensator | None = None
         self.unprocessed = {PRESSURE_RAW: 0, ACCELERATION: 0}
@@ -193,19 +194,28 @@ class Compensation(Node):
         self.create_subscription(message_class(STRING), MODEL, self._on_model, LATCHED_QOS,
                                  raw=True)
         self.create_timer(period, self.publish_diagnostics)
-        if model_file:
-            check(self, 'model_file', model_file, Path(model_file).is_file(),
-                  'an existing model file')
-            try:
-                model = load(model_file)
-            except ModelError as exc:
-                raise NodeError(f'{self.get_fully_qualified_name()}: {exc}') from None
-            if not self._offer(model, f'file {model_file}'):
-                raise NodeError(f'{self.get_fully_qualified_name()}: parameter \'model_file\' '
-                                f'{model_file!r} cannot be used (see the error above)')
+        if model is not None:
+            self._offer(model, f'file {model_file}')
         source = model_file or self.resolve_topic_name(MODEL)
         self.get_logger().info(f'compensating {self.resolve_topic_name(PRESSURE_RAW)} with '
                                f'the model of {source}')
+
+    def _read_model_file(self, path: str) -> Model:
+        """
+        Read the ``model_file`` parameter's model and check that it can compensate.
+
+        Raises:
+            NodeError: If the file is missing, malformed, unstable or has unknown inputs.
+
+        """
+        check(self, 'model_file', path, Path(path).is_file(), 'an existing model file')
+        try:
+            model = load(path)
+            CompensationFilter.from_model(model)
+        except SensorCompError as exc:
+            raise NodeError(f'{self.get_fully_qualified_name()}: parameter \'model_file\' '
+                            f'{path!r} cannot be used: {exc}') from None
+        return model
 
     # Inputs ------------------------------------------------------------------------------
 
