@@ -1,4 +1,4 @@
-"""``sensor-comp diagnose``: which physical effect does the model miss?"""
+"""``sensor-comp diagnose``: rank the physical effects the model misses."""
 
 from __future__ import annotations
 
