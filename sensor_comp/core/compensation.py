@@ -19,6 +19,17 @@ output-error structure or a lower order).
 
 NaN samples (stream gaps) in the inputs give NaN output and reset the filter to rest: the
 compensation restarts after a gap as it would at the start of a stream.
+
+Models with catalogued effects (:mod:`sensor_comp.core.effects`) need nothing more for the
+acceleration-driven ones: their channels (``a_z·|a_z|``, delays, the amplifier high-pass,
+a shot-triggered offset...) are named, with their parameters, in the model's inputs, and
+computed here with their own carried state. Disturbances that the acceleration does not
+drive (mains hum) cannot be predicted from it, and their phase in a new recording is
+unknown: they are *estimated* from the compensated pressure itself by streaming trackers
+and removed too (:class:`~sensor_comp.core.effects.mains_hum.LineTracker`, whose
+documentation says when that is not sound: during its settling time after the start of
+a stream or a gap, a drifting mains frequency, intermittent pickup). ``induced`` stays the
+acceleration-driven part; ``compensated`` has the disturbance estimate removed as well.
 """
 
 from __future__ import annotations
@@ -30,6 +41,7 @@ from typing import Protocol, TYPE_CHECKING
 import numpy as np
 from scipy import signal
 
+from .effects import disturbance_trackers
 from .ident.least_squares import delayed_numerator
 from .ident.polynomials import max_root_radius
 from .inputs import input_channels, InputError, needs_rate
@@ -72,6 +84,9 @@ class CompensationFilter:
         nk: Input delay in samples.
         inputs: One input name per row of ``b`` (see :mod:`sensor_comp.core.inputs`).
         fs: Sample rate in Hz; needed by derivative inputs.
+        disturbances: Streaming disturbance estimators (``tracker(residual) -> estimate``
+            with ``reset()``), e.g. from :func:`~sensor_comp.core.effects.
+            disturbance_trackers`; their estimate is removed from the compensated pressure.
 
     Raises:
         CompensationError: On shapes that do not match or non-finite coefficients.
@@ -81,7 +96,8 @@ class CompensationFilter:
     """
 
     def __init__(self, b: np.ndarray, a: np.ndarray, *, nk: int = 0,
-                 inputs: Sequence[str] = ('a_z',), fs: float | None = None):
+                 inputs: Sequence[str] = ('a_z',), fs: float | None = None,
+                 disturbances: Sequence = ()):
         b = np.atleast_2d(np.asarray(b, dtype=np.float64))
         a = np.atleast_1d(np.asarray(a, dtype=np.float64))
         inputs = tuple(inputs)
@@ -111,6 +127,7 @@ class CompensationFilter:
         self.b = b
         self._num = delayed_numerator(b, self.nk)
         self._order = max(self._num.shape[1], a.size) - 1
+        self.disturbances = tuple(disturbances)
         self.reset()
 
     @classmethod
@@ -118,11 +135,16 @@ class CompensationFilter:
         """
         Build the filter of ``model`` (anything with ``b``, ``a``, ``nk``, ``inputs``, ``fs``).
 
+        The trackers of the model's disturbance effects (its ``effects`` entries, when it
+        has them) come along.
+
         Raises:
             UnstableModelError: When the model has a pole of magnitude ≥ 1.
 
         """
-        return cls(model.b, model.a, nk=model.nk, inputs=model.inputs, fs=model.fs)
+        trackers = disturbance_trackers(getattr(model, 'effects', ()), fs=model.fs)
+        return cls(model.b, model.a, nk=model.nk, inputs=model.inputs, fs=model.fs,
+                   disturbances=trackers)
 
     @property
     def pole_radius(self) -> float:
@@ -133,6 +155,8 @@ class CompensationFilter:
         """Return the filter to rest (zero state), as at the start of a stream."""
         self._zi = np.zeros((len(self.inputs), self._order))
         self._input_state: dict[str, object] = {}
+        for tracker in self.disturbances:
+            tracker.reset()
 
     def filter_inputs(self, u: np.ndarray) -> np.ndarray:
         """
@@ -202,7 +226,8 @@ class CompensationFilter:
             pressure: ``(w,)`` raw pressure in Pa (a ``(1, w)`` block is accepted).
 
         Returns:
-            ``(compensated, induced)``, both ``(w,)`` in Pa.
+            ``(compensated, induced)``, both ``(w,)`` in Pa; ``compensated`` has the
+            disturbance estimates removed too.
 
         Raises:
             CompensationError: When the blocks do not have the same number of samples.
@@ -217,7 +242,11 @@ class CompensationFilter:
             raise CompensationError(f'pressure block {pressure.shape} and acceleration block '
                                     f'{acceleration.shape} must hold the same samples')
         induced = self.induced(acceleration)
-        return pressure - induced, induced
+        compensated = pressure - induced
+        if self.disturbances:
+            residual = compensated
+            compensated = residual - sum(tracker(residual) for tracker in self.disturbances)
+        return compensated, induced
 
 
 def compensate_recording(model: LinearModel,

@@ -42,15 +42,17 @@ from .effects.base import effect_entry, Effect, ModelSpec, Physical, Search
 from .ident import Estimate, fit_oe, IdentError, simulate
 from .ident.least_squares import scaled_qr
 from .ident.polynomials import max_root_radius
-from .inputs import input_channels
+from .inputs import input_channels, mode_pair
 from .model import Model
 from .shots import segments
 
 __all__ = ['DisturbanceFit', 'ExtendedFit', 'Prediction', 'Window', 'fit_extended',
-           'shot_windows']
+           'ringing_khz', 'shot_windows']
 
 #: Rounds of (scalar searches, refit) when the spec has 1-D parameters.
 ROUNDS = 2
+#: Part of a window after the pulse that the grid start sees, s.
+EARLY_S = 3e-3
 #: Most Levenberg-Marquardt iterations of a joint fit.
 MAX_ITERATIONS = 100
 
@@ -67,6 +69,7 @@ class Window:
         baseline: Leading samples the baseline was the mean of (the pre-trigger).
         source: Index of its recording among the windows' recordings.
         label: Name for messages, e.g. ``'calib.mcap shot 3'``.
+        end: End of the pulse in window samples (None: unknown).
 
     """
 
@@ -76,6 +79,7 @@ class Window:
     baseline: int
     source: int
     label: str = ''
+    end: int | None = None
 
 
 def shot_windows(sources: Sequence, *,
@@ -99,7 +103,7 @@ def shot_windows(sources: Sequence, *,
                        denoise=denoise)
         for shot, (acc, y) in zip(source.shots, cut):
             out.append(Window(acc, y, shot.start, shot.baseline_stop - shot.start, index,
-                              f'{name} shot {shot.index}'))
+                              f'{name} shot {shot.index}', shot.end - shot.start))
     return out
 
 
@@ -167,6 +171,8 @@ class ExtendedFit:
         entries: ``Model.effects`` entries with the physical parameters.
         fs: Sample rate in Hz.
         notes: What the user should know (e.g. a parameter that could not be read).
+        denominators: Base-order denominators worth starting other fits of the same
+            windows from (``starts`` of :func:`fit_extended`).
 
     """
 
@@ -180,6 +186,8 @@ class ExtendedFit:
     entries: tuple[dict, ...]
     fs: float
     notes: tuple[str, ...] = ()
+    denominators: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    _base: tuple[tuple[str, int], ...] = field(default=(), repr=False)
 
     def parameters(self, effect_id: str) -> Physical:
         """Return an effect's physical parameters ``name -> (value, std)``."""
@@ -189,10 +197,21 @@ class ExtendedFit:
         raise EffectError(f'effect {effect_id!r} was not fitted (fitted: '
                           f'{", ".join(self.effects) or "none"})')
 
+    @property
+    def base_orders(self) -> dict[str, int]:
+        """Return the orders of the base model the effects extend (``base_nf`` ...)."""
+        return dict(self._base)
+
     def model(self, **options) -> Model:
-        """Return the :class:`Model` (``options`` go to :meth:`Model.from_estimate`)."""
+        """
+        Return the :class:`Model` (``options`` go to :meth:`Model.from_estimate`).
+
+        Its fit statistics hold the base orders (``base_nf``, ``base_nb``, ``base_nk``),
+        so that a diagnosis can start from the model again.
+        """
+        fit = {**self.base_orders, **(options.pop('fit', None) or {})}
         return Model.from_estimate(self.estimate, fs=self.fs, inputs=self.inputs,
-                                   effects=self.entries, **options)
+                                   effects=self.entries, fit=fit, **options)
 
     def predict(self, windows: Sequence[Window]) -> Prediction:
         """
@@ -288,22 +307,21 @@ class _Problem:
         """
         Return the least sum of squares over numerators (and disturbances) at ``F``.
 
-        By the normal equations of the column-scaled regression (Cholesky), the cheapest
-        way for the many evaluations of a search; the loss is stationary in the
-        coefficients, so their round-off barely reaches it. Least squares by QR when the
-        normal equations are too ill-conditioned.
+        The coefficients come from the normal equations of the column-scaled regression
+        (Cholesky: the cheapest for the many evaluations of a search) and the residual is
+        then computed, so round-off can only raise the loss, never fake a low one; least
+        squares by QR when the normal equations are singular.
         """
         phi, y = self.regression(f)
         scale = np.linalg.norm(phi, axis=0)
         scale[scale == 0] = 1.0
         phi /= scale
-        gram, rhs = phi.T @ phi, phi.T @ y
         try:
-            factor = linalg.cho_factor(gram)
+            theta = linalg.cho_solve(linalg.cho_factor(phi.T @ phi), phi.T @ y)
         except linalg.LinAlgError:
-            e = y - phi @ _lstsq(phi, y)[0]
-            return float(e @ e)
-        return max(float(y @ y - rhs @ linalg.cho_solve(factor, rhs)), 0.0)
+            theta = _lstsq(phi, y)[0]
+        e = y - phi @ theta
+        return float(e @ e)
 
 
 def _joint(problem: _Problem, a0: np.ndarray, *, method: str,
@@ -395,45 +413,10 @@ def _joint(problem: _Problem, a0: np.ndarray, *, method: str,
     return estimate, d, covariance[io:, io:]
 
 
-def _pairs(fs: float, *, avoid: Sequence[float] = (),
-           zetas: Sequence[float] = (0.05, 0.3, 0.9)) -> list[np.ndarray]:
-    """Return candidate pole pairs ``[1, a1, a2]``: a grid of frequency and damping."""
-    out = []
-    for fn in np.geomspace(fs / 2000, 0.4 * fs, 24):
-        if any(abs(fn / f - 1) < 0.1 for f in avoid):
-            continue  # an existing mode
-        out += [_pair(fn, zeta, fs) for zeta in zetas]
-    return out
-
-
-def _pair(fn: float, zeta: float, fs: float) -> np.ndarray:
-    """Return the discrete pole pair ``[1, a1, a2]`` of a mode (``zeta < 1``)."""
-    z = np.exp(2 * math.pi * fn * complex(-zeta, math.sqrt(1 - zeta * zeta)) / fs)
-    return np.array([1.0, -2 * z.real, abs(z) ** 2])
-
-
-def _residual_peaks(problem: _Problem, a: np.ndarray, fs: float, *, count: int = 3,
-                    avoid: Sequence[float] = ()) -> list[float]:
-    """Return the frequencies of the largest peaks of the residual spectrum at ``F = a``."""
-    phi, y = problem.regression(a)
-    e = y - phi @ _lstsq(phi, y)[0]
-    n = 1 << int(math.ceil(math.log2(max(len(w) for w in problem.ys))))
-    power = np.zeros(n // 2 + 1)
-    position = 0
-    for w in problem.ys:
-        part = e[position:position + w.size]
-        position += w.size
-        power += np.abs(np.fft.rfft(part * np.hanning(part.size), n)) ** 2
-    f = np.fft.rfftfreq(n, 1 / fs)
-    peaks = signal.find_peaks(power)[0]
-    peaks = [i for i in peaks[np.argsort(power[peaks])[::-1]] if f[i] > 4 * fs / n
-             and not any(abs(f[i] / g - 1) < 0.1 for g in avoid)]
-    return [float(f[i]) for i in peaks[:count]]
-
-
-def _frequencies(a: np.ndarray, fs: float) -> list[float]:
-    poles = np.roots(a) if a.size > 1 else np.empty(0)
-    return [abs(np.log(p)) * fs / (2 * math.pi) for p in poles if p.imag > 1e-12]
+def _pairs(fs: float) -> list[tuple[float, np.ndarray]]:
+    """Return ``(zeta, [1, a1, a2])`` pole pairs: a grid of frequency and damping."""
+    return [(zeta, mode_pair(fn / 1e3, zeta, fs))
+            for fn in np.geomspace(fs / 2000, 0.4 * fs, 32) for zeta in (0.1, 0.3, 0.9)]
 
 
 class _Fitter:
@@ -456,62 +439,67 @@ class _Fitter:
                      if self.disturbances else None)
         self.ys = [w.y for w in windows]
 
-    def problem(self, values: Mapping[str, float]) -> _Problem:
+    def problem(self, values: Mapping[str, float], *, early: bool = False) -> _Problem:
+        """Return the regression data; ``early``: up to 3 ms after each pulse only."""
         names = self.spec.channels(values)
-        return _Problem(_channels(self.windows, names, self.fs), self.ys, self.cols,
-                        self.spec.nf, self.spec.nb, self.spec.nk)
+        problem = _Problem(_channels(self.windows, names, self.fs), self.ys, self.cols,
+                           self.spec.nf, self.spec.nb, self.spec.nk)
+        if not early:
+            return problem
+        stops = [w.y.size if w.end is None else min(w.y.size, w.end + round(EARLY_S * self.fs))
+                 for w in self.windows]
+        return replace(problem, us=[u[:, :n] for u, n in zip(problem.us, stops)],
+                       ys=[y[:n] for y, n in zip(problem.ys, stops)],
+                       cols=None if problem.cols is None else [
+                           c[:, :n] for c, n in zip(problem.cols, stops)])
 
-    def starts(self, values: Mapping[str, float]) -> list[np.ndarray]:
+    def starts(self, values: Mapping[str, float], *,
+               base: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
         """
-        Return start denominators: the base part from output error and from a grid.
+        Return start denominators: from output error and, for 2nd order, from a grid.
 
-        The grid start is the resonant pair with the least loss (2nd-order bases only);
-        each extra mode is then the grid pair with the least loss beside the others.
+        The grid starts are the pole pair with the least loss and the lightly damped one
+        with the least loss (a slow tail can make an overdamped pair win at the start
+        values of a search, hiding the resonant basin). ``base`` (denominators of an
+        earlier fit of the same windows) replaces them all.
         """
         problem = self.problem(values)
-        spec, extra = self.spec, 2 * self.spec.extra_modes
-        base = replace(problem, nf=spec.nf - extra, nb=max(spec.nb - extra, 1))
-        firsts = []
+        firsts = [a for a in base if a.size == problem.nf + 1]
+        if firsts:
+            return firsts
         try:
-            firsts.append(fit_oe(list(zip(base.us, base.ys)), nf=base.nf, nb=base.nb,
-                                 nk=base.nk).a)
+            firsts.append(fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf,
+                                 nb=problem.nb, nk=problem.nk).a)
         except IdentError:
             pass
-        if base.nf == 2:
-            firsts.append(min(_pairs(self.fs), key=base.profile_sse))
-        out = []
-        for a in firsts:
-            for _ in range(spec.extra_modes):
-                order = a.size - 1
-                partial = replace(problem, nf=order + 2, nb=base.nb + order + 2 - base.nf)
-                # An extra mode is a resonance: lightly damped pairs from a grid and at the
-                # peaks of the residual spectrum (a grid misses a sharp resonance).
-                modes = _frequencies(a, self.fs)
-                pairs = _pairs(self.fs, avoid=modes, zetas=(0.02, 0.1))
-                for fn in _residual_peaks(replace(partial, nf=order, nb=partial.nb - 2), a,
-                                          self.fs, avoid=modes):
-                    pairs += [_pair(fn, zeta, self.fs) for zeta in (0.01, 0.03, 0.1)]
-                a = min((np.convolve(a, pair) for pair in pairs), key=partial.profile_sse)
-            out.append(a)
-        if not out:
-            raise IdentError(f'no start for a model with nf={spec.nf}: the input does not '
+        if problem.nf == 2:
+            # On the windows' early part (pulse and first ringing): a slow tail has not
+            # built up there to pull the grid towards slow pairs.
+            early = self.problem(values, early=True)
+            grid = [(early.profile_sse(pair), zeta, pair) for zeta, pair in _pairs(self.fs)]
+            firsts.append(min(grid, key=lambda g: g[0])[2])
+            firsts.append(min((g for g in grid if g[1] < 0.5), key=lambda g: g[0])[2])
+        if not firsts:
+            raise IdentError(f'no start for a model with nf={problem.nf}: the input does not '
                              f'excite this structure; lower the orders')
-        return out
+        return _distinct(firsts)
 
-    def fit(self, values: Mapping[str, float], starts: Sequence[np.ndarray]):
-        """Return the best of the fits from every start (and plain output error)."""
+    def fit(self, values: Mapping[str, float], starts: Sequence[np.ndarray], *,
+            fresh: bool = False):
+        """Return the best of the fits from every start (and, ``fresh``, output error)."""
         problem = self.problem(values)
         results = []
-        if self.cols is None and not self.spec.extra_modes:
+        if self.cols is None and fresh:
             try:
                 results.append((fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf,
                                        nb=problem.nb, nk=problem.nk), None, None))
             except IdentError:
                 pass
-        for a in starts:
-            if a.size == problem.nf + 1:
-                results.append(_joint(problem, a, method='output error from a start '
-                                                         'denominator'))
+        usable = [a for a in starts if a.size == problem.nf + 1]
+        if usable:  # Levenberg-Marquardt from the start with the least loss
+            best = min(usable, key=problem.profile_sse)
+            results.append(_joint(problem, best, method='output error from the best start '
+                                                        'denominator'))
         return min(results, key=lambda r: r[0].loss)
 
     def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
@@ -530,6 +518,12 @@ class _Fitter:
         losses = [loss(x) for x in xs]
         best = int(np.argmin(losses))
         low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
+        if search.exclude is not None:  # refine on the best point's side of the band
+            band = np.log(search.exclude) if search.log else np.asarray(search.exclude)
+            if xs[best] < band[0]:
+                high = min(high, band[0])
+            else:
+                low = max(low, band[1])
         result = optimize.minimize_scalar(loss, bounds=(low, high), method='bounded',
                                           options={'xatol': 1e-4 * max(high - low, 1e-12)})
         x = result.x if result.fun <= losses[best] else xs[best]
@@ -551,7 +545,8 @@ class _Fitter:
 
 
 def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,
-                 nf: int = 2, nb: int = 2, nk: int = 1) -> ExtendedFit:
+                 nf: int = 2, nb: int = 2, nk: int = 1,
+                 starts: Sequence[np.ndarray] = ()) -> ExtendedFit:
     """
     Fit a base output-error model plus effects on shot windows.
 
@@ -563,6 +558,8 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         nf: Order of the base model's denominator.
         nb: Numerator coefficients of the base model.
         nk: Input delay of the base model, samples.
+        starts: Base-order denominators to start from (e.g. another fit's
+            :attr:`ExtendedFit.denominators`) instead of searching for them again.
 
     Returns:
         The fit, with the physical parameters of every effect.
@@ -581,30 +578,57 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         reason = effect.applicable(windows)
         if reason is not None:
             raise EffectError(f'cannot fit {effect.id}: {reason}')
-    spec = ModelSpec(nf=nf, nb=nb, nk=nk)
+    spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs))
     for effect in chosen:
         spec = effect.extend(spec)
     disturbances = tuple(get_effect(d) for d in spec.disturbances)
-    best = None
-    for combo in itertools.product(*(d.choices() for d in disturbances)):
-        fitter = _Fitter(windows, spec, fs, disturbances, combo)
-        values = {s.key: s.initial for s in spec.searches}
-        starts = fitter.starts(values)
-        estimate, coef, cov = fitter.fit(values, starts)
-        for _ in range(ROUNDS if spec.searches else 0):
-            starts = _distinct(starts + [estimate.a])
-            for search in spec.searches:
-                values[search.key] = fitter.search(search, values, starts)
-            estimate, coef, cov = fitter.fit(values, starts)
-        if best is None or estimate.loss < best[1].loss:
-            best = (fitter, estimate, coef, cov, dict(values))
-    fitter, estimate, coef, cov, values = best
+    # Discrete choices (50 or 60 Hz) by the loss at the start denominators; then one fit.
+    values = {s.key: s.initial for s in spec.searches}
+    base = [np.asarray(a, dtype=np.float64) for a in starts]
+    fitters = [_Fitter(windows, spec, fs, disturbances, combo)
+               for combo in itertools.product(*(d.choices() for d in disturbances))]
+    firsts = fitters[0].starts(values, base=base)
+    fitter = min(fitters, key=lambda f: f.loss(values, firsts))
+    denominators = list(firsts)
+    estimate, coef, cov = fitter.fit(values, denominators, fresh=not starts)
+    for round_ in range(ROUNDS if spec.searches else 0):
+        denominators = _distinct(denominators + [estimate.a])
+        for search in spec.searches:
+            narrowed = search if round_ == 0 else search.around(values[search.key])
+            values[search.key] = fitter.search(narrowed, values, denominators)
+        estimate, coef, cov = fitter.fit(values, denominators)
     value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
                  for s in spec.searches}
     disturbance = None if coef is None else DisturbanceFit(
         disturbances, fitter.choices, fitter.sources, coef, cov)
     inputs = spec.channels(values)
-    return _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs)
+    shared = _distinct(list(firsts) + [estimate.a])
+    fit = _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
+                  tuple(shared))
+    return replace(fit, _base=(('base_nf', nf), ('base_nb', nb), ('base_nk', nk)))
+
+
+def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
+    """
+    Return the frequency of the strongest ringing after the pulses, kHz (None: no pulse end).
+
+    The peak of the pooled spectrum of the pressure over :data:`EARLY_S` after each pulse
+    (quadratic trend removed, so that a slow tail does not count; Hann window,
+    zero-padded), at frequencies of at least two cycles in that time.
+    """
+    parts = [w.y[w.end:w.end + round(EARLY_S * fs)] for w in windows
+             if w.end is not None and w.y.size - w.end >= 16]
+    if not parts:
+        return None
+    n = 1 << int(math.ceil(math.log2(4 * max(p.size for p in parts))))
+    power = 0.0
+    for p in parts:
+        t = np.arange(p.size)
+        p = p - np.polyval(np.polyfit(t, p, 2), t)
+        power = power + np.abs(np.fft.rfft(p * np.hanning(p.size), n)) ** 2
+    f = np.fft.rfftfreq(n, 1 / fs)
+    low = int(np.searchsorted(f, 2 / EARLY_S))
+    return float(f[low + int(np.argmax(power[low:]))] / 1e3)
 
 
 def _distinct(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
@@ -616,7 +640,8 @@ def _distinct(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
     return out[::-1]
 
 
-def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs) -> ExtendedFit:
+def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
+            denominators) -> ExtendedFit:
     """Read every effect's physical parameters and build the model entries."""
     stored = {}
     for key, std in value_std.items():
@@ -643,7 +668,8 @@ def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs) 
                 notes.append(f'{effect.id}: {exc}')
         entries.append(effect_entry(effect, parameters, **extra))
     return ExtendedFit(tuple(e.id for e in chosen), spec, tuple(inputs), estimate, values,
-                       value_std, disturbance, tuple(entries), fs, tuple(notes))
+                       value_std, disturbance, tuple(entries), fs, tuple(notes),
+                       denominators)
 
 
 def _block(disturbance: DisturbanceFit, index: int) -> tuple[np.ndarray, np.ndarray]:

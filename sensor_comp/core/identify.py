@@ -13,17 +13,24 @@ so that its result can be trusted:
   chooses by BIC plus validation fit (see :func:`~sensor_comp.core.ident.select_structure`);
   ``'arx'``, ``'armax'`` (extended least squares), ``'gls'`` (the paper's generalised least
   squares) and ``'oe'`` fit one structure, with the delay from a ``delayest``-style search
-  unless given.
+  unless given;
+- ``effects=('nonlinear_sensitivity', ...)`` extends the chosen structure with catalogued
+  physical effects (:mod:`sensor_comp.core.effects`), fitted as an output-error model by
+  :func:`~sensor_comp.core.extended.fit_extended`; the model's inputs, orders and
+  ``effects`` entries (physical parameters with standard deviations) describe the
+  extension. Without effects the workflow is unchanged.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 from .compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
+from .effects import ordered
+from .extended import fit_extended, shot_windows
 from .ident import (DelayEstimate, estimate_delay, fit_armax_els, fit_armax_gls, fit_arx,
                     fit_oe, fit_percent, IdentError, select_structure, Selection,
                     simulate)
@@ -161,6 +168,7 @@ def _check_rates(sources: Sequence[ShotSource]) -> float:
 def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSource] = (),
              structure: str = 'auto', orders: tuple[int, int] | None = None,
              delay: int | None = None, denoise: bool = True, criterion: str = 'bic',
+             effects: Sequence[str] = (),
              progress: ProgressFactory | None = None) -> Identification:
     """
     Identify the acceleration-induced pressure model of a sensor.
@@ -177,6 +185,8 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
         denoise: EMD-denoise the calibration pressure per shot window (paper step 1).
         criterion: Information criterion for ``'auto'``: ``'bic'``, ``'aic'``, ``'aicc'``,
             ``'fpe'``.
+        effects: Catalogued effect ids to add to the chosen structure (fitted as output
+            error whatever the structure); empty for the base model.
         progress: Progress bar factory ``progress(label, total)`` for the long steps.
 
     Returns:
@@ -186,6 +196,7 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
         IdentError: On an unknown structure, bad orders, mixed sample rates, no usable
             shots, or when no stable model is found.
         ShotError: On too few shots to hold some out for validation.
+        EffectError: On an unknown effect or one the data cannot support.
 
     """
     if structure not in STRUCTURES:
@@ -194,6 +205,7 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
         raise IdentError(f'orders must be two integers na nb >= 1, got {orders!r}')
     if not calibration:
         raise IdentError('no calibration recording given')
+    effects = tuple(e.id for e in ordered(effects))
     progress = progress or _Silent
     excluded: list[str] = []
     calibration = [_usable(s, excluded) for s in calibration]
@@ -253,29 +265,47 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
         explanation += (f'; WARNING: the {estimate.method} iteration did not converge in '
                         f'{estimate.iterations} iterations: prefer oe or auto')
 
+    inputs, entries = BASE_INPUTS, ()
+    if effects:
+        with progress('effects', 1) as bar:
+            windows = shot_windows([s for s in calib if s.shots])
+            windows = [replace(w, y=y) for w, (_, y) in zip(windows, fit_segments)]
+            extension = fit_extended(windows, effects=effects, fs=fs, nf=na, nb=nb, nk=delay)
+            bar.advance()
+        estimate, inputs, entries = extension.estimate, extension.inputs, extension.entries
+        explanation += (f'; extended with {", ".join(effects)} (output error: '
+                        f'{estimate.method})')
+        explanation += ''.join(f'; {note}' for note in extension.notes)
     charge = {s.recording.charge_sensitivity for s in calib} - {None}
     fit = {'calibration_shots': sum(len(s.shots) for s in calib),
            'validation_shots': sum(len(s.shots) for s in valid),
            'emd_denoised': bool(denoise),
            'selection': explanation}
     provenance = _provenance(calib, 'calibration') + _provenance(valid, 'validation')
-    draft = Model.from_estimate(estimate, fs=fs, inputs=BASE_INPUTS,
+    draft = Model.from_estimate(estimate, fs=fs, inputs=inputs,
                                 charge_sensitivity_pC_per_MPa=min(charge) if charge else None,
-                                fit=fit, provenance=provenance)
+                                fit=fit, provenance=provenance, effects=entries)
     draft.check_stable()
     comparisons = tuple(compare([draft], s.recording, s.shots, labels=[structure])[0]
                         for s in valid if s.shots)
     valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
                                   [shot.simulated for c in comparisons for shot in c.shots]))
     worst = max(c.peak_residual_percent for c in comparisons)
+    if effects and extension.disturbance is not None:
+        # The comparisons simulate the acceleration-driven part only; with the disturbance
+        # re-estimated on the validation windows (its phase belongs to each recording):
+        windows = shot_windows([s for s in valid if s.shots])
+        fit['validation_fit_percent_disturbance_removed'] = float(fit_percent(
+            [w.y for w in windows], extension.predict(windows).total))
+    calib_inputs = [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)]
     model = Model.from_estimate(
-        estimate, fs=fs, inputs=BASE_INPUTS,
+        estimate, fs=fs, inputs=inputs,
         charge_sensitivity_pC_per_MPa=draft.charge_sensitivity_pC_per_MPa,
         fit={**fit, 'calibration_fit_percent': float(fit_percent(
-            [y for _, y in measured], simulate(draft, [u for u, _ in measured]))),
+            [y for _, y in measured], simulate(draft, calib_inputs))),
             'validation_fit_percent': valid_fit,
             'validation_peak_residual_percent': worst},
-        provenance=provenance, created=draft.created)
+        provenance=provenance, effects=entries, created=draft.created)
     return Identification(model=model, calibration=tuple(calib), validation=tuple(valid),
                           comparisons=comparisons, validation_fit_percent=valid_fit,
                           selection=selection, delay=delay_search,

@@ -25,10 +25,16 @@ Base channels:
 Modifiers, applied in the order written (all are linear and time-invariant):
 
 - ``@delay_us=D``: delay by ``D`` µs ≥ 0, fractional samples included, by an 8-tap
-  Lagrange interpolator (its error for a signal at ``f`` is of order ``(2πf/fs)⁸/8!``:
-  below 1e-8 of the signal at ``f < fs/20``, far below any measurement noise here).
+  Lagrange interpolator (its error for a sine at ``f`` is at most
+  ``∏_j |d − j| (2πf/fs)⁸/8!`` of its amplitude, ``d`` the delay within the taps: 1e-7 at
+  ``f = fs/20`` for a centred delay, 2e-6 for a delay under 3 samples; far below any
+  measurement noise here).
 - ``@highpass_ms=T``: the first-order high-pass ``T s/(T s + 1)`` of a charge amplifier
   with time constant ``T`` ms (matched pole ``exp(−1/(T·fs))``, zero at ``z = 1``).
+- ``@mode=F,Z``: a lightly damped mode at ``F`` kHz with damping ratio ``Z`` (``0 < Z <
+  1``): the all-pole filter ``P(1)/P(q)`` with ``P`` the matched pole pair
+  ``exp((−Z ± j√(1−Z²))·2πF/fs)``, unit gain at DC. A model whose inputs all pass it has
+  the pair as extra poles of its common denominator.
 
 Stateful stages (derivative, peak detector, modifiers) carry their state in ``state``;
 a non-finite sample gives a non-finite output and restarts the stage from rest after it.
@@ -47,8 +53,8 @@ from scipy import signal
 
 from ..errors import SensorCompError
 
-__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'channel_name',
-           'fractional_delay', 'input_channels', 'needs_rate', 'parse_channel']
+__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'fractional_delay',
+           'input_channels', 'mode_pair', 'needs_rate', 'parse_channel']
 
 #: Row of each axis in an acceleration block.
 AXES = {'x': 0, 'y': 1, 'z': 2}
@@ -56,7 +62,8 @@ AXES = {'x': 0, 'y': 1, 'z': 2}
 #: Order of the Lagrange fractional-delay interpolator (order + 1 taps).
 LAGRANGE_ORDER = 7
 
-_MODIFIERS = {'delay_us': 'delay in µs (>= 0)', 'highpass_ms': 'high-pass time constant in ms'}
+_MODIFIERS = {'delay_us': 'delay in µs (>= 0)', 'highpass_ms': 'high-pass time constant in ms',
+              'mode': 'kHz,damping of a mode'}
 _PEAK = re.compile(r'^peak_a_z\(tau_ms=([^()]+)\)$')
 
 
@@ -74,7 +81,8 @@ class Channel:
         kind: ``'a'``, ``'da'``, ``'a_abs_a'`` or ``'peak'``.
         axis: Row of the acceleration block it reads.
         tau_ms: Decay time constant of a ``peak`` channel, else None.
-        modifiers: ``(modifier, value)`` pairs in the order they apply.
+        modifiers: ``(modifier, value)`` pairs in the order they apply (``mode``: a
+            ``(kHz, damping)`` pair).
 
     """
 
@@ -82,7 +90,7 @@ class Channel:
     kind: str
     axis: int
     tau_ms: float | None
-    modifiers: tuple[tuple[str, float], ...]
+    modifiers: tuple[tuple[str, float | tuple[float, float]], ...]
 
     @property
     def needs_rate(self) -> bool:
@@ -140,22 +148,26 @@ def parse_channel(name: str) -> Channel:
         key, eq, text = item.partition('=')
         if not eq or key not in _MODIFIERS:
             raise InputError(f'model input {name!r}: unknown modifier {item!r}; {_known()}')
-        modifiers.append((key, _number(text, name, key, positive=key == 'highpass_ms')))
+        if key == 'mode':
+            parts = text.split(',')
+            if len(parts) != 2:
+                raise InputError(f'model input {name!r}: @mode needs "kHz,damping", got '
+                                 f'{text!r}')
+            zeta = _number(parts[1], name, 'mode damping', positive=True)
+            if zeta >= 1:
+                raise InputError(f'model input {name!r}: mode damping must be below 1, got '
+                                 f'{zeta!r}')
+            modifiers.append((key, (_number(parts[0], name, 'mode kHz', positive=True),
+                                    zeta)))
+        else:
+            modifiers.append((key, _number(text, name, key, positive=key == 'highpass_ms')))
     return Channel(name, kind, axis, tau, tuple(modifiers))
 
 
-def channel_name(base: str, **modifiers: float | None) -> str:
-    """
-    Return ``base`` with modifiers appended (None values left out), e.g. ``a_z@delay_us=5.0``.
-
-    Raises:
-        InputError: When the result is not a valid name.
-
-    """
-    name = base + ''.join(f'@{key}={float(value)!r}' for key, value in modifiers.items()
-                          if value is not None)
-    parse_channel(name)
-    return name
+def mode_pair(freq_khz: float, zeta: float, fs: float) -> np.ndarray:
+    """Return the matched discrete pole pair ``[1, a1, a2]`` of a mode (``zeta < 1``)."""
+    z = np.exp(2e3 * math.pi * freq_khz * complex(-zeta, math.sqrt(1 - zeta * zeta)) / fs)
+    return np.array([1.0, -2 * z.real, abs(z) ** 2])
 
 
 def needs_rate(names: Sequence[str]) -> bool:
@@ -219,10 +231,16 @@ def _highpass(tau_ms: float, fs: float):
     num, den = 0.5 * (1.0 + pole) * np.array([1.0, -1.0]), np.array([1.0, -pole])
 
     def stage(x, zi):
-        # From rest: the signal before the first sample equals the first sample (as the
-        # derivative), so a window starting at a non-zero level gives no step.
-        zi = signal.lfiltic(num, den, [0.0], [x[0]]) if zi is None else zi
-        return signal.lfilter(num, den, x, zi=zi)
+        return signal.lfilter(num, den, x, zi=np.zeros(1) if zi is None else zi)
+    return stage
+
+
+def _mode(freq_khz: float, zeta: float, fs: float):
+    den = mode_pair(freq_khz, zeta, fs)
+    num = np.array([den.sum()])
+
+    def stage(x, zi):
+        return signal.lfilter(num, den, x, zi=np.zeros(2) if zi is None else zi)
     return stage
 
 
@@ -286,8 +304,12 @@ def input_channels(names: Sequence[str], acceleration: np.ndarray,
         else:
             x = _runs(a, state, f'{name}|peak', _leaky_peak(channel.tau_ms, fs))
         for index, (modifier, value) in enumerate(channel.modifiers):
-            stage = (_fir(fractional_delay(value * 1e-6 * fs)) if modifier == 'delay_us'
-                     else _highpass(value, fs))
+            if modifier == 'delay_us':
+                stage = _fir(fractional_delay(value * 1e-6 * fs))
+            elif modifier == 'highpass_ms':
+                stage = _highpass(value, fs)
+            else:
+                stage = _mode(*value, fs)
             x = _runs(x, state, f'{name}|{index}', stage)
         out[row] = x
     return out

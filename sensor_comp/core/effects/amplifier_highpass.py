@@ -41,8 +41,9 @@ class AmplifierHighpass(Effect):
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Filter every input by the high-pass, its time constant searched."""
-        return replace(spec, modifiers=spec.modifiers + (('highpass_ms', KEY),),
-                       searches=spec.searches + (Search(KEY, 1.0, 1e4, log=True, start=1e4),))
+        search = Search(KEY, 1.0, 1e4, log=True, grid=13, start=1e4)
+        return replace(spec, modifiers=spec.modifiers + (('highpass_ms', f'{{{KEY}}}'),),
+                       searches=spec.searches + (search,))
 
     def physical(self, model, *, covariance=None) -> Physical:
         """Return the time constant (ms) carried by the model's inputs."""

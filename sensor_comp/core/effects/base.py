@@ -32,16 +32,17 @@ from typing import Any, ClassVar, TYPE_CHECKING
 
 import numpy as np
 
-from ..inputs import AXES, parse_channel
+from ..inputs import AXES, mode_pair, parse_channel
 from ...errors import SensorCompError
 
 if TYPE_CHECKING:
     from ..extended import Window
     from ..model import Model
 
-__all__ = ['Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical', 'Search', 'delta_std',
-           'effect_entry', 'entry_of', 'modifier_value', 'parameters_text', 'probe_of',
-           'row_of', 'segment_of', 'sentence', 'static_gain', 'stored_std']
+__all__ = ['Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical', 'Search', 'dc_delay_s',
+           'delta_std', 'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s',
+           'modifier_value', 'parameters_text', 'probe_of', 'row_of', 'segment_of', 'sentence',
+           'static_gain', 'stored_std']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -66,6 +67,7 @@ class Search:
         grid: Points of the coarse grid before the bounded refinement.
         start: Value used before the first search (to fit a first denominator); default
             ``low``.
+        exclude: A band ``(low, high)`` of values not to try.
 
     """
 
@@ -75,17 +77,27 @@ class Search:
     log: bool = False
     grid: int = 25
     start: float | None = None
+    exclude: tuple[float, float] | None = None
 
     @property
     def initial(self) -> float:
         """Return the value used before the first search."""
         return self.low if self.start is None else self.start
 
+    def around(self, value: float, *, points: int = 7) -> Search:
+        """Return the search narrowed to the coarse grid's neighbours of ``value``."""
+        grid = self.points()
+        i = int(np.clip(np.searchsorted(grid, value), 1, grid.size - 1))
+        low, high = grid[max(i - 2, 0)], grid[min(i + 1, grid.size - 1)]
+        return replace(self, low=float(low), high=float(high), grid=points)
+
     def points(self) -> np.ndarray:
-        """Return the coarse grid."""
-        if self.log:
-            return np.geomspace(self.low, self.high, self.grid)
-        return np.linspace(self.low, self.high, self.grid)
+        """Return the coarse grid (without the excluded band)."""
+        grid = (np.geomspace(self.low, self.high, self.grid) if self.log
+                else np.linspace(self.low, self.high, self.grid))
+        if self.exclude is not None:
+            grid = grid[(grid < self.exclude[0]) | (grid > self.exclude[1])]
+        return grid
 
 
 @dataclass(frozen=True)
@@ -95,16 +107,17 @@ class ModelSpec:
 
     Args:
         bases: Input channel bases; ``{key}`` placeholders are filled by searches.
-        modifiers: ``(modifier, key)`` pairs applied to every channel, the value coming
-            from the search ``key`` (see :mod:`sensor_comp.core.inputs`).
+        modifiers: ``(modifier, value)`` pairs applied to every channel (see
+            :mod:`sensor_comp.core.inputs`); ``{key}`` placeholders in the value are
+            filled by searches.
         nf: Order of the common denominator.
         nb: Numerator coefficients per input.
         nk: Input delay in samples.
         searches: The 1-D nonlinear parameters.
         disturbances: Ids of effects adding regressors that bypass the dynamics.
-        extra_modes: Pole pairs added to the base denominator (their start values come
-            from a grid over frequency and damping, not from Steiglitz–McBride, whose
-            regression is nearly singular for high orders at high sample rates).
+        fs: Sample rate in Hz (search ranges may depend on it).
+        ringing_khz: Frequency of the strongest ringing after the pulses in the data, kHz
+            (the sensor's own mode, as a rule), or None.
 
     """
 
@@ -115,7 +128,8 @@ class ModelSpec:
     nk: int = 1
     searches: tuple[Search, ...] = ()
     disturbances: tuple[str, ...] = ()
-    extra_modes: int = 0
+    fs: float = 1e6
+    ringing_khz: float | None = None
 
     def with_inputs(self, *bases: str) -> ModelSpec:
         """Return the spec with further input channel bases."""
@@ -136,7 +150,7 @@ class ModelSpec:
                 return repr(float(values[match.group(1)]))
             return _PLACEHOLDER.sub(value, text)
 
-        suffix = ''.join(f'@{mod}={{{key}}}' for mod, key in self.modifiers)
+        suffix = ''.join(f'@{mod}={value}' for mod, value in self.modifiers)
         return tuple(fill(base + suffix) for base in self.bases)
 
 
@@ -295,6 +309,49 @@ def modifier_value(model: Model, modifier: str) -> float:
             if key == modifier:
                 return value
     raise EffectError(f'the model inputs carry no @{modifier}= ({", ".join(model.inputs)})')
+
+
+def dc_delay_s(a: np.ndarray, num: np.ndarray, fs: float) -> float:
+    """
+    Return the group delay at DC of ``num(q)/a(q)`` in s (the lag of its ramp response).
+
+    For polynomials in ``q⁻¹`` it is ``centroid(num) − centroid(a)`` samples, with
+    ``centroid(p) = Σ j p_j / Σ p_j``.
+    """
+    j_num, j_den = np.arange(num.size), np.arange(a.size)
+    return float((j_num @ num / num.sum() - j_den @ a / a.sum()) / fs)
+
+
+def mechanics_delay_s(a: np.ndarray, fs: float) -> float:
+    """
+    Return the DC group delay of the continuous all-pole system with ``a``'s poles, in s.
+
+    ``Σ −1/s_k`` over the poles ``s_k = fs·ln z_k`` (``2ζ/ω_n`` for one mode). A sampled
+    all-pole system driven by a linearly interpolated input has exactly this delay; what a
+    fitted model has beyond it is a channel delay, what it lacks is a derivative term.
+    """
+    poles = np.roots(a) if a.size > 1 else np.empty(0)
+    return float(sum((-1.0 / (fs * np.log(complex(z)))).real for z in poles))
+
+
+def excess_delay_s(model: Model, a: np.ndarray, b: np.ndarray, row: int) -> float:
+    """
+    Return how far the input ``row``'s path lags its mechanics at DC, in s.
+
+    The DC group delay of the path (its ``@delay_us`` included) minus
+    :func:`mechanics_delay_s` of the denominator: a channel delay makes it positive, a
+    derivative (base-strain) term makes it negative, ``−c/S`` for ``p = S·H a + c·da/dt``.
+    An ``@mode`` belongs to the mechanics; an amplifier high-pass is not counted.
+    """
+    lag = 0.0
+    num = np.concatenate([np.zeros(model.nk), b[row]])
+    for key, value in parse_channel(model.inputs[row]).modifiers:
+        if key == 'delay_us':
+            lag += value * 1e-6
+        elif key == 'mode':  # the mode's poles belong to the mechanics
+            pair = mode_pair(*value, model.fs)
+            a, num = np.convolve(a, pair), num * pair.sum()
+    return dc_delay_s(a, num, model.fs) + lag - mechanics_delay_s(a, model.fs)
 
 
 def static_gain(a: np.ndarray, b: np.ndarray, row: int) -> float:

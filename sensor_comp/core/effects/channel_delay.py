@@ -1,21 +1,28 @@
 """
 Channel delay: the pressure channel lags the accelerometer.
 
-Identification model: every input channel is delayed by ``delay_us`` (an 8-tap Lagrange
-fractional delay, see :mod:`sensor_comp.core.inputs`), found by a coarse grid (5 µs, 0 to
-200 µs) and a bounded scalar search on the output-error loss. The integer delay ``nk`` is
-set to 0 and the numerator gets ``nf + 1`` coefficients (lags 0 … nf, the exact structure
-of a sampled ``nf``-th order system driven by a linearly interpolated input), so a sensor
-without delay has ``delay_us = 0`` and the delay is continuous. A pressure channel that
-*leads* the accelerometer (a negative delay) is not modelled: the search stops at 0.
+Identification model: every input channel is delayed by a fractional number of samples (an
+8-tap Lagrange fractional delay, ``@delay_us`` in :mod:`sensor_comp.core.inputs`), found
+by a coarse grid (10 µs steps, 0 to 200 µs) and a bounded scalar search on the
+output-error loss. The integer delay ``nk`` is set to 0 and the numerator gets ``nf + 1``
+coefficients (lags 0 … nf, the exact structure of a sampled ``nf``-th order system driven
+by a linearly interpolated input).
+
+A free numerator can shift the response by about a sample itself, so the delay is read
+from the whole fitted model rather than from the interpolator alone: the lag of its ramp
+response (DC group delay) beyond that of the continuous mechanics with the same poles
+(:func:`~sensor_comp.core.effects.base.excess_delay_s`), which is exactly the channel
+delay for a sampled delayed all-pole sensor. A lead (negative delay) of more than about a
+sample is not modelled (the interpolator stops at 0). At low frequencies a small delay
+and a base-strain term (a lead of ``c/S``) look alike; they differ at the pulse corners.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-from .base import (Effect, ModelSpec, modifier_value, Outcome, parameters_text, Physical,
-                   probe_of, Search, sentence, stored_std)
+from .base import (delta_std, Effect, excess_delay_s, ModelSpec, Outcome, parameters_text,
+                   Physical, probe_of, row_of, Search, sentence, stored_std)
 
 __all__ = ['ChannelDelay']
 
@@ -44,14 +51,20 @@ class ChannelDelay(Effect):
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Delay every input continuously; numerator on lags 0 … nf."""
-        return replace(spec, modifiers=spec.modifiers + (('delay_us', KEY),), nk=0,
+        return replace(spec, modifiers=spec.modifiers + (('delay_us', f'{{{KEY}}}'),), nk=0,
                        nb=max(spec.nb, spec.nf + 1),
-                       searches=spec.searches + (Search(KEY, 0.0, MAX_DELAY_US, grid=41),))
+                       searches=spec.searches + (Search(KEY, 0.0, MAX_DELAY_US, grid=21),))
 
     def physical(self, model, *, covariance=None) -> Physical:
-        """Return the delay (µs) carried by the model's inputs."""
-        return {'delay_us': (modifier_value(model, 'delay_us'),
-                             stored_std(model, self.id, 'delay_us'))}
+        """Return the delay of the ``a_z`` path beyond its mechanics, µs."""
+        row = row_of(model, 'a')
+
+        def delay(a, b):
+            return 1e6 * excess_delay_s(model, a, b, row)
+
+        std = (delta_std(delay, model.a, model.b, covariance) if covariance is not None
+               else stored_std(model, self.id, 'delay_us'))
+        return {'delay_us': (delay(model.a, model.b), std)}
 
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say what the rate probe and the delayed model find."""

@@ -1,11 +1,16 @@
 """
 Second resonance: a mount or housing mode in parallel with the sensor's own.
 
-Identification model: two more poles and two more numerator coefficients per input (a
-4th-order common denominator for the base's 2nd). The modes are told apart by partial
-fractions of the ``a_z`` path: the pair with the larger static contribution is the
-sensor's own mode, the other one is reported (frequency, damping, static gain relative to
-the main mode).
+Identification model: two more poles and two more numerator coefficients per input. The
+extra pole pair is a *resonance* by construction: every input passes the mode filter
+``@mode=F,Z`` (:mod:`sensor_comp.core.inputs`), whose frequency ``F`` (log grid from 1 kHz
+to ``0.4 fs``) and damping ``Z`` (0.003 to 0.2) are found by bounded scalar searches;
+the numerators (two more coefficients) then set how strongly each input drives it.
+Free extra poles would be too flexible: they also imitate a slow tail (amplifier
+high-pass, zero shift) or a derivative term; and the searched mode stays ±20 % away from
+the strongest ringing of the data, the sensor's own mode, which it could otherwise take
+over while the base denominator imitates a tail. The static gain of the second mode relative to
+the main one comes from partial fractions of the ``a_z`` path.
 """
 
 from __future__ import annotations
@@ -16,11 +21,21 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (delta_std, Effect, EffectError, ModelSpec, Outcome, parameters_text,
-                   Physical, row_of, segment_of, sentence, stored_std)
+from .base import (delta_std, Effect, EffectError, ModelSpec, modifier_value, Outcome,
+                   parameters_text, Physical, row_of, Search, segment_of, sentence,
+                   stored_std)
 from ..ident.least_squares import delayed_numerator
+from ..inputs import mode_pair
 
 __all__ = ['SecondResonance', 'modes']
+
+FREQ, ZETA = 'second_resonance.freq_khz', 'second_resonance.zeta'
+#: Lowest mode frequency searched, kHz: below, a "mode" would imitate slow tails.
+MIN_KHZ = 1.0
+#: Largest damping ratio searched: a resonance rings.
+MAX_ZETA = 0.2
+#: Relative band around the data's strongest ringing (the sensor's own mode) not searched.
+MAIN_BAND = 0.2
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
@@ -60,32 +75,36 @@ class SecondResonance(Effect):
     order = 30
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
-        """Add a pole pair and two numerator coefficients."""
-        return replace(spec, nf=spec.nf + 2, nb=spec.nb + 2, extra_modes=spec.extra_modes + 1)
+        """Pass every input through a searched mode; two more numerator coefficients."""
+        main = spec.ringing_khz
+        exclude = None if main is None else (main / (1 + MAIN_BAND), main * (1 + MAIN_BAND))
+        searches = (Search(FREQ, MIN_KHZ, 0.4 * spec.fs / 1e3, log=True, grid=40,
+                           start=0.1 * spec.fs / 1e3, exclude=exclude),
+                    Search(ZETA, 0.003, MAX_ZETA, log=True, grid=9, start=0.05))
+        return replace(spec, nb=spec.nb + 2, searches=spec.searches + searches,
+                       modifiers=spec.modifiers + (('mode', f'{{{FREQ}}},{{{ZETA}}}'),))
 
     def physical(self, model, *, covariance=None) -> Physical:
         """Return the second mode's frequency (kHz), damping and relative static gain."""
         row = row_of(model, 'a')
-        fs, nk = model.fs, model.nk
+        freq, zeta = modifier_value(model, 'mode')
+        pair = mode_pair(freq, zeta, model.fs)
 
-        def second(a, b):
-            found = modes(a, delayed_numerator(b, nk)[row], fs)
-            if len(found) < 2:
-                raise EffectError(f'the fitted {model.a.size - 1}th-order denominator has '
-                                  f'{len(found)} complex pole pair(s): no second mode')
-            (_, _, g1), (fn, zeta, g2) = found[0], found[1]
-            return fn / 1e3, zeta, g2 / g1
+        def gain(a, b):
+            full = np.convolve(a, pair)
+            found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
+            second = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
+            main = max((m for m in found if m is not second), key=lambda m: abs(m[2]),
+                       default=None)
+            if main is None:
+                raise EffectError('the fitted model has no main mode beside the second one')
+            return second[2] / main[2]
 
-        values = second(model.a, model.b)
-        out = {}
-        for index, name in enumerate(self.parameters):
-            if covariance is not None:
-                std = delta_std(lambda a, b, i=index: second(a, b)[i], model.a, model.b,
-                                covariance)
-            else:
-                std = stored_std(model, self.id, name)
-            out[name] = (float(values[index]), std)
-        return out
+        std = (delta_std(gain, model.a, model.b, covariance) if covariance is not None
+               else stored_std(model, self.id, 'gain'))
+        return {'freq_khz': (freq, stored_std(model, self.id, 'freq_khz')),
+                'zeta': (zeta, stored_std(model, self.id, 'zeta')),
+                'gain': (gain(model.a, model.b), std)}
 
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Name the residual's spectral peak and what the second mode removes."""

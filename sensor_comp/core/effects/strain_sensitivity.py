@@ -1,22 +1,38 @@
 """
 Base-strain sensitivity: pressure read from the housing strain, which follows the jerk.
 
-Identification model: one more input channel, the rate of change of the axial acceleration
-``da_z`` (m/s³), with its own numerator over the common denominator. Its static gain is the
-strain coefficient, reported in Pa per (g/ms) (1 g/ms = 9806.65 m/s³), the unit hammer
-pulses are naturally described in.
+The pressure is ``p = S·H(s)·a + c·da/dt``. Identification model: one more input, the rate
+of change of the axial acceleration ``da_z`` (m/s³) smoothed by a 2nd-order low pass
+(``@mode=F,0.7``, unit gain at DC), with numerators on lags 0 … nf (``nk = 0``,
+``nb = nf + 1``), so that the strain term can act directly (``B_j = c·F``) rather than
+through the sensor's mechanics. The derivative amplifies the accelerometer noise
+(``√2·σ_a·fs`` per sample): unsmoothed, that noise would make the fit trade the strain term
+for a quieter prediction (errors in the variables, ``c`` too small); the low pass's corner
+``F`` is found by a bounded scalar search (2 kHz to ``0.4 fs``), so the fit itself picks
+the best trade between noise and sharpness. The strain coefficient is the static gain of
+the ``da_z`` path, in Pa per (g/ms) (1 g/ms = 9806.65 m/s³), the unit hammer pulses are
+described in.
+
+At the pulse corners the jerk jumps: a sampled model cannot follow a step at a fractional
+sample instant, so the first sample after each corner keeps an error of up to ``c`` times
+the jump. At low frequencies a small channel delay looks like a negative ``c``.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
-                   probe_of, row_of, sentence, static_gain, stored_std)
+                   probe_of, row_of, Search, sentence, static_gain, stored_std)
 from ...streams import G0
 
 __all__ = ['StrainSensitivity']
 
 #: One g per millisecond in m/s³.
 G_PER_MS = G0 * 1e3
+KEY = 'strain_sensitivity.smooth_khz'
+#: Damping of the derivative's smoothing low pass (a Butterworth-like corner).
+SMOOTHING_ZETA = 0.7
 
 
 class StrainSensitivity(Effect):
@@ -39,8 +55,11 @@ class StrainSensitivity(Effect):
     order = 40
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
-        """Add the ``da_z`` input."""
-        return spec.with_inputs('da_z')
+        """Add the smoothed ``da_z`` input; numerators on lags 0 … nf."""
+        search = Search(KEY, 2.0, 0.4 * spec.fs / 1e3, log=True, grid=7,
+                        start=0.1 * spec.fs / 1e3)
+        return replace(spec.with_inputs(f'da_z@mode={{{KEY}}},{SMOOTHING_ZETA!r}'), nk=0,
+                       nb=max(spec.nb, spec.nf + 1), searches=spec.searches + (search,))
 
     def physical(self, model, *, covariance=None) -> Physical:
         """Return the static gain of the ``da_z`` path in Pa/(g/ms)."""

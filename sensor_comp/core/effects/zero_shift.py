@@ -47,7 +47,7 @@ class ZeroShift(Effect):
         """Add the leaky-peak channel, its decay time searched."""
         return replace(spec.with_inputs(f'peak_a_z(tau_ms={{{KEY}}})'),
                        searches=spec.searches + (Search(KEY, 1.0, 2000.0, log=True,
-                                                        start=50.0),))
+                                                        grid=13, start=50.0),))
 
     def physical(self, model, *, covariance=None) -> Physical:
         """Return the offset per g (static gain of the peak channel) and the decay time."""
