@@ -74,6 +74,7 @@ __all__ = [
     'declare',
     'diagnostics',
     'finish_publishing',
+    'join_callbacks',
     'latched_qos',
     'message_class',
     'publish_raw',
@@ -335,6 +336,22 @@ def spin_until(executor: Executor, stop: threading.Event, *,
         executor.spin_once(timeout_sec=_DRAIN_STEP_S)
         if progress() == before:
             break
+
+
+def join_callbacks(executor: Executor) -> None:
+    """
+    Wait for the callbacks a shut-down executor still runs in its thread pool.
+
+    rclpy 7.1's ``Executor.shutdown()`` does not wait for the callbacks in flight (its wait
+    is skipped once the shutdown flag is set), and a ``MultiThreadedExecutor`` runs them in
+    a thread pool: destroying a node while one of its callbacks runs fails at random
+    (a timer writing to a closed file gave EBADF). Call this after ``shutdown()`` and after
+    the spinning thread has ended, before destroying the nodes; it does nothing for an
+    executor without a pool (single-threaded: its callbacks ran in the spinning thread).
+    """
+    pool = getattr(executor, '_executor', None)  # MultiThreadedExecutor's ThreadPoolExecutor
+    if pool is not None:
+        pool.shutdown(wait=True)
 
 
 def diagnostics(node: Node, *, name: str, level: bytes, message: str,

@@ -99,8 +99,8 @@ from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, e
                            IMAGE, MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
 from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
-                      DIAGNOSTICS_QOS, diagnostics, LATCHED_QOS, latched_qos, message_class,
-                      publish_raw, run_main, spin_until, take_queued)
+                      DIAGNOSTICS_QOS, diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
+                      message_class, publish_raw, run_main, spin_until, take_queued)
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
@@ -791,9 +791,13 @@ def _summary(model: Model) -> str:
 
 
 def _run(node: Identification, stop: threading.Event) -> None:
-    with MultiThreadedExecutor(num_threads=2, context=node.context) as executor:
-        executor.add_node(node)
+    executor = MultiThreadedExecutor(num_threads=2, context=node.context)
+    executor.add_node(node)
+    try:
         spin_until(executor, stop, progress=lambda: node.samples_received[PRESSURE_RAW])
+    finally:
+        executor.shutdown()
+        join_callbacks(executor)
 
 
 def main(args=None) -> int:

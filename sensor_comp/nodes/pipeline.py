@@ -30,8 +30,10 @@ What it does:
 :meth:`Pipeline.stop` (or leaving the ``with`` block) stops the acquisition, lets the
 consumers take what is still queued (until nothing happened for 0.2 s, at most 10 s),
 then follows the shutdown order that keeps rclpy from aborting: ``executor.shutdown()``,
-join the spinning thread, destroy the nodes (the recorder finalises its bag, the
-identification's worker ends), and shut down the context if the pipeline made it.
+join the spinning thread, wait for the callbacks still running in the executor's thread
+pool (:func:`~sensor_comp.nodes._common.join_callbacks`), destroy the nodes (the recorder
+finalises its bag, the identification's worker ends), and shut down the context if the
+pipeline made it.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ._common import DEFAULT_NAMESPACE, NodeError, use_fastdds_profile
+from ._common import DEFAULT_NAMESPACE, join_callbacks, NodeError, use_fastdds_profile
 from .acquisition import Acquisition
 from .compensation import Compensation
 from .identification import Identification
@@ -243,6 +245,7 @@ class Pipeline:
             self.executor.shutdown()
             self._spin_thread.join()
             self._spin_thread = None
+        join_callbacks(self.executor)
         for node in reversed(list(self.nodes.values())):
             node.destroy_node()
         self.nodes = {}

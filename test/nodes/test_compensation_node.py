@@ -20,8 +20,8 @@ from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import (decode_block, decode_stream_info, decode_string,
                                      encode_block, encode_stream_info, encode_string, IMAGE,
                                      STRING)
-from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS,
-                                       message_class, NodeError)
+from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS_QOS, join_callbacks,
+                                       LATCHED_QOS, message_class, NodeError)
 from sensor_comp.nodes.compensation import Compensation, model_from_text, STATUS_NAME
 from sensor_comp.nodes.identification import Identification, provenance_shots
 from sensor_comp.nodes.player import Player
@@ -89,6 +89,7 @@ def _spin(context, *nodes):
     def stop():
         executor.shutdown()
         thread.join()
+        join_callbacks(executor)
     return stop
 
 

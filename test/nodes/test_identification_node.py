@@ -20,7 +20,8 @@ from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
 from sensor_comp.nodes import identification as identification_module
-from sensor_comp.nodes._common import DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
+from sensor_comp.nodes._common import (DIAGNOSTICS_QOS, join_callbacks, LATCHED_QOS,
+                                       NodeError)
 from sensor_comp.nodes.compensation import model_from_text
 from sensor_comp.nodes.identification import (Identification, provenance_shots,
                                               STATUS_NAME)
@@ -63,6 +64,7 @@ def _spin(context, *nodes):
     def stop():
         executor.shutdown()
         thread.join()
+        join_callbacks(executor)
     return stop
 
 
