@@ -1,9 +1,10 @@
 """
-``sensor-comp demo``: the main job on the bundled bags, start to finish.
+``sensor-comp demo``: the main job on a bundled hidden-effect bag pair, start to finish.
 
-Identify on the calibration bag (the seed paper's ARX and GLS, and our output-error model
-chosen by BIC and validation), compare all three on the validation bag, compensate it, and
-print a short report; plots and the compensated bag go to the output folder.
+The whole loop: identify the base model on the calibration bag (and the seed paper's ARX for
+reference), compare it with the validation bag, see where it fails and which physical effect
+is missing (diagnose), add that effect, watch the error fall (before/after table), write
+the HTML report, and compensate the validation bag with the final model.
 """
 
 from __future__ import annotations
@@ -13,27 +14,31 @@ import os
 from pathlib import Path
 
 from .compensate import compensate_bag
-from .identify import describe_model
+from .identify import describe_effect, describe_model
 from .sources import load_shots, progress_factory
 from ..bundled import bundled_bag
 from ..core.compare import compare, format_table
+from ..core.diagnose import diagnose
 from ..core.identify import identify
+from ..core.report import html_report, write_report
+from ..core.residual import analyse
 
 __all__ = ['register', 'run']
 
-CALIBRATION = 'demo_calib.mcap'
-VALIDATION = 'demo_valid.mcap'
+#: The bundled pair the demo runs on (which effect it hides is for the demo to find out).
+CALIBRATION = 'case_i_calib.mcap'
+VALIDATION = 'case_i_valid.mcap'
 
 
 def register(subparsers) -> None:
     """Add the ``demo`` sub-command."""
     parser = subparsers.add_parser(
-        'demo', help='run identify → compare → compensate on the bundled bags',
-        description='The main job on the bundled drop-hammer bags: identify the induced '
-                    'pressure model on the calibration bag, compare it with the seed paper\'s '
-                    'ARX and GLS on the validation bag, compensate that bag and report.')
+        'demo', help='run the compare → diagnose → add-effect loop on bundled bags',
+        description='The main job on a bundled drop-hammer bag pair: identify, compare, '
+                    'diagnose the missing physical effect, add it, compare before/after, '
+                    'write the HTML report and compensate the validation bag.')
     parser.add_argument('-o', '--output-dir', default='demo-out',
-                        help='folder for the model, plots and compensated bag '
+                        help='folder for models, report and compensated bag '
                              '(default: %(default)s)')
     parser.set_defaults(func=run)
 
@@ -48,31 +53,56 @@ def run(args: argparse.Namespace) -> int:
     print(f'calibration: {calib_path} ({len(calibration.shots)} shots)')
     print(f'validation:  {valid_path} ({len(validation.shots)} shots)\n')
 
-    models = {}
-    delay = None
-    # Ours first: its delay search is reused by the seed paper's structures.
-    for structure, label in (('auto', 'OE (auto)'), ('arx', 'ARX (paper)'),
-                             ('gls', 'GLS (paper)')):
-        result = identify([calibration], validation=[validation], structure=structure,
-                          delay=delay, denoise=True, progress=progress)
-        delay = result.model.nk
-        result.model.save(out / f'model_{structure}.json')
-        models[label] = result.model
-        print(f'{label}: {describe_model(result.model, result.model.continuous())}')
-        print(f'  {result.explanation}')
-    labels = ['ARX (paper)', 'GLS (paper)', 'OE (auto)']
-    comparisons = compare([models[label] for label in labels], validation.recording,
-                          list(validation.shots), labels=labels)
-    print('\nvalidation shots (fit %, peak error %, peak residual after compensation %):')
-    print(format_table(comparisons))
+    print('1. identify the base model (output error, structure by BIC and validation)')
+    base = identify([calibration], validation=[validation], structure='auto',
+                    progress=progress).model
+    base.save(out / 'model_base.json')
+    print(f'   {describe_model(base, base.continuous())}')
+    paper = identify([calibration], validation=[validation], structure='arx', orders=(2, 2),
+                     delay=base.nk, progress=progress).model
+    paper.save(out / 'model_paper_arx.json')
 
-    from ..core.plots import comparison_figure, comparison_residual_figure
-    comparison_figure(comparisons, path=out / 'overlay.png')
-    comparison_residual_figure(comparisons, path=out / 'residual.png')
-    best = models['OE (auto)']
-    counts = compensate_bag(best, valid_path, str(out / 'compensated.mcap'))
+    print('\n2. compare with the validation shots and see where the model fails')
+    shots = list(validation.shots)
+    before = compare([base], validation.recording, shots, labels=['base'])
+    analysis = analyse(base, validation.recording, shots, comparison=before[0])
+    print(f'   fit {before[0].fit_percent:.2f} %, worst peak residual '
+          f'{before[0].peak_residual_percent:.1f} %')
+    for line in analysis.summary():
+        print(f'   - {line}')
+
+    print('\n3. diagnose: which physical effect is missing?')
+    diagnosis = diagnose([calibration], [validation], base=base, progress=progress)
+    print(f'   verdict: {diagnosis.verdict}')
+    for entry in diagnosis.ranking[:3]:
+        print(f'   {entry.effect:24s} score {entry.score:.3f}'
+              f'{"  (significant)" if entry.significant else ""}')
+    if diagnosis.verdict != 'missing_effect':
+        print('   nothing to add: the model is as good as this data can tell')
+        return 0
+    effect = diagnosis.ranking[0].effect
+    print(f'   evidence: {diagnosis.ranking[0].evidence}')
+
+    print(f'\n4. add {effect} and identify again')
+    extended = identify([calibration], validation=[validation], structure='auto',
+                        effects=(effect,), progress=progress).model
+    extended.save(out / 'model_extended.json')
+    print(f'   {describe_model(extended, extended.continuous())}')
+    for entry in extended.effects:
+        print(f'   {entry["id"]}: {describe_effect(entry)}')
+
+    print('\n5. watch the error fall (validation shots: fit %, peak error %, peak residual %)')
+    labels = ['ARX (paper)', 'base', f'+ {effect}']
+    after = compare([paper, base, extended], validation.recording, shots, labels=labels)
+    print(format_table(after))
+
+    report = out / 'report.html'
+    write_report(report, html_report(
+        title=f'sensor_comp demo: {VALIDATION}', shots=shots, comparisons=before,
+        analysis=analysis, diagnosis=diagnosis.to_dict(), after=after[1:],
+        sources=[f'calibration: {calib_path}', f'validation: {valid_path}']))
+    counts = compensate_bag(extended, valid_path, str(out / 'compensated.mcap'))
     print(f'compensated {counts["output_samples"]} of {counts["pressure_samples"]} samples '
           f'into {out / "compensated.mcap"}')
-    print(f'model: {out / "model_auto.json"}; plots: {out / "overlay.png"}, '
-          f'{out / "residual.png"}')
+    print(f'report: {report}')
     return 0

@@ -9,7 +9,7 @@ from .sources import load_shots, progress_factory
 from ..core.identify import identify, STRUCTURES
 from ..core.shots import shot_table
 
-__all__ = ['describe_model', 'register', 'run']
+__all__ = ['describe_effect', 'describe_model', 'register', 'run']
 
 
 def register(subparsers) -> None:
@@ -43,6 +43,9 @@ def register(subparsers) -> None:
                         metavar=('START', 'STOP'),
                         help='manual shot window in seconds (repeat; applies to every '
                              'calibration recording)')
+    parser.add_argument('--effect', action='append', default=[], metavar='ID',
+                        help='add a physical effect of the catalogue to the model (repeat for '
+                             'several; see sensor-comp diagnose)')
     parser.add_argument('--json', action='store_true', help='print a JSON summary')
     parser.set_defaults(func=run)
 
@@ -54,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     result = identify(calibration, validation=validation, structure=args.structure,
                       orders=tuple(args.orders) if args.orders else None, delay=args.delay,
                       denoise=not args.no_emd, criterion=args.criterion,
+                      effects=tuple(args.effect),
                       progress=progress_factory(args.quiet or args.json))
     result.model.save(args.output)
     view = result.model.continuous()
@@ -77,12 +81,25 @@ def run(args: argparse.Namespace) -> int:
         kept = sum(len(d.kept) for d in result.denoising) / len(result.denoising)
         print(f'EMD: {len(result.denoising)} windows, {kept:.1f} IMFs kept on average')
     print(describe_model(result.model, view))
+    for effect in result.model.effects:
+        print(f'effect {effect["id"]}: ' + describe_effect(effect))
     shots = sum(len(s.shots) for s in result.validation)
     print(f'validation: fit {result.validation_fit_percent:.2f} % over {shots} held-out '
           f'shots, worst peak residual '
           f'{result.model.fit["validation_peak_residual_percent"]:.1f} %')
     print(f'wrote {args.output}')
     return 0
+
+
+def describe_effect(effect: dict) -> str:
+    """Return an effect's fitted physical parameters as ``name = value ± std unit``."""
+    parameters = effect.get('parameters', {})
+    std = effect.get('std', {}) or {}
+    units = effect.get('units', {}) or {}
+    return ', '.join(f'{name} = {value:.4g}'
+                     + (f' ± {std[name]:.2g}' if std.get(name) is not None else '')
+                     + (f' {units[name]}' if units.get(name) else '')
+                     for name, value in parameters.items())
 
 
 def describe_model(model, view) -> str:
