@@ -31,13 +31,13 @@ import json
 import math
 import os
 from pathlib import Path
-import tempfile
 
 import numpy as np
 from scipy import signal
 
 from .. import __version__
 from ..errors import SensorCompError
+from ..files import write_text_atomically
 from ..streams import G0
 from .ident.estimate import Estimate, STRUCTURES
 from .ident.least_squares import delayed_numerator
@@ -402,17 +402,7 @@ class Model:
         path = Path(path)
         text = json.dumps(self.to_json(), indent=2, allow_nan=False) + '\n'
         try:
-            fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial',
-                                       dir=path.parent or '.')
-            try:
-                with os.fdopen(fd, 'w', encoding='utf-8') as f:
-                    f.write(text)
-                    f.flush()
-                    os.fsync(f.fileno())
-                os.replace(tmp, path)
-            except BaseException:
-                os.unlink(tmp)
-                raise
+            write_text_atomically(path, text)
         except OSError as exc:
             raise ModelError(f'cannot write model file {os.fspath(path)!r}: {exc}') from None
 

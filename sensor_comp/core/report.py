@@ -16,7 +16,6 @@ import datetime
 import html
 import io
 import os
-import tempfile
 
 from matplotlib.figure import Figure
 
@@ -27,6 +26,7 @@ from .residual_plots import (amplitude_figure, cross_correlation_figure, probes_
                              segments_figure, spectrum_figure, whiteness_figure)
 from .shots import Shot, shot_table
 from .. import __version__
+from ..files import write_text_atomically
 
 __all__ = ['html_report', 'write_report']
 
@@ -142,12 +142,4 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
 
 def write_report(path: str | os.PathLike, text: str) -> None:
     """Write the report atomically (a temporary file renamed into place)."""
-    folder = os.path.dirname(os.path.abspath(path))
-    handle, temporary = tempfile.mkstemp(dir=folder, prefix='.report-', suffix='.html')
-    try:
-        with os.fdopen(handle, 'w', encoding='utf-8') as f:
-            f.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        os.unlink(temporary)
-        raise
+    write_text_atomically(path, text)
