@@ -50,6 +50,8 @@ from ..errors import SensorCompError
 __all__ = ['ALPHA', 'VERDICTS', 'Diagnosis', 'DiagnosisError', 'Ranked', 'Skipped',
            'diagnose']
 
+#: Base structure ``(nf, nb)`` and delay: a sampled 2nd-order sensor, exactly.
+BASE_ORDERS, BASE_DELAY = (2, 3), 0
 #: Family-wise false-alarm probability over all candidates.
 ALPHA = 1e-3
 #: Possible verdicts.
@@ -318,7 +320,7 @@ def _analyses(model: Model, validation) -> tuple:
 
 
 def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | None = None,
-             orders: tuple[int, int] = (2, 2), delay: int | None = None,
+             orders: tuple[int, int] = BASE_ORDERS, delay: int | None = BASE_DELAY,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
              residual_analysis: bool = True,
              progress: ProgressFactory | None = None) -> Diagnosis:
@@ -335,7 +337,11 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
             and extensions are fitted alike). None: output error with ``orders`` and
             ``delay``.
         orders: ``(nf, nb)`` of the base model without ``base``.
-        delay: Input delay of the base model without ``base``; estimated when None.
+        delay: Input delay of the base model without ``base``; estimated when None. The
+            default base, ``nf = 2``, ``nb = 3``, ``nk = 0``, is the exact structure of a
+            sampled 2nd-order sensor driven by a linearly interpolated input: a base with
+            one numerator coefficient less leaves a small systematic misfit that delay-like
+            extensions would be credited with.
         candidates: Effect ids to try; default every catalogued effect not in the base.
         alpha: Family-wise false-alarm probability of the significance tests.
         residual_analysis: Run the residual analysis of the base model (evidence and the

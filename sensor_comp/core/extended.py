@@ -592,10 +592,11 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
     denominators = list(firsts)
     estimate, coef, cov = fitter.fit(values, denominators, fresh=not starts)
     for round_ in range(ROUNDS if spec.searches else 0):
-        denominators = _distinct(denominators + [estimate.a])
+        # The first round tries every start denominator (basins); the next one searches
+        # again with the denominator refitted at the values found (they are coupled).
+        denominators = _distinct(denominators + [estimate.a]) if round_ == 0 else [estimate.a]
         for search in spec.searches:
-            narrowed = search if round_ == 0 else search.around(values[search.key])
-            values[search.key] = fitter.search(narrowed, values, denominators)
+            values[search.key] = fitter.search(search, values, denominators)
         estimate, coef, cov = fitter.fit(values, denominators)
     value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
                  for s in spec.searches}

@@ -79,7 +79,7 @@ def test_extensions_change_the_structure_as_documented():
     base = ModelSpec(nf=2, nb=2, nk=1, fs=FS, ringing_khz=5.0)
     values = {'amplifier_highpass.tau_ms': 20.0, 'channel_delay.delay_us': 12.5,
               'zero_shift.tau_ms': 50.0, 'second_resonance.freq_khz': 10.0,
-              'second_resonance.zeta': 0.02, 'strain_sensitivity.smooth_khz': 12.0}
+              'second_resonance.zeta': 0.02}
     spec = get_effect('second_resonance').extend(base)
     assert (spec.nf, spec.nb) == (2, 4)
     assert spec.channels(values) == ('a_z@mode=10.0,0.02',)
@@ -94,7 +94,7 @@ def test_extensions_change_the_structure_as_documented():
     assert get_effect('mains_hum').extend(base).disturbances == ('mains_hum',)
     spec = get_effect('strain_sensitivity').extend(base)
     assert (spec.nk, spec.nb) == (0, 3)
-    assert spec.channels(values) == ('a_z', 'da_z@mode=12.0,0.7')
+    assert spec.channels(values) == ('a_z', 'da_z@mode=20.0,0.7')
     with pytest.raises(EffectError, match='needs the value'):
         get_effect('zero_shift').extend(base).channels({})
 

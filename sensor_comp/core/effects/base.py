@@ -84,13 +84,6 @@ class Search:
         """Return the value used before the first search."""
         return self.low if self.start is None else self.start
 
-    def around(self, value: float, *, points: int = 7) -> Search:
-        """Return the search narrowed to the coarse grid's neighbours of ``value``."""
-        grid = self.points()
-        i = int(np.clip(np.searchsorted(grid, value), 1, grid.size - 1))
-        low, high = grid[max(i - 2, 0)], grid[min(i + 1, grid.size - 1)]
-        return replace(self, low=float(low), high=float(high), grid=points)
-
     def points(self) -> np.ndarray:
         """Return the coarse grid (without the excluded band)."""
         grid = (np.geomspace(self.low, self.high, self.grid) if self.log

@@ -3,15 +3,19 @@ Base-strain sensitivity: pressure read from the housing strain, which follows th
 
 The pressure is ``p = S·H(s)·a + c·da/dt``. Identification model: one more input, the rate
 of change of the axial acceleration ``da_z`` (m/s³) smoothed by a 2nd-order low pass
-(``@mode=F,0.7``, unit gain at DC), with numerators on lags 0 … nf (``nk = 0``,
-``nb = nf + 1``), so that the strain term can act directly (``B_j = c·F``) rather than
-through the sensor's mechanics. The derivative amplifies the accelerometer noise
-(``√2·σ_a·fs`` per sample): unsmoothed, that noise would make the fit trade the strain term
-for a quieter prediction (errors in the variables, ``c`` too small); the low pass's corner
-``F`` is found by a bounded scalar search (2 kHz to ``0.4 fs``), so the fit itself picks
-the best trade between noise and sharpness. The strain coefficient is the static gain of
-the ``da_z`` path, in Pa per (g/ms) (1 g/ms = 9806.65 m/s³), the unit hammer pulses are
-described in.
+(``@mode=F,0.7`` at ``F = fs/10``, unit gain at DC), with numerators on lags 0 … nf
+(``nk = 0``, ``nb = nf + 1``), so that the strain term can act directly (``B_j = c·F``)
+rather than through the sensor's mechanics. The derivative amplifies the accelerometer
+noise (``√2·σ_a·fs`` per sample): unsmoothed, that noise would make the fit trade the
+strain term for a quieter prediction (errors in the variables, ``c`` too small); the
+low pass (its corner a fifth of the Nyquist frequency) keeps about ``(1/5)³`` of that
+noise's power and delays the jerk by ``2ζ/ω``, 2.2 samples. The corner is fixed, not
+searched: a tunable low pass on a derivative would be a tunable lag, able to imitate a
+channel delay. The strain coefficient is the slope at DC of the whole response to
+``a_z``: the static gain of the ``da_z`` path plus the ``a_z`` path's own lead over its
+mechanics, ``−S·τ_excess`` (:func:`~sensor_comp.core.effects.base.excess_delay_s`: its
+free numerator can take a share of a derivative term), in Pa per (g/ms)
+(1 g/ms = 9806.65 m/s³), the unit hammer pulses are described in.
 
 At the pulse corners the jerk jumps: a sampled model cannot follow a step at a fractional
 sample instant, so the first sample after each corner keeps an error of up to ``c`` times
@@ -22,15 +26,16 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
-                   probe_of, row_of, Search, sentence, static_gain, stored_std)
+from .base import (delta_std, Effect, excess_delay_s, ModelSpec, Outcome, parameters_text,
+                   Physical, probe_of, row_of, sentence, static_gain, stored_std)
 from ...streams import G0
 
 __all__ = ['StrainSensitivity']
 
 #: One g per millisecond in m/s³.
 G_PER_MS = G0 * 1e3
-KEY = 'strain_sensitivity.smooth_khz'
+#: Corner of the derivative's smoothing low pass, fraction of the sample rate.
+SMOOTHING_CORNER = 0.1
 #: Damping of the derivative's smoothing low pass (a Butterworth-like corner).
 SMOOTHING_ZETA = 0.7
 
@@ -56,17 +61,18 @@ class StrainSensitivity(Effect):
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the smoothed ``da_z`` input; numerators on lags 0 … nf."""
-        search = Search(KEY, 2.0, 0.4 * spec.fs / 1e3, log=True, grid=7,
-                        start=0.1 * spec.fs / 1e3)
-        return replace(spec.with_inputs(f'da_z@mode={{{KEY}}},{SMOOTHING_ZETA!r}'), nk=0,
-                       nb=max(spec.nb, spec.nf + 1), searches=spec.searches + (search,))
+        corner = SMOOTHING_CORNER * spec.fs / 1e3
+        return replace(spec.with_inputs(f'da_z@mode={corner!r},{SMOOTHING_ZETA!r}'), nk=0,
+                       nb=max(spec.nb, spec.nf + 1))
 
     def physical(self, model, *, covariance=None) -> Physical:
-        """Return the static gain of the ``da_z`` path in Pa/(g/ms)."""
-        row = row_of(model, 'da')
+        """Return the derivative coefficient of the whole ``a_z`` response, Pa/(g/ms)."""
+        row, axial = row_of(model, 'da'), row_of(model, 'a')
 
         def coefficient(a, b):
-            return static_gain(a, b, row) * G_PER_MS
+            # The a_z path's own lead over its mechanics is a derivative term too.
+            lead = -static_gain(a, b, axial) * excess_delay_s(model, a, b, axial)
+            return (static_gain(a, b, row) + lead) * G_PER_MS
 
         std = (delta_std(coefficient, model.a, model.b, covariance) if covariance is not None
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
