@@ -1,5 +1,5 @@
 """
-Diagnosis: which catalogued effect does the base model miss?
+Diagnosis: which catalogued effect the base model misses, ranked on validation shots.
 
 For every candidate effect of :mod:`sensor_comp.core.effects` the base model plus that
 effect is fitted on the CALIBRATION shots (:func:`~sensor_comp.core.extended.fit_extended`)

@@ -35,7 +35,7 @@ CHANNELS = ('a_z', 'a_z_abs_a_z', 'da_z@mode=12.5,0.7', 'peak_a_z(tau_ms=3.0)',
 
 
 def shocks(n: int, seed: int = 0) -> np.ndarray:
-    """Return ``(3, n)`` half-sine shocks (1 ms, 300–2000 g, alternating sign) plus noise."""
+    """Return half-sine shocks ``(3, n)``: 1 ms, 300–2000 g, alternating sign, plus noise."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) / FS
     acc = rng.standard_normal((3, n)) * 20.0

@@ -268,7 +268,7 @@ def probe_of(analysis, name: str):
 
 
 def sentence(parts: Sequence[str]) -> str:
-    """Join clauses with semicolons into one sentence (capitalised, full stop)."""
+    """Return the clauses joined by semicolons: one capitalised sentence with a full stop."""
     text = '; '.join(p for p in parts if p)
     return text[:1].upper() + text[1:] + '.'
 
