@@ -281,6 +281,8 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
            'validation_shots': sum(len(s.shots) for s in valid),
            'emd_denoised': bool(denoise),
            'selection': explanation}
+    if effects:  # the structure the effects extend, for a later diagnosis
+        fit.update(extension.base_orders)
     provenance = _provenance(calib, 'calibration') + _provenance(valid, 'validation')
     draft = Model.from_estimate(estimate, fs=fs, inputs=inputs,
                                 charge_sensitivity_pC_per_MPa=min(charge) if charge else None,

@@ -40,7 +40,7 @@ import pytest
 from sensor_comp.core.diagnose import diagnose
 from sensor_comp.core.extended import fit_extended, shot_windows
 from sensor_comp.core.ident import fit_percent
-from sensor_comp.core.identify import ShotSource
+from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import Recording
 
@@ -221,3 +221,16 @@ def test_transverse_is_skipped_without_lateral_channels():
     [skipped] = result.skipped
     assert skipped.effect == 'transverse_sensitivity' and 'lateral' in skipped.reason
     assert [r.effect for r in result.ranking] == ['nonlinear_sensitivity']
+
+
+def test_a_model_with_the_found_effect_is_adequate():
+    effects = CASES['mains_hum'][0]
+    (_, calib), (_, valid) = pair(effects, 200e3, 0.002)
+    found = diagnose([calib], [valid], residual_analysis=False).ranking[0].effect
+    model = identify([calib], validation=[valid], structure='oe', orders=(2, 3), delay=0,
+                     denoise=False, effects=[found]).model
+    assert (model.fit['base_nf'], model.fit['base_nb'], model.fit['base_nk']) == (2, 3, 0)
+    again = diagnose([calib], [valid], base=model, residual_analysis=False)
+    assert again.base_effects == ('mains_hum',)
+    assert 'mains_hum' not in [r.effect for r in again.ranking]
+    assert again.verdict == 'adequate', again.summary()

@@ -83,7 +83,8 @@ class StrainSensitivity(Effect):
         parts = []
         probe = probe_of(analysis, 'jerk')
         if probe is not None:
-            parts.append(f'da/dt explains {100 * probe.fraction:.0f} % of the base residual')
+            parts.append(f'the jerk da/dt explains {100 * probe.fraction:.0f} % of the base '
+                         f'residual')
         parts.append(f'a da/dt path removes {100 * outcome.score:.1f} % of the validation '
                      f'residual energy{parameters_text(self, outcome.parameters)}')
         return sentence(parts)
