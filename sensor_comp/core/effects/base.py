@@ -25,10 +25,10 @@ curvature of the loss.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import math
 import re
-from typing import Any, ClassVar, TYPE_CHECKING
+from typing import ClassVar, TYPE_CHECKING
 
 import numpy as np
 
@@ -155,7 +155,6 @@ class Outcome:
     parameters: Physical
     statistic: float
     p_value: float
-    extra: Mapping[str, Any] = field(default_factory=dict)
 
 
 class Effect:
