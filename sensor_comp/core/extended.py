@@ -591,13 +591,19 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
     fitter = min(fitters, key=lambda f: f.loss(values, firsts))
     denominators = list(firsts)
     estimate, coef, cov = fitter.fit(values, denominators, fresh=not starts)
+    best = None
     for round_ in range(ROUNDS if spec.searches else 0):
         # The first round tries every start denominator (basins); the next one searches
         # again with the denominator refitted at the values found (they are coupled).
         denominators = _distinct(denominators + [estimate.a]) if round_ == 0 else [estimate.a]
+        trial = dict(values)
         for search in spec.searches:
-            values[search.key] = fitter.search(search, values, denominators)
-        estimate, coef, cov = fitter.fit(values, denominators)
+            trial[search.key] = fitter.search(search, trial, denominators)
+        result = fitter.fit(trial, denominators)
+        # A later round may wander to a worse basin: keep the round with the lowest loss.
+        if best is None or result[0].loss < best[1][0].loss:
+            best = (trial, result)
+        values, (estimate, coef, cov) = best[0], best[1]
     value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
                  for s in spec.searches}
     disturbance = None if coef is None else DisturbanceFit(
