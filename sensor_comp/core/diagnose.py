@@ -33,7 +33,7 @@ explains it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 
@@ -44,6 +44,7 @@ from .effects import Effect, EFFECTS, EffectError, get_effect, Outcome, Physical
 from .extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
 from .ident import estimate_delay, fit_percent, IdentError
 from .model import Model
+from .progress import ProgressFactory, Silent
 from .shots import split_calibration
 from ..errors import SensorCompError
 
@@ -67,9 +68,6 @@ MODEL_ALLOWANCE = 0.05
 #: Least score (fraction of the base residual energy removed) a significant effect needs:
 #: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
 MIN_SCORE = 0.005
-
-#: ``progress(label, total)`` returns a context manager with ``advance()``.
-ProgressFactory = Callable[[str, int], object]
 
 
 class DiagnosisError(SensorCompError, ValueError):
@@ -225,20 +223,6 @@ def _json(x):
     return None if x is None or not math.isfinite(x) else float(x)
 
 
-class _Silent:
-    def __init__(self, *_):
-        pass
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *_):
-        return None
-
-    def advance(self, units: int = 1) -> None:
-        pass
-
-
 @dataclass(frozen=True)
 class _Noise:
     """Autocovariance of the noise (lags 0..L) and the Bartlett weights."""
@@ -357,7 +341,7 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
         IdentError: When the base model cannot be fitted.
 
     """
-    progress = progress or _Silent
+    progress = progress or Silent
     calib, valid = _sources(calibration, validation)
     rates = {s.recording.fs for s in calib + valid}
     if len(rates) != 1:

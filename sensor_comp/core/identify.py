@@ -23,7 +23,7 @@ so that its result can be trusted:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 import math
 
@@ -35,6 +35,7 @@ from .ident import (DelayEstimate, estimate_delay, fit_armax_els, fit_armax_gls,
                     fit_oe, fit_percent, IdentError, select_structure, Selection,
                     simulate)
 from .model import Model, Source
+from .progress import ProgressFactory, Silent
 from .shots import detect_shots, segments, Shot, split_calibration
 from ..streams import Recording
 
@@ -55,23 +56,6 @@ _FITTERS = {
     'gls': lambda segs, na, nb, nk: fit_armax_gls(segs, na=na, nb=nb, nk=nk),
     'oe': lambda segs, na, nb, nk: fit_oe(segs, nf=na, nb=nb, nk=nk),
 }
-
-#: ``progress(label, total)`` returns a context manager with ``advance()``.
-ProgressFactory = Callable[[str, int], object]
-
-
-class _Silent:
-    def __init__(self, *_):
-        pass
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *_):
-        return None
-
-    def advance(self, units: int = 1) -> None:
-        pass
 
 
 @dataclass(frozen=True)
@@ -206,7 +190,7 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
     if not calibration:
         raise IdentError('no calibration recording given')
     effects = tuple(e.id for e in ordered(effects))
-    progress = progress or _Silent
+    progress = progress or Silent
     excluded: list[str] = []
     calibration = [_usable(s, excluded) for s in calibration]
     validation = [_usable(s, excluded) for s in validation]
