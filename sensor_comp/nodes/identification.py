@@ -39,6 +39,11 @@ Parameters (read once at start):
 - ``model_file`` (default empty): also write each model to this file (atomically).
 - ``max_pending_blocks`` (default 1000): blocks per topic held until ``stream_info``
   arrives; older ones are dropped and counted.
+- ``diagnose`` (bool, default true): after each fit, run the diagnosis
+  (:func:`~sensor_comp.core.diagnose.diagnose`) of the new model on the same calibration
+  and validation shots, in the worker thread once the model is published, and add its
+  verdict and top-ranked effect to ``/diagnostics`` (level WARN for ``missing_effect`` or
+  ``unexplained``).
 - ``diagnostics_period`` (s, default 1.0), ``fit_timeout`` (s the service waits for a
   fit, default 300).
 
@@ -90,6 +95,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
+from ..core.diagnose import diagnose
 from ..core.identify import identify, ShotSource, STRUCTURES
 from ..core.model import Model, Source
 from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
@@ -351,6 +357,7 @@ class Identification(Node):
         super().__init__(node_name, **kwargs)
         self._declare_parameters()
         self.model: Model | None = None
+        self.verdict: dict = {}  # the latest diagnosis, for /diagnostics
         self.windows: deque[ShotWindow] = deque(maxlen=self.max_shots)
         self.fits = 0
         self.samples_received = {PRESSURE_RAW: 0, ACCELERATION: 0}
@@ -395,6 +402,9 @@ class Identification(Node):
         delay = declare(self, 'delay', -1, 'input delay in samples; -1: estimated')
         self.emd = declare(self, 'emd', True, 'EMD-denoise the calibration windows')
         self.effects = declare(self, 'effects', [], 'extra physical effects to fit')
+        self.diagnose = declare(self, 'diagnose', True,
+                                'after each fit, diagnose the missing physical effect on the '
+                                'same shots and publish the verdict on /diagnostics')
         self.min_shots = declare(self, 'min_shots', 4, 'shots kept before the automatic fit')
         self.max_shots = declare(self, 'max_shots', 20, 'latest shots kept for fitting')
         self.refit_shots = declare(self, 'refit_shots', 0,
@@ -619,7 +629,28 @@ class Identification(Node):
             self.get_logger().error(f'{self.model_file}: {exc}')
         self.get_logger().info(f'model: {summary}')
         self.publish_diagnostics()
+        if self.diagnose:
+            self._diagnose(result, model)
         return _Outcome(True, summary, model)
+
+    def _diagnose(self, result, model: Model) -> None:
+        # After the model is out: the diagnosis (seconds) never delays compensation.
+        try:
+            found = diagnose(result.calibration, result.validation, base=model)
+        except SensorCompError as exc:
+            verdict = {'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)}
+        else:
+            verdict = {'diagnosis_verdict': found.verdict}
+            if found.ranking:
+                top = found.ranking[0]
+                verdict.update({'diagnosis_top_effect': top.effect,
+                                'diagnosis_top_score': top.score,
+                                'diagnosis_top_significant': top.significant})
+            self.get_logger().info(f'diagnosis: {found.explanation}')
+        with self._lock:
+            if self.model is model:
+                self.verdict = verdict
+        self.publish_diagnostics()
 
     def _concatenate(self, windows: tuple[ShotWindow, ...]
                      ) -> tuple[Recording, tuple[Shot, ...]]:
@@ -703,6 +734,13 @@ class Identification(Node):
             level, message = DiagnosticStatus.OK, f'{kept} of {self.min_shots} shots kept'
         if model is not None:
             values.update(_statistics(model))
+            values.update(self.verdict)
+            if level == DiagnosticStatus.OK and self.verdict.get('diagnosis_verdict') in (
+                    'missing_effect', 'unexplained'):
+                level = DiagnosticStatus.WARN
+                message += (f'; diagnosis: {self.verdict["diagnosis_verdict"]}'
+                            + (f' ({self.verdict["diagnosis_top_effect"]})'
+                               if 'diagnosis_top_effect' in self.verdict else ''))
         self._diagnostics.publish(diagnostics(self, name=STATUS_NAME, level=level,
                                               message=message, values=values))
 

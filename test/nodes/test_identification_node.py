@@ -13,6 +13,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from sensor_comp.blocks import iter_blocks
+from sensor_comp.core.diagnose import diagnose
 from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.core.model import load
 from sensor_comp.core.shots import detect_shots, ShotError
@@ -107,8 +108,9 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
         late.create_subscription(String, 'model', lambda msg: texts.append(msg.data),
                                  LATCHED_QOS)
         stop_late = _spin(other_context, late)
-        _wait(lambda: texts and statuses and 'validation_fit_percent' in
-              {v.key for v in statuses[-1].values}, what='the latched model and diagnostics')
+        _wait(lambda: texts and statuses and 'diagnosis_verdict' in
+              {v.key for v in statuses[-1].values}, timeout=60.0,
+              what='the latched model and the diagnosis on diagnostics')
         stop_late()
     finally:
         stop()
@@ -159,6 +161,13 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     assert float(values['sensitivity_MPa_per_g']) == pytest.approx(
         view.sensitivity_MPa_per_g)
     assert values['shots_kept'] == '4' and values['shots_rejected'] == '0'
+    # The verdict on diagnostics is the offline diagnosis of the live model on its shots.
+    by_role = {role: tuple(shot for shot, entry in zip(shots, live.provenance[0].shots)
+                           if entry['role'] == role) for role in ('calibration', 'validation')}
+    found = diagnose([ShotSource(recording, by_role['calibration'])],
+                     [ShotSource(recording, by_role['validation'])], base=live)
+    assert values['diagnosis_verdict'] == found.verdict
+    assert values['diagnosis_top_effect'] == found.ranking[0].effect
     assert int(values['samples_received']) == recording.n_samples
     # Bounded memory: the buffer spans a few shot windows, not the recording.
     span = (5 + 10 + 20 + 1) * FS / 1e3  # pre + max pulse + post + holdoff, in samples
