@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from .base import (Effect, ModelSpec, modifier_value, Outcome, parameters_text, Physical,
-                   probe_of, Search, segment_of, sentence, stored_std)
+                   probe_of, Search, sentence, stored_std, tail_share)
 
 __all__ = ['AmplifierHighpass']
 
@@ -52,12 +52,7 @@ class AmplifierHighpass(Effect):
 
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say where the residual sits (tail) and what the high-pass removes."""
-        parts = []
-        tail = segment_of(analysis, 'tail')
-        if tail is not None and tail.sample_fraction > 0:
-            parts.append(f'the tail after the ringing holds {100 * tail.energy_fraction:.0f} '
-                         f'% of the residual energy in {100 * tail.sample_fraction:.0f} % '
-                         f'of the samples')
+        parts = tail_share(analysis)
         probe = probe_of(analysis, 'integral')
         if probe is not None:
             parts.append(f'G·∫a explains {100 * probe.fraction:.0f} % of the base residual')

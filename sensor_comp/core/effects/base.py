@@ -42,7 +42,7 @@ if TYPE_CHECKING:
 __all__ = ['Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical', 'Search', 'dc_delay_s',
            'delta_std', 'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s',
            'modifier_value', 'parameters_text', 'probe_of', 'row_of', 'segment_of', 'sentence',
-           'static_gain', 'stored_std']
+           'static_gain', 'stored_std', 'tail_share']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -259,6 +259,15 @@ def segment_of(analysis, name: str):
         if seg.name == name:
             return seg
     return None
+
+
+def tail_share(analysis) -> list[str]:
+    """Return the sentence part on the residual share of the tail, or none without a tail."""
+    tail = segment_of(analysis, 'tail')
+    if tail is None or tail.sample_fraction <= 0:
+        return []
+    return [f'the tail after the ringing holds {100 * tail.energy_fraction:.0f} % of the '
+            f'residual energy in {100 * tail.sample_fraction:.0f} % of the samples']
 
 
 def probe_of(analysis, name: str):

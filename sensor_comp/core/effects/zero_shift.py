@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
-                   probe_of, row_of, Search, segment_of, sentence, static_gain, stored_std)
+                   probe_of, row_of, Search, sentence, static_gain, stored_std, tail_share)
 from ..inputs import parse_channel
 from ...streams import G0
 
@@ -64,12 +64,7 @@ class ZeroShift(Effect):
 
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say where the residual sits and what the decaying offset removes."""
-        parts = []
-        tail = segment_of(analysis, 'tail')
-        if tail is not None and tail.sample_fraction > 0:
-            parts.append(f'the tail after the ringing holds {100 * tail.energy_fraction:.0f} '
-                         f'% of the residual energy in {100 * tail.sample_fraction:.0f} % '
-                         f'of the samples')
+        parts = tail_share(analysis)
         probe = probe_of(analysis, 'zero_shift')
         if probe is not None:
             parts.append(f'a decaying offset ∝ peak g explains {100 * probe.fraction:.0f} % '
