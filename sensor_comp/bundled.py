@@ -37,7 +37,7 @@ def bag_dir() -> Path:
 
 def bundled_bag(name: str) -> Path:
     """
-    Return the path of bundled bag ``name`` (e.g. ``'demo_calib.mcap'``).
+    Return the path of bundled bag ``name`` (e.g. ``'case_i_calib.mcap'``).
 
     Raises:
         SensorCompError: If it is not there; the message lists the bags that are.
