@@ -37,6 +37,7 @@ A second signal interrupts that with ``KeyboardInterrupt``.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import os
@@ -62,6 +63,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
 from ..errors import SensorCompError
+from ..io.messages import IMAGE
 
 __all__ = [
     'BLOCK_QOS',
@@ -81,6 +83,7 @@ __all__ = [
     'run_main',
     'sleep_until',
     'spin_until',
+    'subscribe_blocks',
     'take_queued',
     'use_fastdds_profile',
     'wait_for_subscribers',
@@ -313,6 +316,30 @@ def take_queued(handlers: Sequence[tuple[Subscription, Callable[[bytes, dict], N
         if taken == before:
             break
     return taken
+
+
+def subscribe_blocks(node: Node, topics: Sequence[str], on_block: Callable[[str, bytes], None],
+                     take: Callable[[str, bytes, dict], None]):
+    """
+    Subscribe raw and keep-all to block topics; return the subscriptions and their takers.
+
+    Args:
+        node: The subscribing node.
+        topics: Block topics (``sensor_msgs/msg/Image``), relative to the node namespace.
+        on_block: Executor callback, ``on_block(topic, data)``.
+        take: Handler for messages taken directly, ``take(topic, data, info)``.
+
+    Returns:
+        ``({topic: subscription}, takers)``: takers are the pairs :func:`take_queued` takes.
+
+    """
+    image = message_class(IMAGE)
+    subscriptions = {topic: node.create_subscription(
+        image, topic, functools.partial(on_block, topic), BLOCK_QOS, raw=True)
+        for topic in topics}
+    takers = [(subscription, functools.partial(take, topic))
+              for topic, subscription in subscriptions.items()]
+    return subscriptions, takers
 
 
 def spin_until(executor: Executor, stop: threading.Event, *,

@@ -59,7 +59,6 @@ executor round each.
 from __future__ import annotations
 
 from collections import deque
-import functools
 import math
 from pathlib import Path
 import sys
@@ -82,7 +81,7 @@ from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_
 from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
                       DIAGNOSTICS_QOS, diagnostics, finish_publishing, LATCHED_QOS,
                       latched_qos, message_class, NodeError, publish_raw, run_main,
-                      spin_until, take_queued)
+                      spin_until, subscribe_blocks, take_queued)
 
 __all__ = ['Compensation', 'main']
 
@@ -184,11 +183,8 @@ class Compensation(Node):
                                                      STREAM_INFO, LATCHED_QOS)
         self._diagnostics = self.create_publisher(message_class(DIAGNOSTIC_ARRAY),
                                                   DIAGNOSTICS, DIAGNOSTICS_QOS)
-        self._inputs = {topic: self.create_subscription(
-            image, topic, functools.partial(self._on_block, topic), BLOCK_QOS, raw=True)
-            for topic in (PRESSURE_RAW, ACCELERATION)}
-        self._takers = [(subscription, functools.partial(self._take, topic))
-                        for topic, subscription in self._inputs.items()]
+        self._inputs, self._takers = subscribe_blocks(
+            self, (PRESSURE_RAW, ACCELERATION), self._on_block, self._take)
         self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
                                  self._on_stream_info, latched_qos(16), raw=True)
         self.create_subscription(message_class(STRING), MODEL, self._on_model, LATCHED_QOS,

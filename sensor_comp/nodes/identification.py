@@ -79,7 +79,6 @@ from __future__ import annotations
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError as FutureTimeout
 from dataclasses import dataclass, replace
-import functools
 import hashlib
 import inspect
 import json
@@ -102,11 +101,11 @@ from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, d
                           mad_sigma, NOISE_FACTOR, Shot, ShotError)
 from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
-                           IMAGE, MessageError, STRING)
+                           MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
-from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
-                      DIAGNOSTICS_QOS, diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
-                      message_class, publish_raw, run_main, spin_until, take_queued)
+from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTICS_QOS,
+                      diagnostics, join_callbacks, LATCHED_QOS, latched_qos, message_class,
+                      publish_raw, run_main, spin_until, subscribe_blocks, take_queued)
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
@@ -375,12 +374,8 @@ class Identification(Node):
         self._last_error: str | None = None
         self._stop = threading.Event()
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='identification')
-        image = message_class(IMAGE)
-        self._block_subscriptions = {topic: self.create_subscription(
-            image, topic, functools.partial(self._on_block, topic), BLOCK_QOS, raw=True)
-            for topic in (PRESSURE_RAW, ACCELERATION)}
-        self._takers = [(subscription, functools.partial(self._take_queued, topic))
-                        for topic, subscription in self._block_subscriptions.items()]
+        self._block_subscriptions, self._takers = subscribe_blocks(
+            self, (PRESSURE_RAW, ACCELERATION), self._on_block, self._take_queued)
         self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
                                  self._on_stream_info, latched_qos(16), raw=True)
         self._model_publisher = self.create_publisher(message_class(STRING), MODEL,
