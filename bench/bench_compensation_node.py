@@ -38,8 +38,6 @@ import functools
 import json
 import os
 from pathlib import Path
-import random
-import subprocess
 import sys
 import tempfile
 import threading
@@ -47,9 +45,12 @@ import time
 
 import numpy as np
 
+from ._processes import (CpuSampler, isolate_ros, NodeProcess, role_result, start_role,
+                         write_model_file)
+
 __all__ = ['main']
 
-ROOT = Path(__file__).resolve().parents[1]
+_MODULE = 'bench_compensation_node'
 #: (block width, block pairs) of the throughput runs: ~1-3 s each.
 FULL = {1000: 6000, 10_000: 1500}
 QUICK = {1000: 1500, 10_000: 300}
@@ -60,17 +61,6 @@ QUICK_LATENCY = ((1000, 2.5),)
 _WARMUP_S = 0.2
 _TIMEOUT_S = 120.0
 _T0_NS = 1_700_000_000_000_000_000
-
-
-def _model_file(path: Path, fs: float) -> None:
-    """Write a stable 2nd-order model (5 kHz, ζ = 0.05, 1.4e-4 MPa/g) at ``fs``."""
-    from sensor_comp.core.model import Model
-    wn, zeta = 2 * np.pi * 5e3, 0.05
-    radius = np.exp(-zeta * wn / fs)
-    a = np.array([1.0, -2 * radius * np.cos(wn * np.sqrt(1 - zeta ** 2) / fs), radius ** 2])
-    gain = 1.4e-4 * 1e6 / 9.80665  # Pa per m/s²
-    Model(fs=fs, structure='oe', inputs=('a_z',), b=[[gain * a.sum() / 2] * 2], a=a, nk=1,
-          created='bench').save(path)
 
 
 def _ros():
@@ -170,91 +160,30 @@ def _subscribe(args) -> dict:
     return {'samples': samples, 'last_receive_ns': last[0], 'latency': latency}
 
 
-def _cpu_seconds(pid: int) -> float:
-    """Return user + system CPU seconds of process ``pid`` (``/proc/<pid>/stat``)."""
-    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
-class _CpuSampler:
-    """Sample a process's CPU seconds every 20 ms with the wall-clock time, in a thread."""
-
-    def __init__(self, pid: int):
-        self.samples: list[tuple[int, float]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, args=(pid,), daemon=True)
-        self._thread.start()
-
-    def _run(self, pid: int) -> None:
-        while not self._stop.wait(0.02):
-            self.samples.append((time.time_ns(), _cpu_seconds(pid)))
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join()
-
-    def usage(self, start_ns: int, stop_ns: int) -> float:
-        """Return the CPU used between two wall-clock times, in cores (1.0 = one core)."""
-        times, cpu = np.array(self.samples).T
-        used = np.interp([start_ns, stop_ns], times, cpu)
-        return float((used[1] - used[0]) / ((stop_ns - start_ns) / 1e9))
-
-
-def _child(role: str, **options) -> subprocess.Popen:
-    args = [sys.executable, '-m', 'bench.bench_compensation_node', '--role', role]
-    for key, value in options.items():
-        if value is True:
-            args.append(f'--{key}')
-        elif value is not False:
-            args += [f'--{key}', str(value)]
-    return subprocess.Popen(args, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def _result(proc: subprocess.Popen) -> dict:
-    out, log = proc.communicate(timeout=_TIMEOUT_S + 30)
-    if proc.returncode:
-        raise RuntimeError(f'{" ".join(proc.args[3:5])} failed with exit code '
-                           f'{proc.returncode}:\n{log}')
-    return json.loads(out.strip().splitlines()[-1])
-
-
 def _run(*, width: int, pairs: int, fs: float, paced: bool, tmp: Path) -> dict:
     """Run node, subscriber and publisher once; return the measurements."""
     model = tmp / f'model_{fs:g}.json'
-    _model_file(model, fs)
-    log = tmp / 'node.log'
-    with open(log, 'w') as out:
-        node = subprocess.Popen(
-            [sys.executable, '-m', 'sensor_comp.nodes.compensation', '--ros-args', '-p',
-             f'model_file:={model}', '-p', 'diagnostics_period:=1.0'],
-            cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)), stdout=out,
-            stderr=subprocess.STDOUT)
+    write_model_file(model, fs)
+    node = NodeProcess('compensation', {'model_file': str(model), 'diagnostics_period': 1.0},
+                       log=tmp / 'node.log')
     try:
-        deadline = time.monotonic() + 30
-        while 'compensating' not in log.read_text():
-            if node.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f'the compensation node did not start:\n{log.read_text()}')
-            time.sleep(0.02)
-        subscriber = _child('subscriber', expect=width * pairs)
+        node.wait_for_log('compensating', timeout=30)
+        subscriber = start_role(_MODULE, 'subscriber', expect=width * pairs)
         if subscriber.stdout.readline().strip() != 'ready':
             raise RuntimeError(f'subscriber failed:\n{subscriber.communicate()[1]}')
-        sampler = _CpuSampler(node.pid)
-        publisher = _child('publisher', width=width, pairs=pairs, fs=fs, paced=paced)
+        sampler = CpuSampler(node.pid)
+        publisher = start_role(_MODULE, 'publisher', width=width, pairs=pairs, fs=fs,
+                               paced=paced)
         try:
-            sent, received = _result(publisher), _result(subscriber)
+            sent = role_result(publisher, timeout=_TIMEOUT_S + 30)
+            received = role_result(subscriber, timeout=_TIMEOUT_S + 30)
         finally:
             sampler.stop()
         cpu = sampler.usage(sent['first_send_ns'], received['last_receive_ns'])
     finally:
-        node.send_signal(2)
-        try:
-            node.wait(30)
-        except subprocess.TimeoutExpired:
-            node.kill()
-            node.wait()
+        node.stop(timeout=30)
     return {'width': width, 'pairs': pairs, 'fs': fs, 'sent': sent, 'received': received,
-            'cpu': cpu, 'node_log': log.read_text()}
+            'cpu': cpu, 'node_log': node.output()}
 
 
 def _throughput(run: dict) -> tuple[float, bool]:
@@ -286,13 +215,11 @@ def main(argv=None) -> int:
     if args.role:
         print(json.dumps(_publish(args) if args.role == 'publisher' else _subscribe(args)))
         return 0
-    os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
-    os.environ['ROS_DOMAIN_ID'] = str(random.randrange(102, 200))
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    domain = isolate_ros()
     report = {'throughput': [], 'latency': [], 'load_average': os.getloadavg()[0]}
     lost = False
     print(f'compensation node, separate processes (ROS_DOMAIN_ID '
-          f'{os.environ["ROS_DOMAIN_ID"]}, load average {os.getloadavg()[0]:.2f} on '
+          f'{domain}, load average {os.getloadavg()[0]:.2f} on '
           f'{os.cpu_count()} cores); publisher as fast as the node takes the blocks')
     print(f'{"width":>6} {"pairs":>6} | {"MS/s":>7} {"blocks/s":>9} | {"node CPU":>8} | '
           f'{"received":>17}')

@@ -25,10 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
-import random
-import subprocess
 import sys
 import tempfile
 import threading
@@ -45,9 +42,11 @@ from sensor_comp.nodes.player import Player
 from sensor_comp.nodes.recorder import Recorder
 from sensor_comp.streams import Recording
 
+from ._processes import isolate_ros, role_result, start_role
+
 __all__ = ['main']
 
-ROOT = Path(__file__).resolve().parents[1]
+_MODULE = 'bench_recorder_player'
 #: Block pairs per width: about 1.5 s of player work each.
 FULL = {1000: 3000, 10_000: 400}
 QUICK = {1000: 600, 10_000: 80}
@@ -113,30 +112,15 @@ def _play(args) -> dict:
     return {'messages': published, 'seconds': seconds}
 
 
-def _child(role: str, **options) -> subprocess.Popen:
-    args = [sys.executable, '-m', 'bench.bench_recorder_player', '--role', role]
-    for key, value in options.items():
-        args += [f'--{key}', str(value)]
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-
-
-def _result(proc: subprocess.Popen) -> dict:
-    out, log = proc.communicate(timeout=_TIMEOUT_S + 30)
-    if proc.returncode:
-        raise RuntimeError(f'{" ".join(proc.args[3:5])} failed with exit code '
-                           f'{proc.returncode}:\n{log}')
-    return json.loads(out.strip().splitlines()[-1])
-
-
 def _measure(width: int, pairs: int, compression: str, tmp: Path) -> dict:
     """Run one player/recorder pair; return rates and the count check."""
     bag, out = tmp / f'source_{width}.mcap', tmp / f'recorded_{width}.mcap'
     expect = _make_bag(bag, width=width, pairs=pairs)
-    recorder = _child('recorder', output=out, expect=expect, compression=compression)
-    player = _child('player', bag=bag)
-    played, recorded = _result(player), _result(recorder)
+    recorder = start_role(_MODULE, 'recorder', output=out, expect=expect,
+                          compression=compression)
+    player = start_role(_MODULE, 'player', bag=bag)
+    played = role_result(player, timeout=_TIMEOUT_S + 30)
+    recorded = role_result(recorder, timeout=_TIMEOUT_S + 30)
     with BagReader(out) as reader:
         stored = sum(t.message_count for t in reader.topics.values())
     bag.unlink()
@@ -165,11 +149,9 @@ def main(argv=None) -> int:
     if args.role:
         print(json.dumps(_record(args) if args.role == 'recorder' else _play(args)))
         return 0
-    os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
-    os.environ['ROS_DOMAIN_ID'] = str(random.randrange(102, 200))
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    domain = isolate_ros()
     print(f'recorder and player throughput (separate processes, recorder compression '
-          f'{args.compression}, ROS_DOMAIN_ID {os.environ["ROS_DOMAIN_ID"]})')
+          f'{args.compression}, ROS_DOMAIN_ID {domain})')
     print(f'{"width":>6} {"blocks":>6} | {"player":>21} | {"recorder":>21} | {"stored":>11}')
     print(f'{"":>6} {"":>6} | {"blocks/s":>10} {"MS/s":>10} | {"blocks/s":>10} {"MS/s":>10} |')
     lost = False
