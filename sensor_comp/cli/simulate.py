@@ -85,6 +85,9 @@ def register(subparsers) -> None:
                              'has decayed)')
     parser.add_argument('--spacing-ms', type=float, metavar='MS',
                         help='fixed onset-to-onset interval instead')
+    parser.add_argument('--anti-alias-khz', type=float, metavar='KHZ',
+                        help="-3 dB frequency of the digitiser's 4-pole Bessel anti-alias "
+                             'filter on every channel (default: ideal sampling)')
     parser.add_argument('--namespace', default='/rig', help='rig namespace of the topics')
     parser.add_argument('--blind', action='store_true',
                         help='leave the simulator\'s true settings (sim_* keys) out of the '
@@ -121,6 +124,7 @@ def build_config(args: argparse.Namespace) -> RigConfig:
         lateral_ratio=args.lateral / 100, pre_trigger_s=args.pre_ms * 1e-3,
         post_shot_s=None if args.post_ms is None else args.post_ms * 1e-3,
         spacing_s=None if args.spacing_ms is None else args.spacing_ms * 1e-3,
+        anti_alias_hz=None if args.anti_alias_khz is None else args.anti_alias_khz * 1e3,
         seed=args.seed)
 
 

@@ -61,6 +61,9 @@ class RigConfig:
         seed: Seed of every random draw (non-negative integer).
         t0_ns: Acquisition time of the first sample in ns.
         frame_id: Sensor frame of the recording.
+        anti_alias_hz: -3 dB frequency of the digitiser's anti-alias filter (a 4-pole
+            Bessel low-pass acting alike on every channel before sampling), or None for
+            ideal sampling of the continuous signals.
         max_step_s: Largest integration step; the pressure channel is integrated on the
             sample grid refined by an integer factor until the step is at most this. At the
             default 0.5 µs the first-order-hold error at a pulse corner (see :mod:`.lti`)
@@ -84,6 +87,7 @@ class RigConfig:
     seed: int = 0
     t0_ns: int = 0
     frame_id: str = 'sensor'
+    anti_alias_hz: float | None = None
     max_step_s: float = 0.5e-6
 
     def __post_init__(self):
@@ -99,6 +103,9 @@ class RigConfig:
             set_(self, name, _number(name, getattr(self, name), low=0.0, high=high))
         set_(self, 'max_step_s', _number('max_step_s', self.max_step_s, low=0.0,
                                          low_open=True))
+        if self.anti_alias_hz is not None:
+            set_(self, 'anti_alias_hz', _number('anti_alias_hz', self.anti_alias_hz, low=0.0,
+                                                high=self.fs / 2, low_open=True))
         if self.post_shot_s is not None:
             set_(self, 'post_shot_s', _number('post_shot_s', self.post_shot_s, low=0.0))
         for name in ('seed', 't0_ns'):

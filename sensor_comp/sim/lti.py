@@ -74,6 +74,18 @@ class StateSpace:
         return cls(np.array([[-1.0 / tau]]), np.array([[1.0 / tau]]), np.array([[-1.0]]),
                    np.array([[1.0]]))
 
+    @classmethod
+    def bessel_lowpass(cls, *, fc: float, order: int = 4) -> StateSpace:
+        """
+        Return a Bessel low-pass with unit static gain and -3 dB at ``fc`` (Hz).
+
+        Bessel filters have the flattest group delay, so a shock pulse passes delayed but
+        hardly distorted: the usual anti-alias filter of a shock-measurement digitiser.
+        """
+        num, den = signal.bessel(order, 2.0 * math.pi * fc, analog=True, norm='mag')
+        a, b, c, d = signal.tf2ss(num, den)
+        return cls(a, b, c, d)
+
     def response(self, freq_hz: float) -> complex:
         """Return the complex frequency response at ``freq_hz``."""
         s = 2j * math.pi * freq_hz

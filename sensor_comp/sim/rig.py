@@ -12,11 +12,13 @@ The pressure channel is simulated in continuous time and then sampled:
 4. Element terms (base strain) are added; together this is the induced pressure.
 5. Shock-locked disturbances (zero shift) are added beside it; the channel filters (the
    charge amplifier's high-pass) act on both, starting from rest before the first shot.
-6. The grid is sampled down to ``fs``; stationary pickup (mains hum) is added analytically
-   through the channel's frequency response and delay, so it is in steady state from the
-   first sample; white noise is added last (the digitiser).
+6. The digitiser's anti-alias filter (``RigConfig.anti_alias_hz``, if set) acts on the grid,
+   which is then sampled down to ``fs``; stationary pickup (mains hum) is added
+   analytically through the channel's frequency response and delay, so it is in steady
+   state from the first sample; white noise is added last (the digitiser).
 
-The accelerometer is ideal apart from its white noise. Every random draw comes from its own
+The accelerometer is ideal apart from its white noise; it passes the same anti-alias filter
+(integrated on the same refined grid) before it is sampled. Every random draw comes from its own
 stream of the seed, so switching an effect on leaves the shots, lateral motion and noise of
 a run unchanged: runs with and without an effect differ only by that effect.
 """
@@ -56,7 +58,8 @@ class Simulation:
             (zero shift, mains hum), after the channel.
         onsets: Index of the first sample at or after each shot's onset.
         config: The configuration that produced the run.
-        acceleration: ``(3, N)`` clean acceleration in m/s².
+        acceleration: ``(3, N)`` clean acceleration in m/s² as sampled (after the
+            anti-alias filter, if any).
         touches: Exact onset times (s after the first sample) and lateral motion of every
             shot.
         pressure_noise_pa: Standard deviation of the pressure noise in Pa.
@@ -109,7 +112,7 @@ def _induced_and_transient(config: RigConfig, touches: tuple[Touch, ...],
     mechanics = [FohFilter(StateSpace.second_order_lowpass(fn=m.fn_hz, zeta=m.zeta,
                                                            gain=gain * m.gain), fs=fine_fs)
                  for m in modes]
-    systems = [system for system in (e.channel() for e in effects) if system is not None]
+    systems = _channel_systems(config)
     channel = [FohFilter(system, fs=fine_fs) for system in systems]
     channel_transient = [FohFilter(system, fs=fine_fs) for system in systems]
     induced = np.empty(n)
@@ -145,11 +148,43 @@ def _induced_and_transient(config: RigConfig, touches: tuple[Touch, ...],
     return induced, transient
 
 
+def _anti_alias(config: RigConfig) -> StateSpace | None:
+    """Return the digitiser's anti-alias filter, or None for ideal sampling."""
+    if config.anti_alias_hz is None:
+        return None
+    return StateSpace.bessel_lowpass(fc=config.anti_alias_hz)
+
+
+def _channel_systems(config: RigConfig) -> list[StateSpace]:
+    """Return the pressure channel's filters after the element, in signal-path order."""
+    systems = [e.channel() for e in config.ordered_effects()] + [_anti_alias(config)]
+    return [system for system in systems if system is not None]
+
+
+def _sampled_acceleration(config: RigConfig, touches: tuple[Touch, ...],
+                          n: int) -> np.ndarray:
+    """Return the ``(3, n)`` clean acceleration as the digitiser samples it, in m/s²."""
+    system = _anti_alias(config)
+    if system is None:
+        t = np.arange(n) / config.fs
+        return np.stack([acceleration(touches, t, axis=i) for i in range(3)])
+    step = config.oversample
+    fine_fs = config.fs * step
+    filters = [FohFilter(system, fs=fine_fs) for _ in range(3)]
+    out = np.empty((3, n))
+    for first in range(0, n, _CHUNK):
+        count = min(_CHUNK, n - first)
+        t = np.arange(first * step, (first + count) * step) / fine_fs
+        for axis, stage in enumerate(filters):
+            out[axis, first:first + count] = stage(acceleration(touches, t, axis=axis))[::step]
+    return out
+
+
 def _stationary(config: RigConfig, n: int) -> np.ndarray:
     """Return the stationary pickup through the channel, in steady state, at ``fs``."""
     out = np.zeros(n)
     t = np.arange(n) / config.fs
-    systems = [system for system in (e.channel() for e in config.effects) if system is not None]
+    systems = _channel_systems(config)
     for effect in config.ordered_effects():
         rng = np.random.default_rng([config.seed, _EFFECTS, zlib.crc32(effect.id.encode())])
         for line in effect.lines(rng):
@@ -165,7 +200,7 @@ def _stationary(config: RigConfig, n: int) -> np.ndarray:
 def _metadata(config: RigConfig) -> dict[str, str]:
     """Return the recording metadata: the charge sensitivity and the simulated truth."""
     sensor = config.sensor
-    return {
+    metadata = {
         'charge_sensitivity_pC_per_MPa': f'{sensor.charge_sensitivity_pc_per_mpa:g}',
         'simulated': 'true',
         'sim_seed': str(config.seed),
@@ -175,6 +210,10 @@ def _metadata(config: RigConfig) -> dict[str, str]:
         'sim_effects': ';'.join(e.spec() for e in config.ordered_effects()),
         'sim_noise': f'pressure={config.pressure_noise:g},accel={config.accel_noise:g}',
     }
+    if config.anti_alias_hz is not None:
+        # A property of the digitiser, not of the sensor: it stays in blind recordings.
+        metadata['anti_alias'] = f'bessel4,fc_hz={config.anti_alias_hz:g}'
+    return metadata
 
 
 def simulate(config: RigConfig) -> Simulation:
@@ -198,8 +237,7 @@ def simulate(config: RigConfig) -> Simulation:
                            rng=np.random.default_rng([config.seed, _TOUCHES, 1]))
     end = touches[-1].end_s + config.post_s
     n = int(math.floor(end * fs)) + 1
-    t = np.arange(n) / fs
-    clean_accel = np.stack([acceleration(touches, t, axis=i) for i in range(3)])
+    clean_accel = _sampled_acceleration(config, touches, n)
     induced, transient = _induced_and_transient(config, touches, n)
     disturbance = transient + _stationary(config, n)
     pressure_sd = config.pressure_noise * float(np.max(np.abs(induced)))

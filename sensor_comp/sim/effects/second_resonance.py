@@ -44,7 +44,7 @@ class SecondResonance(Effect):
                         doc='static gain relative to the sensor sensitivity S')
 
     def check(self, *, fs: float, sensor: SensorConfig) -> None:
-        """Refuse a mode at or above the Nyquist frequency (there is no anti-alias filter)."""
+        """Refuse a mode at or above the Nyquist frequency (it would alias into the band)."""
         if self.freq_khz * 1e3 >= fs / 2:
             raise SimConfigError(f'effect {self.id!r}: parameter \'freq_khz\' = '
                                  f'{self.freq_khz:g} must be below the Nyquist frequency '
