@@ -7,6 +7,11 @@ physical effects of the simulator switched on. The bags are written with
 ``sensor-comp simulate --blind``, so they do not tell which effect is in them: the answers
 live only here and in ``test_hidden_cases.py``. The letters do not follow the catalogue.
 
+Every run is digitised like a shock-measurement channel: a 4-pole Bessel anti-alias filter at
+a tenth of the sample rate on every channel (the usual rule for shock data: sample at ten
+times the filter corner), then white digitiser noise. Without it a sampled model could not
+follow the jerk step at a pulse corner (the step falls between samples).
+
 Effect sizes are realistic but well above the noise, chosen (within the simulator's
 physical ranges) so that the residual of the wrong model stands out of the noise of the
 weakest validation shot; time constants are short enough for the tails to die out before
@@ -25,6 +30,9 @@ import sys
 ROOT = Path(__file__).resolve().parents[1]
 BAGS = ROOT / 'bags'
 ROLES = ('calib', 'valid')
+#: -3 dB frequency of every case's anti-alias filter relative to the sample rate (a 4-pole
+#: Bessel: flat group delay, little overshoot on a shock pulse).
+ANTI_ALIAS = 0.1
 
 #: Physical parameters checked against the truth, per effect (same names in the
 #: simulator and in the fitted model).
@@ -90,7 +98,8 @@ class Case:
                 '--peak-g', *(f'{g:g}' for g in self.peak_g),
                 '--width-ms', *(f'{w:g}' for w in self.width_ms),
                 '--lateral', f'{self.lateral:g}', '--pre-ms', '5',
-                '--post-ms', f'{self.post_ms:g}']
+                '--post-ms', f'{self.post_ms:g}',
+                '--anti-alias-khz', f'{self.fs * ANTI_ALIAS / 1e3:g}']
         for spec in self.effects:
             argv += ['--effect', spec]
         return argv
@@ -124,8 +133,12 @@ CASES = (
          width_ms=(0.8, 2.0)),
     Case('f', ('amplifier_highpass:tau_ms=8',), fs=200e3, shots=(6, 4), seeds=(601, 602),
          noise=0.3, accel_noise=0.1, peak_g=(1000, 3000), width_ms=(1.0, 2.5), post_ms=35),
+    # The strain term is a derivative: the fit estimates it from differenced acceleration,
+    # whose high-frequency noise biases it towards a lagging, smoothed jerk (errors in the
+    # variables) and leaves the pulse corners unexplained. 0.005 % is a 16-bit digitiser on
+    # a +-5000 g range; at 0.03 % the peak residual falls by 57 % rather than 76 %.
     Case('g', ('strain_sensitivity:pa_per_g_per_ms=3',), fs=200e3, shots=(6, 4),
-         seeds=(701, 702), noise=0.3, accel_noise=0.03, peak_g=(800, 2400),
+         seeds=(701, 702), noise=0.15, accel_noise=0.005, peak_g=(800, 2400),
          width_ms=(0.8, 1.6)),
     Case('h', ('second_resonance:freq_khz=20,zeta=0.015,gain=0.4',), fs=1e6, shots=(3, 2),
          seeds=(801, 802), noise=0.2, accel_noise=0.1, peak_g=(1000, 3000),

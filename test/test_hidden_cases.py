@@ -60,29 +60,10 @@ PARAMETER_TOLERANCE = 0.15
 SINGLE = [c for c in CASES.CASES if len(c.effects) == 1]
 PAIRS = [c for c in CASES.CASES if len(c.effects) == 2]
 CLEAN = [c for c in CASES.CASES if not c.effects]
-# A base-strain term follows the jerk, which steps at the corners of a half-sine pulse. The
-# simulator samples the step as it is (no anti-alias filter), while the acceleration sample
-# after a corner holds only the part of the interval the pulse has run: the first pressure
-# sample after each corner cannot be predicted from the acceleration samples. Measured on
-# case g: the extended model's worst residual sits on such a sample in every validation shot
-# (5-16 noise sigma), the peak residual falls by about 40 %, not 60 %, while the fit reaches
-# the ceiling and the coefficient is recovered.
-PEAK_LIMITED = {'strain_sensitivity': 'the jerk step at the pulse corners is not predictable '
-                                      'from the sampled acceleration (see the comment above)'}
 
 
 def _ids(case) -> str:
     return f'case_{case.name}'
-
-
-def _with_marks(cases):
-    """Return ``cases`` as pytest params, known peak-residual limits marked xfail (strict)."""
-    out = []
-    for case in cases:
-        reasons = [PEAK_LIMITED[e] for e in case.effect_ids if e in PEAK_LIMITED]
-        marks = [pytest.mark.xfail(strict=True, reason=reasons[0])] if reasons else []
-        out.append(pytest.param(case, id=_ids(case), marks=marks))
-    return out
 
 
 @dataclass(frozen=True)
@@ -175,7 +156,7 @@ def test_both_hidden_effects_rank_in_the_top_two(case):
     assert entry.significant
 
 
-@pytest.mark.parametrize('case', _with_marks(SINGLE + PAIRS))
+@pytest.mark.parametrize('case', SINGLE + PAIRS, ids=_ids)
 def test_adding_the_effect_removes_the_peak_residual(case):
     result = outcome(case.name)
     before = result.diagnosis.peak_residual_percent
