@@ -1,5 +1,5 @@
 """
-The ``recorder`` node: record topics into one rosbag2-layout MCAP file.
+The ``recorder`` node: record topics into a rosbag2-layout MCAP file, or a series of them.
 
 Run it as ``recorder --ros-args -r __ns:=/rig -p output:=run.mcap`` (or
 ``python -m sensor_comp.nodes.recorder ...``); stop it with Ctrl-C or SIGTERM.
@@ -17,6 +17,26 @@ Parameters (read once at start):
 - ``flush_period`` (s, default 1.0; 0 = only when a chunk is full): how often the open
   chunk is written out, which bounds what a crash (SIGKILL, power loss) can lose.
 - ``discovery_period`` (s, default 0.5): how often the graph is searched for new topics.
+- ``max_bag_duration`` (s, default 0 = no limit) and ``max_bag_size`` (bytes, default 0 =
+  no limit): split the recording into files, like rosbag2's options of the same names (see
+  below).
+- ``diagnostics_period`` (s, default 1.0): how often the status goes to ``/diagnostics``.
+
+Splitting: with ``max_bag_duration`` or ``max_bag_size`` set, ``output`` ``run.mcap``
+becomes the series ``run_0000.mcap``, ``run_0001.mcap``, ... in the same directory (four
+digits at least, so that names sort in recording order up to 10 000 files; the recorder
+refuses to start if files of such a series exist already). A new file is started before
+the message whose receive time is ``max_bag_duration`` or more past the first message of
+the current file, or before any message once the current file reached ``max_bag_size``
+bytes on disk (a file grows by whole compressed chunks, so it ends at most one chunk past
+the size). The current file is closed (summary written) before the next one is created:
+when ``run_0001.mcap`` exists, ``run_0000.mcap`` is complete. Every message is in exactly
+one file, except the latched ones: each new file starts with the latest messages of every
+latched topic (as many per topic as the depths of its publishers add up to, with their
+original times), the ones a subscriber joining at that moment would get, so that every
+file is readable alone (``stream_info`` gives the blocks' rate). Under a backlog the
+recorder takes messages in per-topic runs (see below), so a file may hold a few messages
+received just before its first one.
 
 How messages are stored: the subscriptions are ``raw``, so the CDR bytes go to the bag
 without being deserialised. ``log_time`` is the DDS receive time and ``publish_time`` the
@@ -31,6 +51,11 @@ publisher offering it can match: transient-local when all publishers offer trans
 reliable (else best effort), and always keep-all so that no message is lost while the
 recorder is busy writing.
 
+``/diagnostics`` (status ``sensor_comp: recorder``): messages recorded per topic, the file
+being written and the number of files, and ``newest_age_s``, the time since the receive
+time of the newest message written: under a steady stream this is how far the recorder
+lags behind what DDS has received for it (its queues grow meanwhile).
+
 On SIGINT/SIGTERM the recorder stops discovering topics, takes what its subscriptions still
 hold (messages received before the signal), writes the MCAP summary and logs how many
 messages it recorded per topic. A killed recorder leaves a file without summary from which
@@ -39,22 +64,30 @@ messages it recorded per topic. A killed recorder leaves a file without summary 
 
 from __future__ import annotations
 
+from collections import deque
 from datetime import datetime
 import functools
 from pathlib import Path
+import re
 import sys
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..errors import SensorCompError
 from ..io.bag_writer import BagWriter
-from ._common import check, declare, DEFAULT_NAMESPACE, message_class, NodeError, run_main
+from ..io.messages import DIAGNOSTIC_ARRAY
+from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTICS_QOS,
+                      diagnostics, message_class, NodeError, run_main)
 
-__all__ = ['Recorder', 'main']
+__all__ = ['Recorder', 'main', 'split_path']
+
+#: Status name on ``/diagnostics``.
+STATUS_NAME = 'sensor_comp: recorder'
 
 # Infrastructure topics every node publishes; recorded only when listed.
 _INFRASTRUCTURE = ('/rosout', '/parameter_events')
@@ -66,9 +99,15 @@ _DRAIN_STEP_S = 0.05
 _BATCH = 256
 
 
+def split_path(output: Path, index: int) -> Path:
+    """Return split file ``index`` of ``output`` (``run.mcap``, 3: ``run_0003.mcap``)."""
+    output = Path(output)
+    return output.with_name(f'{output.stem}_{index:04d}{output.suffix}')
+
+
 class Recorder(Node):
     """
-    Record topics into one MCAP bag (see the module documentation for the parameters).
+    Record topics into an MCAP bag or a split series (see the module documentation).
 
     Spin it with any executor and call :meth:`close` (or ``destroy_node``) when done, or
     call :meth:`run`, which spins it until an event is set and then finalises the bag.
@@ -78,8 +117,15 @@ class Recorder(Node):
         **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
             ``/rig``; ``context``; ``parameter_overrides``; ...).
 
+    Attributes:
+        output: The ``output`` parameter (the series' base name when splitting).
+        splitting: Whether the recording is split into files.
+        files: The files created so far, the one being written last (see :attr:`path`).
+        counts: Messages recorded per topic, all files together (latched messages repeated
+            in split files not counted again).
+
     Raises:
-        NodeError: On a bad parameter or an existing output file.
+        NodeError: On a bad parameter or an existing output file (or split series).
         BagError: If the output file cannot be created.
 
     """
@@ -98,26 +144,109 @@ class Recorder(Node):
                                'seconds between writes of the open chunk; 0: only when full')
         discovery_period = declare(self, 'discovery_period', 0.5,
                                    'seconds between searches for new topics')
+        max_duration = declare(self, 'max_bag_duration', 0.0,
+                               'seconds of receive time per file; 0: no limit')
+        self.max_bag_size = declare(self, 'max_bag_size', 0,
+                                    'bytes per file on disk; 0: no limit')
+        period = declare(self, 'diagnostics_period', 1.0, 'seconds between diagnostics')
         check(self, 'chunk_size', chunk_size, chunk_size > 0, 'a positive number of bytes')
         check(self, 'flush_period', flush_period, flush_period >= 0, 'a number of s >= 0')
-        check(self, 'discovery_period', discovery_period, discovery_period > 0,
-              'a positive number of seconds')
-        self.path = Path(output)
-        check(self, 'output', output, bool(output) and not self.path.exists(),
-              'the name of a file that does not exist yet')
+        for name, value in (('discovery_period', discovery_period),
+                            ('diagnostics_period', period)):
+            check(self, name, value, value > 0, 'a positive number of seconds')
+        check(self, 'max_bag_duration', max_duration, max_duration >= 0,
+              'a number of seconds >= 0 (0: no limit)')
+        check(self, 'max_bag_size', self.max_bag_size, self.max_bag_size >= 0,
+              'a number of bytes >= 0 (0: no limit)')
+        self._max_duration_ns = round(max_duration * 1e9)
+        self.output = Path(output)
+        self.splitting = bool(self._max_duration_ns or self.max_bag_size)
+        self._check_output(output)
         self._wanted = {self._resolve(t) for t in topics}
-        self._writer = BagWriter(self.path, compression=compression, chunk_size=chunk_size)
+        self._writer_options = {'compression': compression, 'chunk_size': chunk_size}
+        self.files: list[Path] = []
         self.counts: dict[str, int] = {}
+        self._types: dict[str, tuple[str, bool]] = {}  # topic: (msgtype, latched)
+        self._latched: dict[str, deque] = {}  # repeated in each split file
+        self._file_start_ns: int | None = None
+        self._file_messages = 0
+        self._newest_ns: int | None = None
+        self._writer: BagWriter | None = None
+        self._open(0)
         self._topic_subscriptions = {}
         self._skipped: set[str] = set()
         self._dirty = False
         self._stop_ns: int | None = None
-        self._own_timers = [self.create_timer(discovery_period, self.discover)]
+        self._diagnostics = self.create_publisher(message_class(DIAGNOSTIC_ARRAY), DIAGNOSTICS,
+                                                  DIAGNOSTICS_QOS)
+        self._own_timers = [self.create_timer(discovery_period, self.discover),
+                            self.create_timer(period, self.publish_diagnostics)]
         if flush_period:
             self._own_timers.append(self.create_timer(flush_period, self._flush))
         what = ', '.join(sorted(self._wanted)) or f'every topic under {self.get_namespace()}'
-        self.get_logger().info(f'recording {what} to {self.path}')
+        limits = ' and '.join(x for x in (
+            f'{max_duration:g} s' if max_duration else '',
+            f'{self.max_bag_size} bytes' if self.max_bag_size else '') if x)
+        split = f' (a new file every {limits})' if self.splitting else ''
+        self.get_logger().info(f'recording {what} to {self.path}{split}')
         self.discover()
+
+    @property
+    def path(self) -> Path:
+        """Return the file being written (once closed, the last one written)."""
+        return self.files[-1]
+
+    def _check_output(self, output: str) -> None:
+        check(self, 'output', output, bool(output), 'the name of a file to create')
+        if not self.splitting:
+            check(self, 'output', output, not self.output.exists(),
+                  'the name of a file that does not exist yet')
+            return
+        series = re.compile(re.escape(self.output.stem) + r'_\d{4,}' +
+                            re.escape(self.output.suffix) + '$')
+        parent = self.output.parent
+        found = sorted(p.name for p in parent.iterdir() if series.match(p.name)) \
+            if parent.is_dir() else []
+        check(self, 'output', output, not found,
+              f'a name whose split files do not exist yet (found {", ".join(found[:3])}'
+              f'{", ..." if len(found) > 3 else ""} in {parent})')
+
+    def _open(self, index: int) -> None:
+        """Create file ``index`` (the next free name) with every topic recorded so far."""
+        path = split_path(self.output, index) if self.splitting else self.output
+        while self.splitting and path.exists():  # made by someone else since the start
+            self.get_logger().warning(f'{path} exists (not written by this recorder); '
+                                      f'skipped, it stays as it is')
+            index += 1
+            path = split_path(self.output, index)
+        self._index = index
+        self._writer = BagWriter(path, **self._writer_options)
+        self.files.append(path)
+        self._file_start_ns = None
+        self._file_messages = 0
+        for topic, (msgtype, latched) in self._types.items():
+            self._writer.add_topic(topic, msgtype, latched=latched)
+        for topic, kept in self._latched.items():
+            for data, log_time, publish_time in kept:
+                self._writer.write(topic, data, log_time_ns=log_time,
+                                   publish_time_ns=publish_time)
+
+    def _split(self) -> None:
+        """Close the current file, then start the next one."""
+        writer, self._writer = self._writer, None
+        messages = self._file_messages
+        writer.close()
+        self._open(self._index + 1)
+        self.get_logger().info(f'closed {writer.path} ({messages} messages); recording to '
+                               f'{self.path}')
+
+    def _split_due(self, received: int) -> bool:
+        if self._file_start_ns is None:  # nothing but repeated latched messages yet
+            return False
+        if self._max_duration_ns and received - self._file_start_ns >= self._max_duration_ns:
+            return True
+        return bool(self.max_bag_size) and \
+            self._writer.file_path.stat().st_size >= self.max_bag_size
 
     def _resolve(self, topic: str) -> str:
         try:
@@ -142,6 +271,8 @@ class Recorder(Node):
     def discover(self) -> None:
         """Subscribe to every wanted topic that has a publisher and is not recorded yet."""
         for topic, types in self.get_topic_names_and_types():
+            if topic in self._latched:
+                self._keep_latched(topic, self.get_publishers_info_by_topic(topic))
             if topic in self.counts or topic in self._skipped or not self._wants(topic):
                 continue
             publishers = self.get_publishers_info_by_topic(topic)
@@ -166,11 +297,21 @@ class Recorder(Node):
                 self._skip(topic, str(exc))
                 continue
             self.counts[topic] = 0
+            self._types[topic] = (types[0], latched)
+            if latched and self.splitting:
+                self._keep_latched(topic, publishers)
             self._topic_subscriptions[topic] = self.create_subscription(
                 msg_class, topic, functools.partial(self._record, topic), qos, raw=True)
             self.get_logger().info(f'recording {topic} ({types[0]}'
                                    f'{", latched" if latched else ""}'
                                    f'{"" if reliable else ", best effort"})')
+
+    def _keep_latched(self, topic: str, publishers) -> None:
+        """Keep as many of the topic's latest messages as its publishers' depths add up to."""
+        depth = sum(max(1, p.qos_profile.depth) for p in publishers)
+        kept = self._latched.get(topic)
+        if kept is None or kept.maxlen < depth:  # never shrinks: a publisher may come back
+            self._latched[topic] = deque(kept or (), maxlen=depth)
 
     def _skip(self, topic: str, why: str) -> None:
         self._skipped.add(topic)
@@ -193,9 +334,18 @@ class Recorder(Node):
         received = info.get('received_timestamp') or time.time_ns()
         if self._stop_ns is not None and received > self._stop_ns:
             return  # arrived after the stop request
-        self._writer.write(topic, data, log_time_ns=received,
-                           publish_time_ns=info.get('source_timestamp') or received)
+        if self.splitting and self._split_due(received):
+            self._split()
+        published = info.get('source_timestamp') or received
+        self._writer.write(topic, data, log_time_ns=received, publish_time_ns=published)
+        if self._file_start_ns is None:
+            self._file_start_ns = received
+        kept = self._latched.get(topic)
+        if kept is not None:
+            kept.append((data, received, published))
         self.counts[topic] += 1
+        self._file_messages += 1
+        self._newest_ns = received
         self._dirty = True
 
     def _flush(self) -> None:
@@ -236,8 +386,19 @@ class Recorder(Node):
         writer, self._writer = self._writer, None
         writer.close()
         lines = ''.join(f'\n  {topic}: {count}' for topic, count in sorted(self.counts.items()))
+        where = (f'{len(self.files)} files {self.files[0]} ... {self.path.name}'
+                 if len(self.files) > 1 else str(self.path))
         self.get_logger().info(f'recorded {self.received} messages on {len(self.counts)} '
-                               f'topics to {self.path}{lines}')
+                               f'topics to {where}{lines}')
+
+    def publish_diagnostics(self) -> None:
+        """Publish the recorder's status on ``/diagnostics``."""
+        age = (time.time_ns() - self._newest_ns) / 1e9 if self._newest_ns else ''
+        values = {'messages': self.received, 'file': str(self.path),
+                  'files': len(self.files), 'newest_age_s': age, **self.counts}
+        self._diagnostics.publish(diagnostics(
+            self, name=STATUS_NAME, level=DiagnosticStatus.OK, values=values,
+            message=f'{self.received} messages on {len(self.counts)} topics to {self.path}'))
 
     def destroy_node(self) -> None:
         """Close the bag, then destroy the node."""
