@@ -22,7 +22,7 @@ import numpy as np
 
 from .streams import Gap, Stream, StreamError, StreamInfo
 
-__all__ = ['assemble', 'iter_blocks']
+__all__ = ['BlockSequence', 'assemble', 'iter_blocks']
 
 
 def iter_blocks(stream: Stream, *, width: int) -> Iterator[tuple[int, np.ndarray]]:
@@ -65,7 +65,79 @@ def _describe(stamp: int, width: int) -> str:
     return f'block at stamp {stamp} ns ({width} samples)'
 
 
-def assemble(info: StreamInfo, blocks: Iterable[tuple[int, np.ndarray]]) -> Stream:
+class BlockSequence:
+    """
+    Check that the blocks of one stream follow each other, one block at a time.
+
+    This is the check :func:`assemble` applies, for readers that process blocks as they
+    come (e.g. compensating a bag block by block) instead of joining them.
+
+    Args:
+        info: The stream's metadata; its rate defines where each block should start.
+        name: Name of the stream in error messages (default ``info.topic``), e.g. the
+            absolute topic.
+
+    """
+
+    def __init__(self, info: StreamInfo, *, name: str | None = None):
+        self.info = info
+        self.name = info.topic if name is None else name
+        #: ``(stamp, width)`` of the last non-empty block, ``None`` before the first.
+        self.previous: tuple[int, int] | None = None
+
+    def add(self, stamp: int, block: np.ndarray) -> int:
+        """
+        Check the next block and return how many samples are missing before it.
+
+        Args:
+            stamp: Stamp of the block's first sample in integer nanoseconds.
+            block: ``(channels, w)`` samples; an empty block is accepted and ignored.
+
+        Returns:
+            0 for the first block and for a block that starts where the previous one ends
+            (within half a sample), else the number of samples of the gap.
+
+        Raises:
+            StreamError: If the block has the wrong number of channels, starts before the
+                previous block starts (out of order) or more than half a sample before it
+                ends (overlap, duplicate); the message names the stream, the stamps and
+                the sizes.
+
+        """
+        info, stamp = self.info, int(stamp)
+        shape = np.shape(block)
+        if len(shape) != 2 or shape[0] != len(info.channels):
+            width = shape[-1] if shape else 0
+            raise StreamError(f'stream {self.name!r}: {_describe(stamp, width)} has shape '
+                              f'{shape}, expected ({len(info.channels)}, samples) for '
+                              f'channels {", ".join(info.channels)}')
+        width = shape[1]
+        if width == 0:
+            return 0
+        missing = 0
+        if self.previous is not None:
+            prev_stamp, prev_width = self.previous
+            expected = prev_stamp + round(prev_width * 1e9 / info.fs)
+            offset = (stamp - expected) * info.fs / 1e9  # in samples
+            if stamp < prev_stamp:
+                raise StreamError(
+                    f'stream {self.name!r}: {_describe(stamp, width)} arrived after the '
+                    f'{_describe(prev_stamp, prev_width)}: blocks out of order; sort them '
+                    f'by stamp or check the DAQ clock')
+            if offset < -0.5:
+                raise StreamError(
+                    f'stream {self.name!r}: {_describe(stamp, width)} overlaps the previous '
+                    f'{_describe(prev_stamp, prev_width)}, which ends at {expected} ns, by '
+                    f'{-offset:.1f} samples at {info.fs:g} Hz: duplicated blocks, two '
+                    f'publishers on one topic, or a wrong sample rate')
+            if offset > 0.5:
+                missing = math.floor(offset + 0.5)
+        self.previous = (stamp, width)
+        return missing
+
+
+def assemble(info: StreamInfo, blocks: Iterable[tuple[int, np.ndarray]], *,
+             name: str | None = None) -> Stream:
     """
     Join blocks into one stream, turning missing blocks into NaN gaps.
 
@@ -73,6 +145,7 @@ def assemble(info: StreamInfo, blocks: Iterable[tuple[int, np.ndarray]]) -> Stre
         info: The stream's metadata; its rate defines where each block should start.
         blocks: ``(stamp_ns, (channels, w) array)`` in acquisition order. Empty blocks are
             ignored.
+        name: Name of the stream in error messages (default ``info.topic``).
 
     Returns:
         The stream, with ``t0_ns`` = stamp of the first block. Samples no block delivered
@@ -85,46 +158,25 @@ def assemble(info: StreamInfo, blocks: Iterable[tuple[int, np.ndarray]]) -> Stre
             message names the topic, the stamps and the sizes.
 
     """
-    fs, topic = info.fs, info.topic
+    sequence = BlockSequence(info, name=name)
     n_channels = len(info.channels)
     parts, gaps = [], []
     n = 0
-    previous = None  # (stamp, width) of the previous block
+    t0 = None
     for stamp, data in blocks:
         block = np.asarray(data, dtype=np.float64)
-        stamp = int(stamp)
-        if block.ndim != 2 or block.shape[0] != n_channels:
-            raise StreamError(f'stream {topic!r}: {_describe(stamp, block.shape[-1])} has '
-                              f'shape {block.shape}, expected ({n_channels}, samples) for '
-                              f'channels {", ".join(info.channels)}')
-        width = block.shape[1]
-        if width == 0:
+        missing = sequence.add(stamp, block)
+        if block.shape[-1] == 0:
             continue
-        if previous is not None:
-            prev_stamp, prev_width = previous
-            expected = prev_stamp + round(prev_width * 1e9 / fs)
-            offset = (stamp - expected) * fs / 1e9  # in samples
-            if stamp < prev_stamp:
-                raise StreamError(
-                    f'stream {topic!r}: {_describe(stamp, width)} arrived after the '
-                    f'{_describe(prev_stamp, prev_width)}: blocks out of order; sort them '
-                    f'by stamp or check the DAQ clock')
-            if offset < -0.5:
-                raise StreamError(
-                    f'stream {topic!r}: {_describe(stamp, width)} overlaps the previous '
-                    f'{_describe(prev_stamp, prev_width)}, which ends at {expected} ns, by '
-                    f'{-offset:.1f} samples at {fs:g} Hz: duplicated blocks, two publishers '
-                    f'on one topic, or a wrong sample rate')
-            if offset > 0.5:
-                missing = math.floor(offset + 0.5)
-                gaps.append(Gap(n, missing))
-                parts.append(np.full((n_channels, missing), np.nan))
-                n += missing
-        else:
-            t0 = stamp
+        if t0 is None:
+            t0 = int(stamp)
+        if missing:
+            gaps.append(Gap(n, missing))
+            parts.append(np.full((n_channels, missing), np.nan))
+            n += missing
         parts.append(block)
-        n += width
-        previous = (stamp, width)
-    if previous is None:
-        raise StreamError(f'stream {topic!r}: no samples to assemble (no non-empty block)')
+        n += block.shape[1]
+    if t0 is None:
+        raise StreamError(f'stream {sequence.name!r}: no samples to assemble (no non-empty '
+                          f'block)')
     return Stream(info, t0, np.concatenate(parts, axis=1), tuple(gaps))

@@ -245,29 +245,39 @@ class Recording:
                 grids are offset by a fraction of a sample.
 
         """
+        accel_name, press_name = acceleration.info.topic, pressure.info.topic
         if acceleration.data.shape[0] != 3:
-            raise StreamError(f'stream {acceleration.info.topic!r} must have 3 channels '
-                              f'(x, y, z), has {acceleration.data.shape[0]}')
+            raise StreamError(f'stream {accel_name!r} must have 3 channels (x, y, z), has '
+                              f'{acceleration.data.shape[0]} '
+                              f'({", ".join(acceleration.info.channels)})')
         if pressure.data.shape[0] != 1:
-            raise StreamError(f'stream {pressure.info.topic!r} must have 1 channel, has '
-                              f'{pressure.data.shape[0]}')
+            raise StreamError(f'stream {press_name!r} must have 1 channel, has '
+                              f'{pressure.data.shape[0]} ({", ".join(pressure.info.channels)})')
         if not math.isclose(acceleration.fs, pressure.fs, rel_tol=1e-9):
-            raise StreamError(f'sample rates differ: {acceleration.info.topic!r} at '
-                              f'{acceleration.fs:g} Hz, {pressure.info.topic!r} at '
+            raise StreamError(f'sample rates differ: {accel_name!r} at '
+                              f'{acceleration.fs:g} Hz, {press_name!r} at '
                               f'{pressure.fs:g} Hz; resample one of them first')
         fs = acceleration.fs
         offset = (pressure.t0_ns - acceleration.t0_ns) * fs / 1e9
         shift = round(offset)
         if abs(offset - shift) > 0.01:
-            raise StreamError(f'pressure and acceleration samples are not on one grid: '
-                              f'offset {offset:.3f} samples')
+            raise StreamError(f'{press_name!r} starts at {pressure.t0_ns} ns and {accel_name!r} '
+                              f'at {acceleration.t0_ns} ns, {offset:.3f} samples apart at '
+                              f'{fs:g} Hz: they are not on one grid; the two streams must '
+                              f'come from one DAQ, whose blocks share stamps')
         a_start = max(0, shift)
         p_start = max(0, -shift)
         n = min(acceleration.n_samples - a_start, pressure.n_samples - p_start)
         if n <= 0:
-            raise StreamError('pressure and acceleration streams do not overlap in time')
+            raise StreamError(f'{accel_name!r} ({_span(acceleration)}) and {press_name!r} '
+                              f'({_span(pressure)}) do not overlap in time: record them '
+                              f'together')
         metadata = {**acceleration.info.metadata, **pressure.info.metadata}
         return cls(fs=fs, t0_ns=acceleration.stamp_ns(a_start),
                    pressure=pressure.data[0, p_start:p_start + n],
                    acceleration=acceleration.data[:, a_start:a_start + n],
                    frame_id=pressure.info.frame_id, metadata=metadata)
+
+
+def _span(stream: Stream) -> str:
+    return f'{stream.t0_ns} to {stream.stamp_ns(stream.n_samples)} ns'

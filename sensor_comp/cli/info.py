@@ -18,6 +18,10 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+#: Gaps listed one by one in the text output (all of them are in --json).
+_GAPS_SHOWN = 5
+
+
 def run(args: argparse.Namespace) -> int:
     """Print the bag summary; return the exit code."""
     from ..io.bag_reader import BagReader, read_streams
@@ -25,11 +29,15 @@ def run(args: argparse.Namespace) -> int:
     with BagReader(args.bag) as reader:
         topics = {name: {'type': t.msgtype, 'latched': t.latched, 'messages': t.message_count}
                   for name, t in sorted(reader.topics.items())}
-        truncated = reader.truncated
-    streams = read_streams(args.bag)
+        truncated, warning = reader.truncated, reader.warning
+        advice = (f'run `sensor-comp repair {args.bag}` to write a finalised copy'
+                  if truncated else '')
+    # info describes what a cut-short bag still holds; the warning is part of its output.
+    streams = read_streams(args.bag, on_truncated='ignore')
     summary = {
         'bag': str(args.bag),
         'truncated': truncated,
+        'warning': warning,
         'topics': topics,
         'streams': {
             name: {'fs_hz': s.fs, 'channels': list(s.info.channels), 'unit': s.info.unit,
@@ -44,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f'bag: {args.bag}' + ('  (TRUNCATED: recovered the complete chunks)' if truncated
                                 else ''))
+    if warning:
+        print(f'  {warning}' + (f'; {advice}' if advice else ''))
     print('topics:')
     for name, t in topics.items():
         print(f'  {name:40s} {t["type"]:36s} {t["messages"]:8d} msgs'
@@ -54,4 +64,10 @@ def run(args: argparse.Namespace) -> int:
         gaps = f', {count} gap{"s" if count > 1 else ""}' if count else ''
         print(f'  {name:24s} {s["fs_hz"] / 1e3:g} kS/s  {",".join(s["channels"])} '
               f'[{s["unit"]}]  {s["samples"]} samples = {s["duration_s"]:.4g} s{gaps}')
+        for gap in s['gaps'][:_GAPS_SHOWN]:
+            print(f'    gap: {gap["count"]} samples ({gap["count"] / s["fs_hz"] * 1e3:.4g} ms) '
+                  f'missing from sample {gap["start"]} '
+                  f'(t = {gap["start"] / s["fs_hz"]:.6g} s), NaN in the data')
+        if count > _GAPS_SHOWN:
+            print(f'    ... and {count - _GAPS_SHOWN} more gaps (--json lists them all)')
     return 0

@@ -15,8 +15,8 @@ from ..errors import SensorCompError
 __all__ = ['main']
 
 #: Sub-command modules of :mod:`sensor_comp.cli`, in the order ``--help`` lists them.
-COMMANDS = ('simulate', 'import_csv', 'info', 'identify', 'show', 'compare', 'diagnose',
-            'report', 'compensate', 'demo')
+COMMANDS = ('simulate', 'import_csv', 'info', 'repair', 'identify', 'show', 'compare',
+            'diagnose', 'report', 'compensate', 'demo')
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -16,9 +16,11 @@ raw pressure into a :class:`~sensor_comp.streams.Recording`.
 
 from __future__ import annotations
 
+import errno
 import mmap
 import os
 from pathlib import Path
+import re
 import struct
 from typing import Iterable, Iterator, NamedTuple
 import warnings
@@ -31,31 +33,47 @@ from ..blocks import assemble
 from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO, Stream, StreamError
 from ..streams import StreamInfo
 from .bag_writer import topic_name
-from .messages import decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, IMAGE, MessageError
+from .messages import (BLOCK_ENCODING, decode_block, decode_stream_info, DIAGNOSTIC_ARRAY,
+                       IMAGE, MessageError)
 from .rosbag2_layout import (BagError, is_latched, MESSAGE_ENCODING, PROFILE,
                              SCHEMA_ENCODINGS, TruncatedBagWarning)
 
 __all__ = [
+    'AttachmentRecord',
     'BagError',
     'BagReader',
+    'block_topics',
+    'ChannelRecord',
+    'DamagedChunk',
+    'MCAP_MAGIC',
     'find_namespace',
+    'MetadataRecord',
     'RawMessage',
+    'SchemaRecord',
     'TopicInfo',
+    'TruncatedBagError',
     'TruncatedBagWarning',
     'read_recording',
     'read_stream_infos',
     'read_streams',
+    'require_described',
 ]
 
-_MAGIC = b'\x89MCAP0\r\n'
+#: The first bytes of every MCAP file.
+MCAP_MAGIC = b'\x89MCAP0\r\n'
 _HEADER, _FOOTER, _SCHEMA, _CHANNEL, _MESSAGE, _CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
-_STATISTICS, _DATA_END = 0x0B, 0x0F
+_ATTACHMENT, _STATISTICS, _METADATA, _DATA_END = 0x09, 0x0B, 0x0C, 0x0F
 _RECORD = struct.Struct('<BQ')  # opcode, length
 _FOOTER_SIZE = _RECORD.size + 20
+_FOOTER_BODY = struct.Struct('<QQI')  # summary start, summary offsets start, summary CRC
 _MESSAGE_HEAD = struct.Struct('<HIQQ')  # channel, sequence, log time, publish time
 _CHUNK_HEAD = struct.Struct('<QQQI')  # start, end, uncompressed size, uncompressed crc
 _STATISTICS_HEAD = struct.Struct('<QHIIIIQQI')
 _U16, _U32, _U64 = struct.Struct('<H'), struct.Struct('<I'), struct.Struct('<Q')
+_TIMES = struct.Struct('<QQ')
+# rosbag2's bag directory: metadata.yaml names the storage plugin and the files.
+_STORAGE = re.compile(r'^\s*storage_identifier:\s*["\']?([\w-]+)', re.MULTILINE)
+_FILES = re.compile(r'^(\s*)relative_file_paths:\s*\n((?:\1\s*-\s*.+\n?)*)', re.MULTILINE)
 
 
 class TopicInfo(NamedTuple):
@@ -74,12 +92,61 @@ class RawMessage(NamedTuple):
     log_time_ns: int
     publish_time_ns: int
     data: bytes
+    sequence: int = 0
 
 
-class _Channel(NamedTuple):
+class SchemaRecord(NamedTuple):
+    """An MCAP schema: message type name, encoding (``ros2msg``) and definition text."""
+
+    name: str
+    encoding: str
+    data: bytes
+
+
+class ChannelRecord(NamedTuple):
+    """An MCAP channel: topic, its type, latched flag, schema id and channel metadata."""
+
     topic: str
     msgtype: str
     latched: bool
+    schema_id: int
+    message_encoding: str
+    metadata: dict
+
+
+class MetadataRecord(NamedTuple):
+    """An MCAP metadata record (e.g. rosbag2's ``rosbag2`` record)."""
+
+    name: str
+    metadata: dict
+
+
+class AttachmentRecord(NamedTuple):
+    """An MCAP attachment (a file stored in the bag)."""
+
+    log_time_ns: int
+    create_time_ns: int
+    name: str
+    media_type: str
+    data: bytes
+
+
+class DamagedChunk(NamedTuple):
+    """
+    A part of the data section that could not be read.
+
+    ``offset`` is its byte offset in the file; ``start_ns``/``end_ns`` the log times of the
+    messages it holds (``None`` when its header is unreadable too).
+    """
+
+    offset: int
+    start_ns: int | None
+    end_ns: int | None
+    reason: str
+
+
+class TruncatedBagError(BagError):
+    """A bag was cut short in its data section: messages after the cut are lost."""
 
 
 class _Cut(Exception):
@@ -90,14 +157,53 @@ class _Cut(Exception):
         self.offset = offset
 
 
+def _listing(paths) -> str:
+    return ', '.join(p.name for p in paths)
+
+
+def _rosbag2_files(folder: Path, metadata: Path) -> list[Path]:
+    """Return the files a rosbag2 ``metadata.yaml`` lists, checking storage and presence."""
+    text = metadata.read_text(errors='replace')
+    storage = _STORAGE.search(text)
+    files = _FILES.search(text)
+    names = ([line.strip()[1:].strip().strip('"\'') for line in files.group(2).splitlines()
+              if line.strip()] if files else [])
+    if storage and storage.group(1) != 'mcap':
+        raise BagError(f'{folder} is a rosbag2 bag recorded with the '
+                       f'{storage.group(1)!r} storage ({", ".join(names) or "no files"}); '
+                       f'sensor_comp reads MCAP: convert it with `ros2 bag convert` '
+                       f'(output storage_id: mcap) or record with `--storage mcap`')
+    if not names:
+        return sorted(folder.glob('*.mcap'))
+    missing = [n for n in names if not (folder / n).is_file()]
+    if missing:
+        present = sorted(folder.glob('*.mcap'))
+        raise BagError(f'{folder}: metadata.yaml lists {", ".join(missing)}, which is '
+                       f'missing (the folder holds {_listing(present) or "no .mcap file"}); '
+                       f'pass the .mcap file itself')
+    return [folder / n for n in names]
+
+
 def _mcap_file(path: Path) -> Path:
     """Return ``path``, or the single ``.mcap`` file of a rosbag2 bag directory."""
+    if path.name == 'metadata.yaml' and path.is_file():
+        path = path.parent
     if not path.is_dir():
         return path
-    files = sorted(path.glob('*.mcap'))
-    if len(files) != 1:
-        raise BagError(f'{path} is a directory with {len(files)} .mcap files; pass one file')
-    return files[0]
+    metadata = path / 'metadata.yaml'
+    files = (_rosbag2_files(path, metadata) if metadata.is_file()
+             else sorted(path.glob('*.mcap')))
+    if len(files) == 1:
+        return files[0]
+    if files:
+        raise BagError(f'{path} is a bag split into {len(files)} files ({_listing(files)}); '
+                       f'sensor_comp reads one file at a time: pass one of them')
+    others = sorted(path.glob('*.db3'))
+    if others:
+        raise BagError(f'{path} holds a rosbag2 SQLite bag ({_listing(others)}), no .mcap '
+                       f'file; convert it with `ros2 bag convert` (output storage_id: mcap)')
+    raise BagError(f'{path} is a directory with no .mcap file; pass an MCAP bag (a .mcap '
+                   f'file, or a rosbag2 directory holding one)')
 
 
 def _string(buf, pos: int) -> tuple[str, int]:
@@ -105,7 +211,23 @@ def _string(buf, pos: int) -> tuple[str, int]:
     end = pos + 4 + size
     if end > len(buf):
         raise struct.error('string runs past the end of its record')
-    return str(buf[pos + 4:end], 'utf-8'), end
+    try:
+        return str(buf[pos + 4:end], 'utf-8'), end
+    except UnicodeDecodeError:
+        raise struct.error(f'string at byte {pos} of its record is not UTF-8') from None
+
+
+def _string_map(buf, pos: int) -> tuple[dict, int]:
+    (size,) = _U32.unpack_from(buf, pos)
+    pos += 4
+    end = pos + size
+    if end > len(buf):
+        raise struct.error('map runs past the end of its record')
+    items = {}
+    while pos < end:
+        key, pos = _string(buf, pos)
+        items[key], pos = _string(buf, pos)
+    return items, pos
 
 
 def _records(buf, start: int, end: int) -> Iterator[tuple[int, memoryview, int]]:
@@ -129,6 +251,14 @@ def _records(buf, start: int, end: int) -> Iterator[tuple[int, memoryview, int]]
         pos = body_end
 
 
+def _open_hint(error: OSError) -> str:
+    if error.errno == errno.ENOENT:
+        return 'check the path'
+    if error.errno == errno.EACCES:
+        return 'check its permissions (ls -l) or read it as its owner'
+    return 'check that it is a readable file'
+
+
 class BagReader:
     """
     Read the topics and messages of a ROS 2 MCAP bag.
@@ -140,26 +270,42 @@ class BagReader:
             for msg in bag.messages(['/rig/acceleration']):
                 ...
 
+    A usable summary (complete, CRC correct) gives topics and counts at once; otherwise the
+    data section is scanned. When the summary is used, a data section that does not parse
+    up to it is an error (the file was damaged, not cut).
+
     Args:
-        path: An ``.mcap`` file, or a rosbag2 bag directory holding exactly one.
+        path: An ``.mcap`` file, or a rosbag2 bag directory holding exactly one (its
+            ``metadata.yaml`` is honoured).
+        skip_damaged: Skip chunks that do not decompress or fail their CRC (and a damaged
+            record that ends the readable part) and list them in :attr:`damaged`, instead
+            of raising :class:`BagError` (what ``sensor-comp repair`` does).
 
     Attributes:
         path: The file read.
         profile: The MCAP profile (``'ros2'``).
         library: The writer's library string.
         topics: ``{topic: TopicInfo}`` of every channel in the file.
-        truncated: ``True`` when the file was cut short (no footer or unfinished summary).
-        warning: What was recovered and lost when ``truncated``, else ``''``.
+        schemas: ``{schema id: SchemaRecord}``.
+        channels: ``{channel id: ChannelRecord}``.
+        truncated: ``True`` when the writer did not finish the file (no footer or an
+            unfinished summary).
+        cut_in_data: ``True`` when the cut fell in the data section, so that messages may
+            be lost (a file cut in its summary only lost nothing).
+        warning: What was recovered and lost when ``truncated`` (or that a damaged summary
+            was ignored), else ``''``.
+        damaged: The parts skipped with ``skip_damaged``, in file order, once read.
 
     Raises:
-        BagError: If the file is missing, empty, not MCAP (the message shows its first
-            bytes), not the ``ros2`` profile, or has a channel that is not CDR with a
-            ``ros2msg``/``ros2idl`` schema.
+        BagError: If the file is missing, unreadable, empty, not MCAP (the message shows
+            its first bytes), not the ``ros2`` profile, or has a channel that is not CDR
+            with a ``ros2msg``/``ros2idl`` schema.
 
     """
 
-    def __init__(self, path):
+    def __init__(self, path, *, skip_damaged: bool = False):
         self.path = _mcap_file(Path(path))
+        self.skip_damaged = skip_damaged
         try:
             with open(self.path, 'rb') as file:
                 size = os.fstat(file.fileno()).st_size
@@ -167,26 +313,33 @@ class BagReader:
                     raise BagError(f'{self.path} is empty (0 bytes): its writer never wrote '
                                    f'to it, there is nothing to read')
                 self._map = mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ)
+        except IsADirectoryError:
+            raise BagError(f'{self.path} is a directory; pass an MCAP bag') from None
         except OSError as exc:
-            raise BagError(f'cannot open bag {self.path}: {exc.strerror}') from None
+            raise BagError(f'cannot open bag {self.path}: {exc.strerror}; '
+                           f'{_open_hint(exc)}') from None
         self._buf = memoryview(self._map)
-        self._schemas: dict[int, tuple[str, str]] = {}
-        self._channels: dict[int, _Channel] = {}
+        self.schemas: dict[int, SchemaRecord] = {}
+        self.channels: dict[int, ChannelRecord] = {}
         self.truncated = False
+        self.cut_in_data = False
         self.warning = ''
+        self._damaged: dict[int, DamagedChunk] = {}
         self._cut = None
         self._partial_chunk = None
         self._partial_messages = 0
         try:
             self._data_start = self._read_header()
+            self._data_stop = len(self._buf)
             counts = self._read_summary()
+            self._summary = counts is not None
             if counts is None:
                 counts = self._scan()
         except BaseException:
             self.close()
             raise
         self.topics = {c.topic: TopicInfo(c.msgtype, c.latched, counts.get(cid, 0))
-                       for cid, c in sorted(self._channels.items())}
+                       for cid, c in sorted(self.channels.items())}
 
     def __enter__(self) -> BagReader:
         return self
@@ -204,19 +357,48 @@ class BagReader:
         except BufferError:
             pass  # an unfinished messages() iterator still holds a view; GC unmaps it
 
+    @property
+    def size(self) -> int:
+        """Return the size of the file in bytes."""
+        return len(self._buf)
+
+    @property
+    def has_summary(self) -> bool:
+        """Return whether topics and counts come from a complete, CRC-correct summary."""
+        return self._summary
+
+    @property
+    def damaged(self) -> list[DamagedChunk]:
+        """Return the damaged parts skipped so far (``skip_damaged``), in file order."""
+        return [self._damaged[k] for k in sorted(self._damaged)]
+
+    def check_complete(self) -> None:
+        """
+        Refuse a bag cut short in its data section.
+
+        Raises:
+            TruncatedBagError: If :attr:`cut_in_data`; the message says what survived and
+                to run ``sensor-comp repair``.
+
+        """
+        if self.cut_in_data:
+            raise TruncatedBagError(f'{self.warning}; run `sensor-comp repair {self.path}` '
+                                    f'to save them in a finalised bag, then use that bag')
+
     def _fail(self, what: str) -> BagError:
         return BagError(f'{self.path}: {what}')
 
     def _read_header(self) -> int:
-        head = bytes(self._buf[:len(_MAGIC)])
-        if head != _MAGIC:
+        head = bytes(self._buf[:len(MCAP_MAGIC)])
+        if head != MCAP_MAGIC:
             hint = ''
             if head.startswith(b'SQLite f'):
-                hint = ' (it is an SQLite database: a rosbag2 .db3 bag, not MCAP)'
+                hint = (' (it is an SQLite database: a rosbag2 .db3 bag, not MCAP; convert '
+                        'it with `ros2 bag convert`, output storage_id: mcap)')
             raise self._fail(f'not an MCAP file: it starts with {bytes(self._buf[:16])!r} '
-                             f'instead of the MCAP magic {_MAGIC!r}{hint}')
+                             f'instead of the MCAP magic {MCAP_MAGIC!r}{hint}')
         try:
-            opcode, body, _ = next(_records(self._buf, len(_MAGIC), len(self._buf)))
+            opcode, body, _ = next(_records(self._buf, len(MCAP_MAGIC), len(self._buf)))
             if opcode != _HEADER:
                 raise self._fail(f'first record has opcode 0x{opcode:02x}, not an MCAP '
                                  f'header: the file is damaged')
@@ -228,49 +410,50 @@ class BagReader:
         if self.profile != PROFILE:
             raise self._fail(f'MCAP profile is {self.profile!r}, not {PROFILE!r}: not a ROS 2 '
                              f'bag (written by {self.library!r})')
-        return len(_MAGIC) + _RECORD.size + len(body)
+        return len(MCAP_MAGIC) + _RECORD.size + len(body)
 
     def _add_schema(self, body) -> None:
         (sid,) = _U16.unpack_from(body, 0)
         name, pos = _string(body, 2)
-        encoding, _ = _string(body, pos)
-        self._schemas[sid] = (name, encoding)
+        encoding, pos = _string(body, pos)
+        (size,) = _U32.unpack_from(body, pos)
+        if pos + 4 + size > len(body):
+            raise struct.error('schema data runs past the end of its record')
+        self.schemas[sid] = SchemaRecord(name, encoding, bytes(body[pos + 4:pos + 4 + size]))
 
     def _add_channel(self, body) -> None:
         cid, sid = struct.unpack_from('<HH', body, 0)
         topic, pos = _string(body, 4)
         encoding, pos = _string(body, pos)
-        (size,) = _U32.unpack_from(body, pos)
-        pos += 4
-        end = pos + size
-        metadata = {}
-        while pos < end:
-            key, pos = _string(body, pos)
-            metadata[key], pos = _string(body, pos)
+        metadata, _ = _string_map(body, pos)
         if encoding != MESSAGE_ENCODING:
             raise self._fail(f'topic {topic} has message encoding {encoding!r}; ROS 2 bags '
                              f'carry {MESSAGE_ENCODING!r}')
-        if sid not in self._schemas:
+        if sid not in self.schemas:
             raise self._fail(f'topic {topic} has no schema (id {sid}): its message type is '
                              f'unknown')
-        msgtype, schema_encoding = self._schemas[sid]
-        if schema_encoding not in SCHEMA_ENCODINGS:
-            raise self._fail(f'topic {topic} ({msgtype}) has schema encoding '
-                             f'{schema_encoding!r}; ROS 2 bags use '
+        schema = self.schemas[sid]
+        if schema.encoding not in SCHEMA_ENCODINGS:
+            raise self._fail(f'topic {topic} ({schema.name}) has schema encoding '
+                             f'{schema.encoding!r}; ROS 2 bags use '
                              f'{" or ".join(SCHEMA_ENCODINGS)}')
-        self._channels[cid] = _Channel(topic, msgtype,
-                                       is_latched(metadata.get('offered_qos_profiles', '')))
+        self.channels[cid] = ChannelRecord(
+            topic, schema.name, is_latched(metadata.get('offered_qos_profiles', '')), sid,
+            encoding, metadata)
 
     def _read_summary(self) -> dict[int, int] | None:
         """Read schemas, channels and counts from the summary; ``None`` if unusable."""
         buf = self._buf
-        footer = len(buf) - len(_MAGIC) - _FOOTER_SIZE
-        if footer < self._data_start or bytes(buf[-len(_MAGIC):]) != _MAGIC:
+        footer = len(buf) - len(MCAP_MAGIC) - _FOOTER_SIZE
+        if footer < self._data_start or bytes(buf[-len(MCAP_MAGIC):]) != MCAP_MAGIC:
             return None
         opcode, _ = _RECORD.unpack_from(buf, footer)
-        summary_start, offsets_start, _ = struct.unpack_from('<QQI', buf,
-                                                             footer + _RECORD.size)
+        summary_start, offsets_start, crc = _FOOTER_BODY.unpack_from(buf, footer + _RECORD.size)
         if opcode != _FOOTER or not self._data_start <= summary_start <= footer:
+            return None
+        if crc and zlib.crc32(buf[summary_start:footer + _RECORD.size + 16]) != crc:
+            self.warning = (f'{self.path}: its summary is damaged (CRC mismatch); the data '
+                            f'section was read instead')
             return None
         stats = None
         try:
@@ -286,26 +469,29 @@ class BagReader:
             if stats is None:
                 return None
             fields = _STATISTICS_HEAD.unpack_from(stats, 0)
-            if fields[2] != len(self._channels):
+            if fields[2] != len(self.channels):
                 return None
             pairs = struct.iter_unpack('<HQ', stats[_STATISTICS_HEAD.size:][:fields[-1]])
-            return dict(pairs)
+            counts = dict(pairs)
         except (_Cut, struct.error):  # a damaged summary: trust only the data section
-            self._schemas.clear()
-            self._channels.clear()
+            self.schemas.clear()
+            self.channels.clear()
             return None
+        self._data_stop = summary_start
+        return counts
 
-    def _data(self, counts: dict[int, int] | None = None,
-              wanted: set[int] | None = None) -> Iterator[RawMessage]:
+    def _data(self, counts: dict[int, int] | None = None, wanted: set[int] | None = None,
+              extras: bool = False) -> Iterator:
         """
         Yield the messages of the data section in file order.
 
         With ``counts``, also register schemas and channels, count messages per channel and
-        note where the data section ends (the scan of a file without usable summary).
+        note where the data section ends (the scan of a file without usable summary). With
+        ``extras``, also yield metadata records and attachments.
         """
         scanning = counts is not None
         try:
-            for opcode, body, offset, cut in self._data_records():
+            for opcode, body, offset, cut in self._data_records(scanning):
                 if opcode == _CHUNK:
                     inner = self._chunk_records(body, offset, cut)
                 elif opcode in (_SCHEMA, _CHANNEL, _MESSAGE):
@@ -313,12 +499,19 @@ class BagReader:
                 elif opcode == _DATA_END:
                     self._data_end = True
                     return
+                elif extras and opcode == _METADATA:
+                    name, pos = _string(body, 0)
+                    yield MetadataRecord(name, _string_map(body, pos)[0])
+                    continue
+                elif extras and opcode == _ATTACHMENT:
+                    yield self._attachment(body)
+                    continue
                 else:
                     continue
                 for op, rec in inner:
                     if op == _MESSAGE:
-                        cid, _, log_time, publish_time = _MESSAGE_HEAD.unpack_from(rec, 0)
-                        channel = self._channels.get(cid)
+                        cid, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(rec)
+                        channel = self.channels.get(cid)
                         if channel is None:
                             raise self._fail(f'message at log time {log_time} ns refers to '
                                              f'channel {cid}, which was never defined')
@@ -326,7 +519,8 @@ class BagReader:
                             counts[cid] = counts.get(cid, 0) + 1
                         if wanted is None or cid in wanted:
                             yield RawMessage(channel.topic, channel.msgtype, log_time,
-                                             publish_time, bytes(rec[_MESSAGE_HEAD.size:]))
+                                             publish_time, bytes(rec[_MESSAGE_HEAD.size:]),
+                                             sequence)
                     elif scanning and op == _SCHEMA:
                         self._add_schema(rec)
                     elif scanning and op == _CHANNEL:
@@ -334,21 +528,50 @@ class BagReader:
         except struct.error as exc:
             raise self._fail(f'damaged record in the data section: {exc}') from None
 
-    def _data_records(self) -> Iterator[tuple[int, memoryview, int, bool]]:
+    @staticmethod
+    def _attachment(body) -> AttachmentRecord:
+        log_time, create_time = _TIMES.unpack_from(body, 0)
+        name, pos = _string(body, _TIMES.size)
+        media_type, pos = _string(body, pos)
+        (size,) = _U64.unpack_from(body, pos)
+        if pos + 8 + size > len(body):
+            raise struct.error('attachment data run past the end of its record')
+        return AttachmentRecord(log_time, create_time, name, media_type,
+                                bytes(body[pos + 8:pos + 8 + size]))
+
+    def _data_records(self, scanning: bool) -> Iterator[tuple[int, memoryview, int, bool]]:
         """
         Yield ``(opcode, body, offset, cut)`` of the data section's records.
 
         A record cut by the end of the file ends the iteration; a cut chunk is still yielded
         (``cut=True``, with the bytes that exist) so that its first messages can be kept.
+        When the summary is used, the data section must parse up to it: a record that does
+        not is damage, not a cut.
         """
         buf = self._buf
         try:
-            for opcode, body, offset in _records(buf, self._data_start, len(buf)):
+            for opcode, body, offset in _records(buf, self._data_start, self._data_stop):
                 yield opcode, body, offset, False
         except _Cut as exc:
+            if not scanning and self._summary:
+                lost = self._data_stop - exc.offset
+                self._damage(exc.offset, None, f'is damaged (its length runs past the data '
+                                               f'section): the {lost} bytes from there on '
+                                               f'cannot be read', kind='record')
+                return
             self._cut = exc.offset
             if exc.offset + _RECORD.size <= len(buf) and buf[exc.offset] == _CHUNK:
                 yield _CHUNK, buf[exc.offset + _RECORD.size:], exc.offset, True
+
+    def _damage(self, offset: int, times: tuple[int, int] | None, what: str, *,
+                kind: str = 'chunk') -> None:
+        """Record a damaged part (``skip_damaged``) or raise :class:`BagError` about it."""
+        where = f'{kind} at byte {offset}'
+        if not self.skip_damaged:
+            raise self._fail(f'{where} {what}; run `sensor-comp repair {self.path}` to copy '
+                             f'every intact chunk to a new bag')
+        start, end = times or (None, None)
+        self._damaged[offset] = DamagedChunk(offset, start, end, f'{where} {what}')
 
     def _chunk_records(self, body, offset: int, cut: bool) -> Iterator[tuple[int, memoryview]]:
         """Yield the records of a chunk; of a cut chunk, those that decompress completely."""
@@ -357,14 +580,16 @@ class BagReader:
             compression, pos = _string(body, _CHUNK_HEAD.size)
             (length,) = _U64.unpack_from(body, pos)
         except struct.error:
-            if cut:
-                return  # the cut fell inside the chunk's header: no message survived
-            raise
+            if not cut:
+                self._damage(offset, None, 'has an unreadable header')
+            return  # a cut inside the chunk's header: no message survived
         data = body[pos + 8:pos + 8 + length]
+        times = (start, end)
         if cut:
-            self._partial_chunk = (start, end)
+            self._partial_chunk = times
         elif len(data) != length:
-            raise self._fail(f'chunk at byte {offset} is damaged (its records overrun it)')
+            self._damage(offset, times, 'is damaged (its records overrun it)')
+            return
         try:
             if compression == '':
                 records = data
@@ -379,12 +604,13 @@ class BagReader:
                 raise self._fail(f'chunk at byte {offset} uses compression {compression!r}; '
                                  f'supported: zstd, lz4, none')
         except (zstandard.ZstdError, RuntimeError) as exc:
-            if cut:
-                return  # not even the first compressed block is complete
-            raise self._fail(f'chunk at byte {offset} does not decompress: {exc}') from None
+            if not cut:
+                self._damage(offset, times, f'does not decompress ({exc})')
+            return  # of a cut chunk, not even the first compressed block is complete
         if not cut and (len(records) != size or (crc and zlib.crc32(records) != crc)):
-            raise self._fail(f'chunk at byte {offset} is damaged (size or CRC of its {size} '
-                             f'uncompressed bytes does not match)')
+            self._damage(offset, times, f'is damaged (size or CRC of its {size} uncompressed '
+                                        f'bytes does not match)')
+            return
         records = memoryview(records)  # slicing without copies
         try:
             for opcode, rec, _ in _records(records, 0, len(records)):
@@ -393,7 +619,7 @@ class BagReader:
                 yield opcode, rec
         except _Cut:
             if not cut:
-                raise self._fail(f'chunk at byte {offset} holds an incomplete record') from None
+                self._damage(offset, times, 'holds an incomplete record')
 
     def _scan(self) -> dict[int, int]:
         """Register schemas and channels and count messages by reading the data section."""
@@ -404,9 +630,9 @@ class BagReader:
         counts: dict[int, int] = {}
         recovered = sum(1 for _ in self._data(counts))
         if self._cut is not None or not self._data_end:
-            self.truncated = True
+            self.truncated = self.cut_in_data = True
             self.warning = self._describe_cut(recovered)
-        elif bytes(self._buf[-len(_MAGIC):]) != _MAGIC:
+        elif bytes(self._buf[-len(MCAP_MAGIC):]) != MCAP_MAGIC:
             self.truncated = True
             self.warning = (f'{self.path} is cut short in its summary section (the writer '
                             f'did not finish): all {recovered} messages were read')
@@ -414,8 +640,8 @@ class BagReader:
 
     def _describe_cut(self, recovered: int) -> str:
         size = len(self._buf)
-        text = (f'{self.path} is cut short at byte {size} (the writer did not finish); '
-                f'read the {recovered} complete messages before the cut')
+        text = (f'{self.path} is cut short at byte {size} (the writer did not finish): '
+                f'{recovered} complete messages precede the cut')
         if self._cut is None:
             return text + ' (the cut fell between two records)'
         text += f'; the last {size - self._cut} bytes hold an incomplete record'
@@ -424,6 +650,16 @@ class BagReader:
             text += (f' (a chunk of messages logged {start}..{end} ns, of which the first '
                      f'{self._partial_messages} were complete and kept)')
         return text
+
+    @property
+    def cut_at(self) -> int | None:
+        """Return the offset of the incomplete record a cut left, if any."""
+        return self._cut
+
+    @property
+    def partial_chunk(self) -> tuple[int, int] | None:
+        """Return the log-time span of the chunk the cut fell in, if it fell in one."""
+        return self._partial_chunk
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
         """
@@ -436,7 +672,8 @@ class BagReader:
             :class:`RawMessage` with the serialized CDR bytes.
 
         Raises:
-            BagError: If a requested topic is not in the bag, or the data are damaged.
+            BagError: If a requested topic is not in the bag, or the data are damaged (and
+                not ``skip_damaged``).
 
         """
         wanted = None
@@ -446,8 +683,18 @@ class BagReader:
             if missing:
                 raise self._fail(f'no topic {", ".join(sorted(missing))}; it has '
                                  f'{", ".join(self.topics) or "no topics"}')
-            wanted = {cid for cid, c in self._channels.items() if c.topic in topics}
+            wanted = {cid for cid, c in self.channels.items() if c.topic in topics}
         yield from self._data(wanted=wanted)
+
+    def records(self) -> Iterator[RawMessage | MetadataRecord | AttachmentRecord]:
+        """
+        Iterate over messages, metadata records and attachments in file order.
+
+        Raises:
+            BagError: If the data are damaged (and not ``skip_damaged``).
+
+        """
+        yield from self._data(extras=True)
 
 
 def find_namespace(bag: BagReader) -> str:
@@ -455,21 +702,46 @@ def find_namespace(bag: BagReader) -> str:
     Return the rig namespace of a bag: the one with a ``<namespace>/stream_info`` topic.
 
     Raises:
-        BagError: When the bag has no stream_info topic, or several rigs.
+        BagError: When the bag has no stream_info topic of the right type, or several rigs.
 
     """
     suffix = '/' + STREAM_INFO
-    found = sorted(t[:-len(suffix)] or '/' for t, info in bag.topics.items()
-                   if t.endswith(suffix) and info.msgtype == DIAGNOSTIC_ARRAY)
+    candidates = {t: info for t, info in bag.topics.items() if t.endswith(suffix)}
+    found = sorted(t[:-len(suffix)] or '/' for t, info in candidates.items()
+                   if info.msgtype == DIAGNOSTIC_ARRAY)
     if len(found) == 1:
         return found[0]
-    if not found:
-        raise BagError(f'{bag.path} has no <namespace>/{STREAM_INFO} topic '
-                       f'({DIAGNOSTIC_ARRAY}) that announces the rate and channels of its '
-                       f'block streams, and a block stream is never decoded by guessing '
-                       f'its rate; its topics: {", ".join(bag.topics) or "none"}')
-    raise BagError(f'{bag.path} holds several rigs ({", ".join(found)}); pass namespace= '
-                   f'one of them')
+    if found:
+        raise BagError(f'{bag.path} holds several rigs ({", ".join(found)}); pass namespace= '
+                       f'one of them (sensor-comp: --namespace)')
+    if candidates:
+        topic, info = sorted(candidates.items())[0]
+        raise BagError(f'{bag.path}: {topic} carries {info.msgtype}, not {DIAGNOSTIC_ARRAY}: '
+                       f'it is not the stream_info that announces the rate and channels of '
+                       f'the block streams, and a block stream is never decoded by guessing '
+                       f'its rate')
+    raise BagError(f'{bag.path} has no <namespace>/{STREAM_INFO} topic '
+                   f'({DIAGNOSTIC_ARRAY}) that announces the rate and channels of its '
+                   f'block streams, and a block stream is never decoded by guessing '
+                   f'its rate; its topics: {", ".join(bag.topics) or "none"}; record the '
+                   f'latched {STREAM_INFO} topic of the acquisition with the blocks')
+
+
+def _stream_info_topic(bag: BagReader, namespace: str) -> str:
+    """Return ``<namespace>/stream_info``, checking that the bag holds it with messages."""
+    topic = topic_name(namespace, STREAM_INFO)
+    info = bag.topics.get(topic)
+    if info is None:
+        raise BagError(f'{bag.path} has no topic {topic}; its topics: '
+                       f'{", ".join(bag.topics) or "none"}')
+    if info.msgtype != DIAGNOSTIC_ARRAY:
+        raise BagError(f'{bag.path}: {topic} carries {info.msgtype}, not {DIAGNOSTIC_ARRAY}')
+    if not info.message_count:
+        raise BagError(f'{bag.path}: {topic} holds no message, so the rate and channels of '
+                       f'the block streams are unknown (a block stream is never decoded by '
+                       f'guessing its rate); the recorder missed the latched stream_info: '
+                       f'start it before the acquisition, or record the acquisition again')
+    return topic
 
 
 def _merge_stream_info(infos: dict[str, StreamInfo], msg: RawMessage, path: Path) -> None:
@@ -493,67 +765,121 @@ def read_stream_infos(bag: BagReader, *, namespace: str) -> dict[str, StreamInfo
     Return what the bag's ``<namespace>/stream_info`` messages announce, by stream name.
 
     Raises:
-        BagError: If the topic is missing or a message does not decode or contradicts
-            another.
+        BagError: If the topic is missing, of another type or empty, or a message does not
+            decode or contradicts another.
 
     """
-    info_topic = topic_name(namespace, STREAM_INFO)
-    if info_topic not in bag.topics:
-        raise BagError(f'{bag.path} has no topic {info_topic}; its topics: '
-                       f'{", ".join(bag.topics) or "none"}')
+    info_topic = _stream_info_topic(bag, namespace)
     infos: dict[str, StreamInfo] = {}
     for msg in bag.messages([info_topic]):
         _merge_stream_info(infos, msg, bag.path)
     return infos
 
 
-def read_streams(path, *, namespace: str | None = None,
-                 names: Iterable[str] | None = None) -> dict[str, Stream]:
+def _not_blocks(bag: BagReader, topic: str) -> BagError:
+    return BagError(f'{bag.path}: {topic} carries {bag.topics[topic].msgtype}, but a block '
+                    f'stream must be {IMAGE} ({BLOCK_ENCODING} blocks): the bag was not '
+                    f'recorded from a sensor_comp acquisition, or the topic is misnamed')
+
+
+def block_topics(bag: BagReader, *, namespace: str,
+                 names: Iterable[str] | None = None) -> dict[str, str]:
+    """
+    Return ``{relative name: absolute topic}`` of the block streams under ``namespace``.
+
+    Args:
+        bag: The open bag.
+        namespace: Rig namespace, e.g. ``'/rig'``.
+        names: Streams that must be there, e.g. ``('acceleration', 'pressure/raw')``; every
+            Image topic with messages when ``None``.
+
+    Raises:
+        BagError: If a named stream's topic carries another type, or has no blocks.
+
+    """
+    prefix = topic_name(namespace, '')
+    carrying = {t[len(prefix):]: t for t, info in bag.topics.items()
+                if t.startswith(prefix) and info.msgtype == IMAGE and info.message_count}
+    if names is None:
+        return dict(sorted(carrying.items()))
+    names = list(dict.fromkeys(names))
+    for name in names:
+        if name not in carrying and prefix + name in bag.topics and \
+                bag.topics[prefix + name].msgtype != IMAGE:
+            raise _not_blocks(bag, prefix + name)
+    missing = [n for n in names if n not in carrying]
+    if missing:
+        raise BagError(f'{bag.path}: no blocks on {", ".join(prefix + m for m in missing)}'
+                       f'; streams with blocks: {", ".join(carrying) or "none"}; '
+                       f'sensor_comp needs both {ACCELERATION} and {PRESSURE_RAW} of one '
+                       f'rig: record them together')
+    return {name: carrying[name] for name in names}
+
+
+def require_described(path, infos: dict[str, StreamInfo], topics: dict[str, str],
+                      info_topic: str) -> None:
+    """
+    Check that ``stream_info`` described every block stream of ``topics``.
+
+    Raises:
+        BagError: Naming the undescribed topics, since their rate would be a guess.
+
+    """
+    unknown = [topic for name, topic in topics.items() if name not in infos]
+    if unknown:
+        raise BagError(f'{path}: {", ".join(unknown)} carry blocks but {info_topic} does not '
+                       f'describe them (it describes {", ".join(infos) or "nothing"}); a '
+                       f'block stream is never decoded by guessing its rate: record the '
+                       f'stream_info of the node that publishes them')
+
+
+def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | None = None,
+                 on_truncated: str = 'warn') -> dict[str, Stream]:
     """
     Read the block streams of a bag.
 
     Every ``sensor_msgs/msg/Image`` topic under the namespace that carries blocks is decoded
     with the rate and channels its ``stream_info`` entry announces (entries of several
     ``stream_info`` messages are merged by stream name), and assembled: gaps become NaN plus
-    :class:`~sensor_comp.streams.Gap` entries. A cut-short bag is read up to the cut with a
-    :class:`TruncatedBagWarning`.
+    :class:`~sensor_comp.streams.Gap` entries.
 
     Args:
         path: The ``.mcap`` file (or rosbag2 directory holding one).
         namespace: Rig namespace, e.g. ``'/rig'``; found from the ``.../stream_info`` topic
             when ``None``.
         names: Relative topics to read, e.g. ``('acceleration',)``; all when ``None``.
+        on_truncated: For a bag cut short, ``'warn'`` (read up to the cut with a
+            :class:`TruncatedBagWarning`), ``'ignore'`` (read up to the cut) or ``'raise'``
+            (:class:`TruncatedBagError` when the cut fell in the data section; a bag that
+            only lacks its summary is read, nothing of it is lost).
 
     Returns:
         ``{relative topic: Stream}``, e.g. keys ``'acceleration'``, ``'pressure/raw'``.
 
     Raises:
         BagError: If the bag has no (or several) ``stream_info`` topics, blocks on a topic
-            ``stream_info`` does not describe, a requested stream without blocks, or a
-            block that does not decode.
-        StreamError: If blocks of a stream overlap or are out of order.
+            ``stream_info`` does not describe, a requested stream without blocks or of
+            another type, or a block that does not decode.
+        StreamError: If blocks of a stream overlap, are out of order or have the wrong
+            number of rows.
 
     """
+    if on_truncated not in ('warn', 'ignore', 'raise'):
+        raise BagError(f"on_truncated must be 'warn', 'ignore' or 'raise', got "
+                       f"{on_truncated!r}")
     with BagReader(path) as bag:
-        if bag.truncated:
+        if on_truncated == 'raise':
+            bag.check_complete()
+        elif bag.truncated and on_truncated == 'warn':
             warnings.warn(bag.warning, TruncatedBagWarning, stacklevel=2)
         namespace = find_namespace(bag) if namespace is None else namespace
-        info_topic = topic_name(namespace, STREAM_INFO)
-        if info_topic not in bag.topics:
-            raise BagError(f'{bag.path} has no topic {info_topic}; its topics: '
-                           f'{", ".join(bag.topics) or "none"}')
-        prefix = info_topic[:-len(STREAM_INFO)]
-        carrying = {t[len(prefix):]: t for t, info in bag.topics.items()
-                    if t.startswith(prefix) and info.msgtype == IMAGE and info.message_count}
-        wanted = sorted(carrying) if names is None else list(dict.fromkeys(names))
-        missing = [n for n in wanted if n not in carrying]
-        if missing:
-            raise BagError(f'{bag.path}: no blocks on {", ".join(prefix + m for m in missing)}'
-                           f'; streams with blocks: {", ".join(carrying) or "none"}')
+        info_topic = _stream_info_topic(bag, namespace)
+        prefix = topic_name(namespace, '')
+        topics = block_topics(bag, namespace=namespace, names=names)
         infos: dict[str, StreamInfo] = {}
-        blocks: dict[str, list] = {name: [] for name in wanted}
+        blocks: dict[str, list] = {name: [] for name in topics}
         # One pass: stream_info and blocks share chunks, each chunk is decompressed once.
-        for msg in bag.messages([info_topic, *(carrying[name] for name in wanted)]):
+        for msg in bag.messages([info_topic, *topics.values()]):
             if msg.topic == info_topic:
                 _merge_stream_info(infos, msg, bag.path)
                 continue
@@ -563,33 +889,39 @@ def read_streams(path, *, namespace: str | None = None,
                 raise BagError(f'{bag.path}: {msg.topic} message at log time '
                                f'{msg.log_time_ns} ns: {exc}') from None
             blocks[msg.topic[len(prefix):]].append((stamp, data))
-    unknown = [name for name in (carrying if names is None else wanted) if name not in infos]
-    if unknown:
-        raise BagError(f'{path}: {", ".join(carrying[u] for u in unknown)} carry blocks but '
-                       f'{info_topic} does not describe them (it describes '
-                       f'{", ".join(infos) or "nothing"}); a block stream is never decoded '
-                       f'by guessing its rate')
+        if names is None:
+            for name in infos:
+                if prefix + name in bag.topics and bag.topics[prefix + name].msgtype != IMAGE:
+                    raise _not_blocks(bag, prefix + name)
+    require_described(path, infos, topics, info_topic)
     streams = {}
-    for name in wanted:
+    for name, topic in topics.items():
         try:
-            streams[name] = assemble(infos[name], blocks[name])
+            streams[name] = assemble(infos[name], blocks[name], name=topic)
         except StreamError as exc:
             raise StreamError(f'{path}: {exc}') from None
     return streams
 
 
-def read_recording(path, *, namespace: str | None = None) -> Recording:
+def read_recording(path, *, namespace: str | None = None,
+                   on_truncated: str = 'warn') -> Recording:
     """
     Read the ``acceleration`` and ``pressure/raw`` streams of a bag as one recording.
 
     Args:
         path: The ``.mcap`` file (or rosbag2 directory holding one).
         namespace: Rig namespace; found from the ``.../stream_info`` topic when ``None``.
+        on_truncated: What to do with a bag cut short; see :func:`read_streams`.
 
     Raises:
         BagError: See :func:`read_streams`.
-        StreamError: If the two streams differ in rate or do not overlap in time.
+        StreamError: If the two streams differ in rate, do not overlap in time or are not on
+            one sample grid.
 
     """
-    streams = read_streams(path, namespace=namespace, names=(ACCELERATION, PRESSURE_RAW))
-    return Recording.from_streams(streams[ACCELERATION], streams[PRESSURE_RAW])
+    streams = read_streams(path, namespace=namespace, names=(ACCELERATION, PRESSURE_RAW),
+                           on_truncated=on_truncated)
+    try:
+        return Recording.from_streams(streams[ACCELERATION], streams[PRESSURE_RAW])
+    except StreamError as exc:
+        raise StreamError(f'{path}: {exc}') from None

@@ -16,7 +16,7 @@ from __future__ import annotations
 import heapq
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 
@@ -90,7 +90,7 @@ class BagWriter:
         self._writer = Writer(self._file, chunk_size=chunk_size,
                               compression=_COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=_LIBRARY)
-        self._schemas: dict[str, int] = {}
+        self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
         self._closed = False
@@ -130,27 +130,82 @@ class BagWriter:
             MessageDefinitionError: If the message type is not installed.
 
         """
+        self._check_new_topic(topic)
+        definition = message_definition(msgtype).encode()
+        metadata = {'offered_qos_profiles': offered_qos_profiles(latched=latched)}
+        digest = type_hash(msgtype)
+        if digest:
+            metadata['topic_type_hash'] = digest
+        self._register(topic, msgtype, SCHEMA_ENCODINGS[0], definition, metadata)
+
+    def copy_topic(self, topic: str, *, msgtype: str, schema_encoding: str, schema_data: bytes,
+                   metadata: Mapping[str, str]) -> None:
+        """
+        Declare a topic with the schema and channel metadata of another bag, unchanged.
+
+        Args:
+            topic: Absolute topic name.
+            msgtype: Schema name, ``pkg/msg/Type``.
+            schema_encoding: ``'ros2msg'`` or ``'ros2idl'``.
+            schema_data: The definition text as stored in the other bag.
+            metadata: Channel metadata (``offered_qos_profiles``, ``topic_type_hash``, ...).
+
+        Raises:
+            BagError: If the writer is closed, the name is not absolute or already added, or
+                the schema encoding is not a ROS 2 one.
+
+        """
+        self._check_new_topic(topic)
+        if schema_encoding not in SCHEMA_ENCODINGS:
+            raise BagError(f'{topic}: schema encoding {schema_encoding!r} is not a ROS 2 one '
+                           f'({", ".join(SCHEMA_ENCODINGS)})')
+        self._register(topic, msgtype, schema_encoding, bytes(schema_data), dict(metadata))
+
+    def _check_new_topic(self, topic: str) -> None:
         self._check_open()
         if not topic.startswith('/') or topic.endswith('/') or '//' in topic:
             raise BagError(f'topic {topic!r} must be an absolute ROS name such as /rig/data')
         if topic in self._channels:
             raise BagError(f'topic {topic} was already added to {self.path}')
-        if msgtype not in self._schemas:
-            self._schemas[msgtype] = self._writer.register_schema(
-                name=msgtype, encoding=SCHEMA_ENCODINGS[0],
-                data=message_definition(msgtype).encode())
-        metadata = {'offered_qos_profiles': offered_qos_profiles(latched=latched)}
-        digest = type_hash(msgtype)
-        if digest:
-            metadata['topic_type_hash'] = digest
+
+    def _register(self, topic: str, msgtype: str, encoding: str, definition: bytes,
+                  metadata: dict) -> None:
+        key = (msgtype, encoding, definition)
+        if key not in self._schemas:
+            self._schemas[key] = self._writer.register_schema(name=msgtype, encoding=encoding,
+                                                              data=definition)
         channel = self._writer.register_channel(topic=topic, message_encoding=MESSAGE_ENCODING,
-                                                schema_id=self._schemas[msgtype],
+                                                schema_id=self._schemas[key],
                                                 metadata=metadata)
         self._channels[topic] = channel
         self._sequence[channel] = 0
 
+    def add_metadata(self, name: str, metadata: Mapping[str, str]) -> None:
+        """
+        Add an MCAP metadata record (e.g. copied from another bag).
+
+        Raises:
+            BagError: If the writer is closed.
+
+        """
+        self._check_open()
+        self._writer.add_metadata(name, dict(metadata))
+
+    def add_attachment(self, name: str, data: bytes, *, media_type: str, log_time_ns: int,
+                       create_time_ns: int = 0) -> None:
+        """
+        Add an MCAP attachment (a file stored in the bag, e.g. copied from another bag).
+
+        Raises:
+            BagError: If the writer is closed.
+
+        """
+        self._check_open()
+        self._writer.add_attachment(create_time=create_time_ns, log_time=log_time_ns,
+                                    name=name, media_type=media_type, data=bytes(data))
+
     def write(self, topic: str, data: bytes, *, log_time_ns: int,
-              publish_time_ns: int | None = None) -> None:
+              publish_time_ns: int | None = None, sequence: int | None = None) -> None:
         """
         Append one serialized message.
 
@@ -159,6 +214,8 @@ class BagWriter:
             data: CDR bytes of the message.
             log_time_ns: Receive time in integer nanoseconds (rosbag2's ``recv_timestamp``).
             publish_time_ns: Send time; defaults to ``log_time_ns``.
+            sequence: The message's sequence number (e.g. copied from another bag);
+                defaults to counting the topic's messages from 0.
 
         Raises:
             BagError: If the writer is closed, the topic unknown or a time negative.
@@ -175,8 +232,9 @@ class BagWriter:
             if not 0 <= value < _UINT64:
                 raise BagError(f'{topic}: {name} {value} is outside 0..2^64-1 ns; bags store '
                                f'unsigned times since the epoch')
-        sequence = self._sequence[channel]
-        self._sequence[channel] = (sequence + 1) % _UINT32
+        if sequence is None:
+            sequence = self._sequence[channel]
+            self._sequence[channel] = (sequence + 1) % _UINT32
         self._writer.add_message(channel_id=channel, log_time=int(log_time_ns), data=data,
                                  publish_time=int(publish_time_ns), sequence=sequence)
 
