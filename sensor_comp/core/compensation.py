@@ -17,8 +17,23 @@ the induced estimate grow without bound from any disturbance, so such a model is
 with :class:`UnstableModelError` naming the pole magnitude (re-identify it, e.g. with an
 output-error structure or a lower order).
 
-NaN samples (stream gaps) in the inputs give NaN output and reset the filter to rest: the
-compensation restarts after a gap as it would at the start of a stream.
+Invalid samples never poison the state. A non-finite input sample (NaN: a stream gap; Inf:
+an overflowed or corrupted sample) gives NaN output and restarts the filter from rest after
+it, as at the start of a stream; so does an output that overflows (a corrupted block of
+~1e300 values), which would otherwise leave an infinite state and NaN output for ever. A
+non-finite raw pressure sample gives a NaN compensated sample (the filter is not
+involved). Rest, not the steady state of the first valid sample, is the restart: the state
+after missing data is unknown, and from rest the output after a gap is exactly the
+compensation of the data after the gap as a recording of its own (what identification
+assumes of every window); the steady state of one noisy sample would only trade the
+transient of the acceleration's mean for that of its noise (see :meth:`CompensationFilter.
+filter_inputs`).
+
+Model changes (:meth:`CompensationFilter.take_over`): a new model's filter starts with the
+state it would have had, had it run on the same input all along: it filters the recent
+input history (since the latest restart, at most :meth:`~CompensationFilter.memory`
+samples, after which the slowest pole's free response has decayed to 1e-9). The output then
+changes by the change of the induced estimate only, with no start-up transient.
 
 Models with catalogued effects (:mod:`sensor_comp.core.effects`) need nothing more for the
 acceleration-driven ones: their channels (``a_z·|a_z|``, delays, the amplifier high-pass,
@@ -30,6 +45,8 @@ and removed too (:class:`~sensor_comp.core.effects.mains_hum.LineTracker`, whose
 documentation says when that is not sound: during its settling time after the start of
 a stream or a gap, a drifting mains frequency, intermittent pickup). ``induced`` stays the
 acceleration-driven part; ``compensated`` has the disturbance estimate removed as well.
+An effect id this version does not know is refused (:class:`CompensationError`): it may
+be a disturbance that compensation would silently leave in.
 """
 
 from __future__ import annotations
@@ -41,18 +58,23 @@ from typing import Protocol, TYPE_CHECKING
 import numpy as np
 from scipy import signal
 
-from .effects import disturbance_trackers
+from .effects import disturbance_trackers, EFFECTS
 from .ident.least_squares import delayed_numerator
 from .ident.polynomials import max_root_radius
-from .inputs import input_channels, InputError, needs_rate
+from .inputs import (fractional_delay, input_channels, InputError, mode_pair, needs_rate,
+                     parse_channel)
 from ..errors import SensorCompError
 from ..streams import Recording
 
 if TYPE_CHECKING:
     from .shots import Shot
 
-__all__ = ['CompensationError', 'CompensationFilter', 'UnstableModelError',
+__all__ = ['STATE_TOLERANCE', 'CompensationError', 'CompensationFilter', 'UnstableModelError',
            'compensate_recording', 'peak_residual_percent', 'shot_residuals']
+
+#: Relative size to which the free response of a discarded input history must have decayed
+#: before a new model's state computed from the rest of the history counts as exact.
+STATE_TOLERANCE = 1e-9
 
 
 class CompensationError(SensorCompError, ValueError):
@@ -140,9 +162,18 @@ class CompensationFilter:
 
         Raises:
             UnstableModelError: When the model has a pole of magnitude ≥ 1.
+            CompensationError: When the model names an effect this version does not know.
 
         """
-        trackers = disturbance_trackers(getattr(model, 'effects', ()), fs=model.fs)
+        effects = getattr(model, 'effects', ())
+        unknown = sorted({str(entry.get('id')) for entry in effects} - set(EFFECTS))
+        if unknown:
+            raise CompensationError(
+                f'model effect(s) {", ".join(map(repr, unknown))} unknown to this sensor_comp '
+                f'(it knows {", ".join(EFFECTS)}): a disturbance among them would be left in '
+                f'the compensated pressure; use the sensor_comp version that identified the '
+                f'model or re-identify it')
+        trackers = disturbance_trackers(effects, fs=model.fs)
         return cls(model.b, model.a, nk=model.nk, inputs=model.inputs, fs=model.fs,
                    disturbances=trackers)
 
@@ -151,6 +182,39 @@ class CompensationFilter:
         """Return the largest pole magnitude of the filter (< 1)."""
         return max_root_radius(self.a)
 
+    def memory(self, *, tolerance: float = STATE_TOLERANCE) -> int:
+        """
+        Return how many past input samples fix the filter's state to ``tolerance``.
+
+        The state after filtering only the last ``n`` samples of a history (from rest)
+        differs from the state after the whole history by the free response to what came
+        before, which decays as ``r^n`` with ``r`` the slowest pole radius; the input stages
+        (derivative, delay taps, high-pass, extra mode, peak detector) add their own memory
+        in series.
+
+        Args:
+            tolerance: Relative size of the neglected free response (0 < tolerance < 1).
+
+        Returns:
+            The number of samples (at least the filter order).
+
+        """
+        stages = []
+        for name in self.inputs:
+            channel = parse_channel(name)
+            length = 1 if channel.kind == 'da' else 0
+            if channel.kind == 'peak':
+                length += _decay(math.exp(-1e3 / (channel.tau_ms * self.fs)), tolerance)
+            for modifier, value in channel.modifiers:
+                if modifier == 'delay_us':
+                    length += fractional_delay(value * 1e-6 * self.fs).size
+                elif modifier == 'highpass_ms':
+                    length += _decay(math.exp(-1e3 / (value * self.fs)), tolerance)
+                else:
+                    length += _decay(math.sqrt(mode_pair(*value, self.fs)[2]), tolerance)
+            stages.append(length)
+        return self._num.shape[1] + _decay(self.pole_radius, tolerance) + max(stages, default=0)
+
     def reset(self) -> None:
         """Return the filter to rest (zero state), as at the start of a stream."""
         self._zi = np.zeros((len(self.inputs), self._order))
@@ -158,15 +222,55 @@ class CompensationFilter:
         for tracker in self.disturbances:
             tracker.reset()
 
+    def take_over(self, history: np.ndarray, *,
+                  previous: CompensationFilter | None = None) -> None:
+        """
+        Start this filter mid-stream as if it had been running on the stream all along.
+
+        A model change then changes the output by the change of the induced estimate only:
+        a filter started from rest would add its start-up transient, up to the size of the
+        induced pressure in the middle of a shot. The state comes from filtering
+        ``history`` from rest (exact when the history reaches back to the stream start or
+        the latest restart, else within :meth:`memory`'s tolerance when it is at least that
+        long). Disturbance trackers of the same type and settings as one of ``previous``'s
+        take over that tracker with its state (they estimate pickup in the compensated
+        pressure, which a model change barely moves at the line frequencies); the others
+        start afresh and settle as after a gap.
+
+        Args:
+            history: ``(3, n)`` acceleration in m/s² just before the next block (``n`` may
+                be 0: from rest).
+            previous: The filter being replaced, whose trackers may carry over.
+
+        """
+        self.reset()
+        history = np.asarray(history, dtype=np.float64)
+        if history.shape[-1]:
+            self.induced(history)
+        if previous is None:
+            return
+        free = list(previous.disturbances)
+        trackers = []
+        for tracker in self.disturbances:
+            same = next((old for old in free if _same_settings(old, tracker)), None)
+            if same is not None:
+                free.remove(same)
+            trackers.append(tracker if same is None else same)
+        self.disturbances = tuple(trackers)
+
     def filter_inputs(self, u: np.ndarray) -> np.ndarray:
         """
         Return the induced pressure for input rows ``u``, continuing from the current state.
+
+        A sample where any input is non-finite gives NaN, and the filter restarts from rest
+        after it (and after an output sample that overflows), as at the start of a stream:
+        splitting ``u`` into blocks anywhere gives the same output.
 
         Args:
             u: ``(n_inputs, w)`` model input channels.
 
         Returns:
-            ``(w,)`` induced pressure in Pa; NaN where any input is NaN.
+            ``(w,)`` induced pressure in Pa; NaN where any input is non-finite.
 
         Raises:
             CompensationError: When ``u`` does not have one row per input.
@@ -178,19 +282,33 @@ class CompensationFilter:
                                     f'got {u.shape}')
         finite = np.isfinite(u).all(axis=0)
         if finite.all():
-            return self._run(u)
+            return self._run_valid(u)
         out = np.full(u.shape[1], np.nan)
-        # Runs of finite samples are filtered; a NaN run resets the state to rest.
+        # Runs of finite samples are filtered; a non-finite run resets the state to rest.
         edges = np.flatnonzero(np.diff(np.concatenate(([False], finite, [False])).astype(int)))
         position = 0
         for start, stop in zip(edges[::2], edges[1::2]):
             if start > position:
                 self._zi[:] = 0.0
-            out[start:stop] = self._run(u[:, start:stop])
+            out[start:stop] = self._run_valid(u[:, start:stop])
             position = stop
         if position < u.shape[1]:
             self._zi[:] = 0.0
         return out
+
+    def _run_valid(self, u: np.ndarray) -> np.ndarray:
+        """Filter finite inputs; an overflowed output sample is NaN and restarts from rest."""
+        out = self._run(u)
+        start = 0
+        while True:
+            bad = np.flatnonzero(~np.isfinite(out[start:]))
+            if not bad.size:
+                return out
+            k = start + bad[0]
+            out[k] = np.nan
+            self._zi[:] = 0.0
+            start = k + 1
+            out[start:] = self._run(u[:, start:])
 
     def _run(self, u: np.ndarray) -> np.ndarray:
         total = np.zeros(u.shape[1])
@@ -227,7 +345,8 @@ class CompensationFilter:
 
         Returns:
             ``(compensated, induced)``, both ``(w,)`` in Pa; ``compensated`` has the
-            disturbance estimates removed too.
+            disturbance estimates removed too, and is NaN wherever it is not finite (a
+            non-finite raw sample or input).
 
         Raises:
             CompensationError: When the blocks do not have the same number of samples.
@@ -246,7 +365,23 @@ class CompensationFilter:
         if self.disturbances:
             residual = compensated
             compensated = residual - sum(tracker(residual) for tracker in self.disturbances)
+        if not np.isfinite(compensated).all():  # ±Inf raw samples: one marker, NaN
+            compensated[~np.isfinite(compensated)] = np.nan
         return compensated, induced
+
+
+def _decay(radius: float, tolerance: float) -> int:
+    """Return the samples after which ``radius**n`` falls below ``tolerance``."""
+    if radius <= 0.0:
+        return 0
+    return math.ceil(math.log(tolerance) / math.log(radius))
+
+
+def _same_settings(a, b) -> bool:
+    """Return whether two trackers are of one type with equal public settings."""
+    settings = [{k: v for k, v in vars(t).items() if not k.startswith('_')} for t in (a, b)]
+    return (type(a) is type(b) and settings[0].keys() == settings[1].keys()
+            and all(np.array_equal(settings[0][k], settings[1][k]) for k in settings[0]))
 
 
 def compensate_recording(model: LinearModel,

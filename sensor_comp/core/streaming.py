@@ -1,24 +1,72 @@
 """
-Live compensation of block streams: pair pressure and acceleration blocks, keep count.
+Live block streams: pair pressure and acceleration blocks, compensate them, keep count.
 
 Blocks of one DAQ carry the same stamp on the pressure and acceleration topics but may
-arrive in either order. :class:`BlockCompensator` pairs them by stamp, runs the streaming
-:class:`~sensor_comp.core.compensation.CompensationFilter` over each pair in time order, and
-accounts for every sample: samples in, samples out, gaps (the filter restarts from rest,
-because the samples that would carry its state are missing), blocks that never found a
-partner, and model changes. The compensation node and ``sensor-comp compensate`` share it.
+arrive in either order. :class:`BlockPairer` pairs them by stamp, checks that consecutive
+pairs follow each other, and accounts for every sample:
+
+- a pair that starts where the previous one ended is passed on;
+- a pair that starts later is passed on with the number of samples missing before it (a
+  stamp gap, counted in ``gaps``);
+- a pair that starts before the previous one ended (out of order, overlapping, sent twice)
+  is dropped and its samples counted as ``overlapping``;
+- a pair whose two blocks differ in width is dropped (``mismatched``), and a block whose
+  partner never comes is given up as ``unpaired`` once a later pair is complete, when more
+  than ``max_pending`` blocks wait, or at :meth:`~BlockPairer.flush`.
+
+Each of these events is one log line naming the topic, the stamp and the reason (when a
+``log`` function is given), so a live node says what it skipped and why.
+:class:`BlockCompensator` runs the streaming
+:class:`~sensor_comp.core.compensation.CompensationFilter` over the pairs in time order:
+a stamp gap restarts the filter from rest (the samples that would carry its state are
+missing), non-finite samples give NaN output (logged once per run of such blocks, counted
+as ``invalid_samples``), and a model change (:meth:`~BlockCompensator.set_filter`)
+computes the new filter's state from the recent input history, so that the output changes
+by the change of model only. The compensation node and ``sensor-comp compensate`` share it,
+and the identification node pairs its blocks with :class:`BlockPairer`.
 """
 
 from __future__ import annotations
 
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
 from .compensation import CompensationError, CompensationFilter
-from ..streams import Gap
+from ..streams import ACCELERATION, Gap, PRESSURE_RAW
 
-__all__ = ['BlockCompensator', 'CompensatedBlock', 'StreamCounters']
+__all__ = ['BlockCompensator', 'BlockError', 'BlockPair', 'BlockPairer', 'CompensatedBlock',
+           'MAX_HISTORY', 'NonFiniteRuns', 'StreamCounters']
+
+#: Most acceleration samples a :class:`BlockCompensator` keeps for a model change (24 MB).
+MAX_HISTORY = 1 << 20
+
+
+class BlockError(CompensationError):
+    """A block that cannot be paired: wrong number of rows, or no sample."""
+
+
+@dataclass(frozen=True)
+class BlockPair:
+    """
+    A pressure block and the acceleration block of the same stamp.
+
+    Attributes:
+        stamp_ns: Acquisition time of the blocks' first sample.
+        pressure: ``(w,)`` raw pressure, Pa.
+        acceleration: ``(3, w)`` acceleration, m/s².
+        missing: Samples missing between the previous pair and this one (a stamp gap); 0
+            when it follows on, or for the first pair.
+
+    """
+
+    stamp_ns: int
+    pressure: np.ndarray
+    acceleration: np.ndarray
+    missing: int = 0
 
 
 @dataclass(frozen=True)
@@ -41,18 +89,25 @@ class CompensatedBlock:
 @dataclass
 class StreamCounters:
     """
-    Sample accounting of a :class:`BlockCompensator`.
+    Sample accounting of a :class:`BlockPairer` (and of the :class:`BlockCompensator` on it).
+
+    Every received sample ends up in exactly one place: ``pressure_samples == output_samples
+    + unpaired_pressure + overlapping`` (and the same for acceleration) once the pairer is
+    flushed.
 
     Attributes:
         pressure_samples: Raw pressure samples received.
         acceleration_samples: Acceleration samples (per axis) received.
-        output_samples: Compensated samples produced.
+        output_samples: Samples passed on in pairs (compensated samples produced).
         unpaired_pressure: Pressure blocks that never got an acceleration block (samples).
         unpaired_acceleration: Acceleration blocks that never got a pressure block (samples).
-        mismatched: Pairs rejected because their widths differ (blocks).
-        gaps: Discontinuities between consecutive pairs, as ``Gap(start, count)`` where
-            ``start`` counts output samples and ``count`` is the missing (or, negative,
-            repeated) samples.
+        mismatched: Pairs rejected because their widths differ (blocks; their samples are
+            counted as unpaired).
+        overlapping: Samples (per topic) of pairs dropped because they started before the
+            previous pair ended: out of order, overlapping or repeated.
+        gaps: Stamp gaps between consecutive pairs, as ``Gap(start, count)`` where
+            ``start`` counts output samples and ``count`` is the missing samples.
+        invalid_samples: Output samples that are NaN because an input was not finite.
         model_changes: How often the filter was replaced.
 
     """
@@ -63,7 +118,9 @@ class StreamCounters:
     unpaired_pressure: int = 0
     unpaired_acceleration: int = 0
     mismatched: int = 0
+    overlapping: int = 0
     gaps: list[Gap] = field(default_factory=list)
+    invalid_samples: int = 0
     model_changes: int = 0
 
     @property
@@ -79,9 +136,188 @@ class StreamCounters:
                 'unpaired_pressure_samples': self.unpaired_pressure,
                 'unpaired_acceleration_samples': self.unpaired_acceleration,
                 'mismatched_blocks': self.mismatched,
+                'overlapping_samples': self.overlapping,
                 'gaps': [{'at_output_sample': g.start, 'missing_samples': g.count}
                          for g in self.gaps],
+                'invalid_samples': self.invalid_samples,
                 'model_changes': self.model_changes}
+
+
+def _quiet(text: str) -> None:
+    """Log nothing (the default of the ``log`` arguments)."""
+
+
+class BlockPairer:
+    """
+    Pair pressure and acceleration blocks by stamp and check their continuity.
+
+    Args:
+        fs: Sample rate in Hz (to know where the next pair should start; half a sample of
+            stamp error is tolerated).
+        max_pending: Blocks waiting for a partner, per topic, before the oldest is given
+            up as unpaired.
+        log: Called with one line per event (gap, overlap, mismatch, unpaired block).
+        gap_note: What a stamp gap does to the consumer, appended to its log line.
+        names: How the log lines name the pressure and the acceleration topics.
+
+    Attributes:
+        counters: The sample accounting.
+
+    """
+
+    def __init__(self, *, fs: float, max_pending: int = 64,
+                 log: Callable[[str], None] | None = None, gap_note: str = '',
+                 names: tuple[str, str] = (PRESSURE_RAW, ACCELERATION)):
+        self.fs = float(fs)
+        self.max_pending = int(max_pending)
+        self.counters = StreamCounters()
+        self._log = log or _quiet
+        self._gap_note = gap_note
+        self._names = {PRESSURE_RAW: names[0], ACCELERATION: names[1]}
+        self._pending: dict[str, dict[int, np.ndarray]] = {PRESSURE_RAW: {}, ACCELERATION: {}}
+        self._next_stamp: int | None = None
+        self._last_stamp: int | None = None
+
+    def add_pressure(self, stamp_ns: int, block: np.ndarray) -> list[BlockPair]:
+        """
+        Take a raw pressure block ``(w,)`` or ``(1, w)``; return the pairs now complete.
+
+        Raises:
+            BlockError: When the block is not one channel or holds no sample.
+
+        """
+        block = np.asarray(block, dtype=np.float64)
+        if block.ndim == 2 and block.shape[0] == 1:
+            block = block[0]
+        if block.ndim != 1:
+            raise BlockError(f'{self._names[PRESSURE_RAW]} block at stamp {stamp_ns} ns must '
+                             f'be one channel, got shape {block.shape}')
+        self._check_width(PRESSURE_RAW, stamp_ns, block)
+        self.counters.pressure_samples += block.size
+        return self._add(PRESSURE_RAW, int(stamp_ns), block)
+
+    def add_acceleration(self, stamp_ns: int, block: np.ndarray) -> list[BlockPair]:
+        """
+        Take an acceleration block ``(3, w)`` in m/s²; return the pairs now complete.
+
+        Raises:
+            BlockError: When the block does not have three rows or holds no sample.
+
+        """
+        block = np.asarray(block, dtype=np.float64)
+        if block.ndim != 2 or block.shape[0] != 3:
+            raise BlockError(f'{self._names[ACCELERATION]} block at stamp {stamp_ns} ns must '
+                             f'have 3 rows (x, y, z), got shape {block.shape}')
+        self._check_width(ACCELERATION, stamp_ns, block)
+        self.counters.acceleration_samples += block.shape[1]
+        return self._add(ACCELERATION, int(stamp_ns), block)
+
+    def _check_width(self, topic: str, stamp: int, block: np.ndarray) -> None:
+        if block.shape[-1] == 0:
+            raise BlockError(f'{self._names[topic]} block at stamp {stamp} ns holds no sample '
+                             f'(width 0)')
+
+    def flush(self) -> None:
+        """Count every block still waiting for a partner as unpaired (end of stream)."""
+        for topic, pending in self._pending.items():
+            for stamp in sorted(pending):
+                self._give_up(topic, stamp, 'the stream ended')
+
+    def _add(self, topic: str, stamp: int, block: np.ndarray) -> list[BlockPair]:
+        other = ACCELERATION if topic == PRESSURE_RAW else PRESSURE_RAW
+        mine, theirs = self._pending[topic], self._pending[other]
+        if stamp in mine:  # a repeated block: the first copy can no longer pair
+            self._give_up(topic, stamp, 'a block of the same stamp came again')
+        mine[stamp] = block
+        out = []
+        if stamp in theirs:
+            # Blocks older than a completed pair can no longer pair: give them up.
+            for name, pending in self._pending.items():
+                for old in sorted(s for s in pending if s < stamp):
+                    self._give_up(name, old, f'the pair at stamp {stamp} ns came first')
+            pair = self._pair(stamp, self._pending[PRESSURE_RAW].pop(stamp),
+                              self._pending[ACCELERATION].pop(stamp))
+            if pair is not None:
+                out.append(pair)
+        for name, pending in self._pending.items():
+            while len(pending) > self.max_pending:
+                self._give_up(name, min(pending), f'more than {self.max_pending} blocks '
+                                                  f'were waiting')
+        return out
+
+    def _give_up(self, topic: str, stamp: int, why: str) -> None:
+        width = self._pending[topic].pop(stamp).shape[-1]
+        if topic == PRESSURE_RAW:
+            self.counters.unpaired_pressure += width
+            other = ACCELERATION
+        else:
+            self.counters.unpaired_acceleration += width
+            other = PRESSURE_RAW
+        self._log(f'{self._names[topic]} block at stamp {stamp} ns ({width} samples) got no '
+                  f'{self._names[other]} block ({why}): counted as unpaired')
+
+    def _pair(self, stamp: int, pressure: np.ndarray, acceleration: np.ndarray):
+        width = pressure.size
+        if width != acceleration.shape[1]:
+            self.counters.mismatched += 1
+            self.counters.unpaired_pressure += width
+            self.counters.unpaired_acceleration += acceleration.shape[1]
+            self._log(f'pair at stamp {stamp} ns dropped: the {self._names[PRESSURE_RAW]} '
+                      f'block has {width} samples but the {self._names[ACCELERATION]} block '
+                      f'{acceleration.shape[1]}; counted as unpaired')
+            return None
+        missing = 0
+        if self._next_stamp is not None:
+            offset = (stamp - self._next_stamp) * self.fs / 1e9
+            if offset <= -0.5:
+                self.counters.overlapping += width
+                self._log(f'pair at stamp {stamp} ns ({width} samples) dropped: it starts '
+                          f'{-offset:.4g} samples before the end of the previous pair (stamp '
+                          f'{self._last_stamp} ns); out of order, overlapping or repeated')
+                return None
+            missing = math.floor(offset + 0.5)
+            if missing:
+                self.counters.gaps.append(Gap(self.counters.output_samples, missing))
+                self._log(f'stamp gap: {missing} samples missing before the pair at stamp '
+                          f'{stamp} ns (the previous pair ended at {self._next_stamp} ns)'
+                          + (f'; {self._gap_note}' if self._gap_note else ''))
+        self._last_stamp = stamp
+        self._next_stamp = stamp + round(width * 1e9 / self.fs)
+        self.counters.output_samples += width
+        return BlockPair(stamp, pressure, acceleration, missing)
+
+
+class NonFiniteRuns:
+    """
+    Log runs of blocks holding non-finite samples: a line where a run starts, one where it ends.
+
+    One line per block would flood the log when a channel is dead; a run of consecutive
+    blocks with non-finite samples is one event.
+
+    Args:
+        log: Called with each line.
+        effect: What the non-finite samples do, for the line at the start of a run.
+
+    """
+
+    def __init__(self, log: Callable[[str], None] | None, *, effect: str):
+        self._log = log or _quiet
+        self._effect = effect
+        self._run: tuple[int, int] | None = None  # (first stamp, samples so far)
+
+    def update(self, stamp_ns: int, bad: int, width: int) -> None:
+        """Note a block of ``width`` samples, ``bad`` of them non-finite."""
+        if bad:
+            if self._run is None:
+                self._log(f'non-finite samples from the block at stamp {stamp_ns} ns on ({bad} '
+                          f'of its {width}): {self._effect}')
+                self._run = (stamp_ns, 0)
+            self._run = (self._run[0], self._run[1] + bad)
+        elif self._run is not None:
+            first, count = self._run
+            self._run = None
+            self._log(f'finite samples again from the block at stamp {stamp_ns} ns: {count} '
+                      f'non-finite samples since stamp {first} ns')
 
 
 class BlockCompensator:
@@ -93,103 +329,115 @@ class BlockCompensator:
         fs: Sample rate in Hz (to know where the next block should start).
         max_pending: Blocks waiting for a partner, per topic, before the oldest is given
             up as unpaired.
+        log: Called with one line per event (see :class:`BlockPairer`, plus runs of
+            non-finite samples).
+        names: How the log lines name the pressure and the acceleration topics.
+
+    Attributes:
+        counters: The sample accounting (:class:`StreamCounters`).
+        samples_since_restart: Samples compensated since the start or the latest stamp gap.
 
     """
 
-    def __init__(self, compensation: CompensationFilter, *, fs: float, max_pending: int = 64):
+    def __init__(self, compensation: CompensationFilter, *, fs: float, max_pending: int = 64,
+                 log: Callable[[str], None] | None = None,
+                 names: tuple[str, str] = (PRESSURE_RAW, ACCELERATION)):
         self.compensation = compensation
-        self.fs = float(fs)
-        self.max_pending = int(max_pending)
-        self.counters = StreamCounters()
-        self._pressure: dict[int, np.ndarray] = {}
-        self._acceleration: dict[int, np.ndarray] = {}
-        self._next_stamp: int | None = None
+        self.pairer = BlockPairer(fs=fs, max_pending=max_pending, log=log, names=names,
+                                  gap_note='the compensation filter restarts from rest')
+        self.counters = self.pairer.counters
+        self._invalid = NonFiniteRuns(log, effect='their compensated samples are NaN (and '
+                                                  'the filter restarts from rest after '
+                                                  'non-finite acceleration)')
+        # The acceleration since the latest restart, for the next model's state.
+        self._history: deque[np.ndarray] = deque()
+        self._history_samples = 0
+        self._keep = self._history_length(compensation)
+        self.samples_since_restart = 0
 
-    def set_filter(self, compensation: CompensationFilter) -> None:
+    @property
+    def fs(self) -> float:
+        """Return the sample rate in Hz."""
+        return self.pairer.fs
+
+    def set_filter(self, compensation: CompensationFilter) -> int:
         """
         Use a new filter from the next block on (a model update).
 
-        The new filter starts from rest: its state belongs to other polynomials. The change
-        of output is the change of model; no sample is dropped or repeated.
+        The new filter's state is the one it would have had, had it run on the stream all
+        along (:meth:`CompensationFilter.take_over` on the acceleration since the latest
+        restart, at most twice the current filter's :meth:`~CompensationFilter.memory`):
+        the output changes by the change of the induced estimate only, with no start-up
+        transient. No sample is dropped or repeated.
+
+        Returns:
+            The number of history samples the new state was computed from.
+
         """
+        history = self._recent(self._keep)
+        compensation.take_over(history, previous=self.compensation)
         self.compensation = compensation
         self.counters.model_changes += 1
+        self._keep = max(self._keep, self._history_length(compensation))
+        return history.shape[1]
+
+    @staticmethod
+    def _history_length(compensation: CompensationFilter) -> int:
+        # Twice the memory: a next model with up to twice the slowest time constant
+        # still starts within tolerance.
+        return min(MAX_HISTORY, 2 * compensation.memory())
 
     def add_pressure(self, stamp_ns: int, block: np.ndarray) -> list[CompensatedBlock]:
         """
         Take a raw pressure block ``(w,)`` or ``(1, w)``; return the blocks now complete.
 
         Raises:
-            CompensationError: When the block is not one channel.
+            BlockError: When the block is not one channel or holds no sample.
 
         """
-        block = np.asarray(block, dtype=np.float64)
-        if block.ndim == 2 and block.shape[0] == 1:
-            block = block[0]
-        if block.ndim != 1:
-            raise CompensationError(f'pressure block at {stamp_ns} ns must be one channel, '
-                                    f'got shape {block.shape}')
-        self.counters.pressure_samples += block.size
-        return self._add(self._pressure, self._acceleration, int(stamp_ns), block)
+        return self._compensate(self.pairer.add_pressure(stamp_ns, block))
 
     def add_acceleration(self, stamp_ns: int, block: np.ndarray) -> list[CompensatedBlock]:
         """
         Take an acceleration block ``(3, w)`` in m/s²; return the blocks now complete.
 
         Raises:
-            CompensationError: When the block is not three channels.
+            BlockError: When the block does not have three rows or holds no sample.
 
         """
-        block = np.asarray(block, dtype=np.float64)
-        if block.ndim != 2 or block.shape[0] != 3:
-            raise CompensationError(f'acceleration block at {stamp_ns} ns must have 3 rows '
-                                    f'(x, y, z), got shape {block.shape}')
-        self.counters.acceleration_samples += block.shape[1]
-        return self._add(self._acceleration, self._pressure, int(stamp_ns), block)
-
-    def _add(self, mine: dict, theirs: dict, stamp: int, block: np.ndarray):
-        if stamp in mine:  # a repeated block: the first copy can no longer pair
-            self._give_up(mine, stamp, 'unpaired_pressure' if mine is self._pressure
-                          else 'unpaired_acceleration')
-        mine[stamp] = block
-        out = []
-        if stamp in theirs:
-            # Blocks older than a completed pair can no longer pair: give them up.
-            for pending, counter in ((self._pressure, 'unpaired_pressure'),
-                                     (self._acceleration, 'unpaired_acceleration')):
-                for old in [s for s in pending if s < stamp]:
-                    self._give_up(pending, old, counter)
-            out.append(self._run(stamp, self._pressure.pop(stamp),
-                                 self._acceleration.pop(stamp)))
-        for pending, counter in ((self._pressure, 'unpaired_pressure'),
-                                 (self._acceleration, 'unpaired_acceleration')):
-            while len(pending) > self.max_pending:
-                self._give_up(pending, min(pending), counter)
-        return [block for block in out if block is not None]
-
-    def _give_up(self, pending: dict, stamp: int, counter: str) -> None:
-        block = pending.pop(stamp)
-        setattr(self.counters, counter, getattr(self.counters, counter) + block.shape[-1])
-
-    def _run(self, stamp: int, pressure: np.ndarray, acceleration: np.ndarray):
-        if pressure.size != acceleration.shape[1]:
-            self.counters.mismatched += 1
-            self.counters.unpaired_pressure += pressure.size
-            self.counters.unpaired_acceleration += acceleration.shape[1]
-            return None
-        if self._next_stamp is not None:
-            missing = round((stamp - self._next_stamp) * self.fs / 1e9)
-            if missing != 0:
-                self.counters.gaps.append(Gap(self.counters.output_samples, missing))
-                self.compensation.reset()
-        self._next_stamp = stamp + round(pressure.size * 1e9 / self.fs)
-        compensated, induced = self.compensation.process(acceleration, pressure)
-        self.counters.output_samples += pressure.size
-        return CompensatedBlock(stamp, compensated, induced)
+        return self._compensate(self.pairer.add_acceleration(stamp_ns, block))
 
     def flush(self) -> None:
         """Count every block still waiting for a partner as unpaired (end of stream)."""
-        for pending, counter in ((self._pressure, 'unpaired_pressure'),
-                                 (self._acceleration, 'unpaired_acceleration')):
-            for stamp in list(pending):
-                self._give_up(pending, stamp, counter)
+        self.pairer.flush()
+
+    def _compensate(self, pairs: list[BlockPair]) -> list[CompensatedBlock]:
+        out = []
+        for pair in pairs:
+            if pair.missing:
+                self.compensation.reset()
+                self._history.clear()
+                self._history_samples = self.samples_since_restart = 0
+            compensated, induced = self.compensation.process(pair.acceleration, pair.pressure)
+            self._remember(pair.acceleration)
+            width = compensated.size
+            self.samples_since_restart += width
+            bad = width - int(np.count_nonzero(np.isfinite(compensated)))
+            self.counters.invalid_samples += bad
+            self._invalid.update(pair.stamp_ns, bad, width)
+            out.append(CompensatedBlock(pair.stamp_ns, compensated, induced))
+        return out
+
+    def _remember(self, acceleration: np.ndarray) -> None:
+        self._history.append(acceleration)
+        self._history_samples += acceleration.shape[1]
+        while (len(self._history) > 1
+               and self._history_samples - self._history[0].shape[1] >= self._keep):
+            self._history_samples -= self._history.popleft().shape[1]
+
+    def _recent(self, samples: int) -> np.ndarray:
+        """Return the last ``samples`` (or fewer) acceleration samples, ``(3, n)``."""
+        if not self._history:
+            return np.zeros((3, 0))
+        joined = np.concatenate(self._history, axis=1)
+        return joined[:, max(0, joined.shape[1] - samples):]

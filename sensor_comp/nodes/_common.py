@@ -64,6 +64,7 @@ from rclpy.subscription import Subscription
 
 from ..errors import SensorCompError
 from ..io.messages import IMAGE
+from ..streams import ACCELERATION, PRESSURE_RAW, STREAM_INFO, StreamInfo
 
 __all__ = [
     'BLOCK_QOS',
@@ -78,6 +79,7 @@ __all__ = [
     'finish_publishing',
     'join_callbacks',
     'latched_qos',
+    'merge_stream_infos',
     'message_class',
     'publish_raw',
     'run_main',
@@ -212,6 +214,31 @@ def message_class(msgtype: str, *, topic: str = ''):
         raise NodeError(f'message type {msgtype}{where} is not installed; install the ROS '
                         f'package {package} (e.g. pip install ros-jazzy-'
                         f'{package.replace("_", "-")}) and set AMENT_PREFIX_PATH') from None
+
+
+def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
+                       infos: Sequence[StreamInfo]) -> None:
+    """
+    Merge the raw streams' descriptions from a ``stream_info`` message into ``known``.
+
+    Several nodes may publish ``stream_info``; the first description of ``pressure/raw``
+    and of ``acceleration`` stays in use (blocks already taken were read at its rate); a
+    later one with another rate is logged as an error and ignored.
+
+    Args:
+        node: The node (for the log).
+        known: Descriptions by relative topic name, updated in place.
+        infos: The message's descriptions (other streams are ignored).
+
+    """
+    for info in infos:
+        if info.topic not in (PRESSURE_RAW, ACCELERATION):
+            continue
+        first = known.setdefault(info.topic, info)
+        if first.fs != info.fs:
+            node.get_logger().error(
+                f'{node.resolve_topic_name(STREAM_INFO)}: {info.topic} now at {info.fs:g} '
+                f'Hz, was {first.fs:g} Hz; the first rate stays in use')
 
 
 def sleep_until(deadline: float, stop: threading.Event) -> bool:

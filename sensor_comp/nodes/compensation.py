@@ -6,7 +6,8 @@ Run it as ``compensation --ros-args -p model_file:=sensor.json`` (or
 model the ``identification`` node publishes. It is the live form of ``sensor-comp
 compensate`` and gives the same samples: both run
 :class:`~sensor_comp.core.streaming.BlockCompensator` (blocks paired by stamp, filter
-state carried from block to block, a stamp gap restarts the filter from rest).
+state carried from block to block, a stamp gap or non-finite acceleration restarts the
+filter from rest, out-of-order and overlapping pairs are dropped).
 
 Topics, relative to the node's namespace (default ``/rig``):
 
@@ -19,8 +20,11 @@ Topics, relative to the node's namespace (default ``/rig``):
   ``frame_id`` (reliable, keep-all: a slow subscriber slows the node down rather than
   losing blocks); ``stream_info`` (latched) describing those two streams; and
   ``/diagnostics`` (status ``sensor_comp: compensation``) every ``diagnostics_period``:
-  samples in and out, blocks held, unpaired and unprocessed samples, stamp gaps, model
-  changes, refused models, malformed messages.
+  samples in and out, blocks held, unpaired, overlapping, invalid (NaN output) and
+  unprocessed samples, stamp gaps, model changes, refused models, malformed messages.
+  Every received sample is accounted for: once the node has stopped, ``pressure_samples
+  = output_samples + unpaired_pressure_samples + overlapping_samples`` (and likewise for
+  acceleration), and samples dropped before a model came are ``unprocessed``.
 
 Parameters (read once at start):
 
@@ -39,15 +43,27 @@ Parameters (read once at start):
   long to wait for subscribers to acknowledge the last blocks).
 
 Models: a model is used from the next block on (``BlockCompensator.set_filter``: no sample
-dropped or repeated; the new filter starts from rest). A model is refused, with a logged
-error and the model in use kept, when its sample rate is not the stream's, when it is
-unstable or its inputs are unknown, or when the message is not a model file. The same
-model text received again changes nothing.
+dropped or repeated), with the filter state it would have had, had it run on the stream
+all along (computed from the recent acceleration, see
+:meth:`~sensor_comp.core.compensation.CompensationFilter.take_over`): the output changes
+by the change of the induced estimate only, with no start-up transient. A model is
+refused, with a logged error and the model in use kept, when its sample rate is not the
+stream's, when it is unstable, names an unknown input or effect, or when the message is
+not a model file (not JSON, another schema version...). The same model text received
+again changes nothing. A node (re)started while the identification runs gets the latched
+model and compensates from its first block on, from rest.
 
-Malformed messages (not a ``64FC1`` block, wrong number of rows, a block pair of two
-widths) are logged, counted and skipped; the node keeps running. On SIGINT/SIGTERM it
-compensates what its subscriptions still hold, counts the blocks still without partner as
-unpaired, logs the accounting and waits for the subscribers' last acknowledgements.
+Faults never stop the node; each is one log line naming the topic, the stamp and the
+reason, and is counted on ``/diagnostics``: a malformed message (not a ``64FC1``
+little-endian block, step or data size inconsistent, wrong number of rows for the topic,
+no sample) is skipped (``malformed_messages``); a pair of two widths, a block without
+partner (``unpaired``), an out-of-order or overlapping pair (``overlapping``) is dropped;
+a stamp gap restarts the filter from rest; non-finite samples give NaN output and restart
+the filter after non-finite acceleration (``invalid_samples``; one line where such a run
+of blocks starts and one where it ends); a bad ``stream_info`` or model is refused. On
+SIGINT/SIGTERM the node compensates what its subscriptions still hold, counts the blocks
+still without partner as unpaired, logs the accounting and waits for the subscribers'
+last acknowledgements.
 
 Hot path: raw subscriptions, :func:`~sensor_comp.io.messages.decode_block` (a zero-copy
 view of the CDR bytes), the streaming filter (``lfilter`` with carried state), pre-encoded
@@ -70,7 +86,7 @@ import numpy as np
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from ..core.compensation import CompensationError, CompensationFilter
+from ..core.compensation import CompensationError, CompensationFilter, STATE_TOLERANCE
 from ..core.model import load, Model, ModelError
 from ..core.streaming import BlockCompensator, CompensatedBlock, StreamCounters
 from ..errors import SensorCompError
@@ -80,8 +96,8 @@ from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_
                        StreamInfo)
 from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
                       DIAGNOSTICS_QOS, diagnostics, finish_publishing, LATCHED_QOS,
-                      latched_qos, message_class, NodeError, publish_raw, run_main,
-                      spin_until, subscribe_blocks, take_queued)
+                      latched_qos, merge_stream_infos, message_class, NodeError, publish_raw,
+                      run_main, spin_until, subscribe_blocks, take_queued)
 
 __all__ = ['Compensation', 'main']
 
@@ -273,13 +289,7 @@ class Compensation(Node):
         except MessageError as exc:
             self._bad(STREAM_INFO, exc)
             return
-        for info in infos:
-            if info.topic not in (PRESSURE_RAW, ACCELERATION):
-                continue
-            known = self._infos.setdefault(info.topic, info)
-            if known.fs != info.fs:
-                self.get_logger().error(f'stream_info: {info.topic} now at {info.fs:g} Hz, '
-                                        f'was {known.fs:g} Hz; the first rate stays in use')
+        merge_stream_infos(self, self._infos, infos)
         if self._fs is not None or len(self._infos) < 2:
             return
         pressure, acceleration = self._infos[PRESSURE_RAW], self._infos[ACCELERATION]
@@ -324,21 +334,35 @@ class Compensation(Node):
         except SensorCompError as exc:  # unstable, unknown inputs
             return self._refuse(source, str(exc))
         if self._fs is None:
+            if self._waiting is not None:
+                self.get_logger().warning(f'{source} replaces the model of '
+                                          f'{self._waiting[2]}, unused')
             self._waiting = (model, compensation, source)
             self.get_logger().info(f'{source}: waiting for stream_info to check its rate')
             return True
         self.model, self._model_source = model, source
         if self.compensator is None:
-            self.compensator = BlockCompensator(compensation, fs=self._fs,
-                                                max_pending=self.max_unpaired_blocks)
+            self.compensator = BlockCompensator(
+                compensation, fs=self._fs, max_pending=self.max_unpaired_blocks,
+                log=self.get_logger().warning,
+                names=(self.resolve_topic_name(PRESSURE_RAW),
+                       self.resolve_topic_name(ACCELERATION)))
             held, self._held = self._held, deque()
             self.get_logger().info(f'using the {_describe(model)} of {source}; compensating '
                                    f'{len(held)} held blocks')
             for topic, data in held:
                 self._handle(topic, data)
         else:
-            self.compensator.set_filter(compensation)
-            self.get_logger().info(f'switched to the {_describe(model)} of {source}')
+            since = self.compensator.samples_since_restart
+            used = self.compensator.set_filter(compensation)
+            needed = compensation.memory()
+            text = (f'switched to the {_describe(model)} of {source}; its filter state comes '
+                    f'from the last {used} acceleration samples')
+            if used < min(since, needed):
+                self.get_logger().warning(f'{text}, fewer than the {needed} that fix it to '
+                                          f'{STATE_TOLERANCE:g}: a small transient remains')
+            else:
+                self.get_logger().info(f'{text}, as if it had run all along')
         return True
 
     def _refuse(self, source: str, why: str) -> bool:
@@ -365,7 +389,8 @@ class Compensation(Node):
         """Publish the node's status on ``/diagnostics``."""
         values = self.accounting()
         lost = [k for k in ('unpaired_pressure_samples', 'unpaired_acceleration_samples',
-                            'mismatched_blocks', 'gaps', 'unprocessed_pressure_samples',
+                            'mismatched_blocks', 'overlapping_samples', 'gaps',
+                            'invalid_samples', 'unprocessed_pressure_samples',
                             'unprocessed_acceleration_samples', 'malformed_messages',
                             'unpublished_blocks') if values.get(k)]
         if self.model is not None:

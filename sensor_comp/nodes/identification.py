@@ -65,6 +65,20 @@ indices since the first sample received, the stamp of each window start);
 :func:`~sensor_comp.core.identify.identify` run offline on them gives the same
 coefficients.
 
+Faults never stop the node; each is one log line naming the topic, the stamp and the
+reason, and is counted on ``/diagnostics``. Blocks are paired by
+:class:`~sensor_comp.core.streaming.BlockPairer`, as in the compensation: a malformed
+message (not a ``64FC1`` little-endian block, step or data size inconsistent, wrong number
+of rows for the topic, no sample) is skipped (``malformed_messages``); a pair of two
+widths (``mismatched_blocks``) or a block without partner (``unpaired_*_samples``) is
+dropped, an out-of-order or overlapping pair too (``overlapping_samples``); a stamp gap
+becomes NaN samples (``gaps``, ``missing_samples``), and so do non-finite samples
+(``invalid_samples``; one line where a run of such blocks starts and one where it ends),
+so that shot windows holding them are left out; an undecodable ``stream_info`` is skipped
+and a later change of rate ignored. Once ``stream_info`` has come, ``samples_received =
+paired_samples + unpaired_pressure_samples + overlapping_samples`` (blocks still waiting
+for their partner aside).
+
 Threads: identification (EMD, the output-error fit) runs in one worker thread of the node,
 so the callbacks that receive blocks return at once and never wait for a fit; a fit works
 on a snapshot of the kept windows. The ``~/fit`` service waits for its fit in the service
@@ -99,13 +113,15 @@ from ..core.identify import identify, ShotSource, STRUCTURES
 from ..core.model import Model, Source
 from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
                           mad_sigma, NOISE_FACTOR, Shot, ShotError)
+from ..core.streaming import BlockError, BlockPairer, NonFiniteRuns, StreamCounters
 from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
                            MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
 from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTICS_QOS,
-                      diagnostics, join_callbacks, LATCHED_QOS, latched_qos, message_class,
-                      publish_raw, run_main, spin_until, subscribe_blocks, take_queued)
+                      diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
+                      merge_stream_infos, message_class, publish_raw, run_main, spin_until,
+                      subscribe_blocks, take_queued)
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
@@ -118,6 +134,9 @@ _MIN_FIT_SHOTS = 2
 # Blocks of one topic waiting for their partner before they count as unpaired (the topics
 # are delivered independently; one ran 40 blocks ahead of the other under load).
 _MAX_UNPAIRED = 1000
+# What a stamp gap and a non-finite sample do here (for the log lines).
+_GAP_NOTE = 'filled with NaN; a shot window holding it is left out'
+_NON_FINITE_NOTE = ('taken as a stream gap (NaN); a shot window holding them is left out')
 # Queued messages taken per block callback (see take_queued).
 _BATCH = 64
 
@@ -141,41 +160,14 @@ class ShotWindow:
     acceleration: np.ndarray
 
 
-class _BlockPairs:
-    """Pair pressure and acceleration blocks by stamp (they may arrive in either order)."""
-
-    def __init__(self):
-        self.pending = {PRESSURE_RAW: {}, ACCELERATION: {}}
-        self.unpaired = 0  # samples given up, both topics together
-
-    def add(self, topic: str, stamp: int, block: np.ndarray):
-        mine = self.pending[topic]
-        theirs = self.pending[ACCELERATION if topic == PRESSURE_RAW else PRESSURE_RAW]
-        if stamp in mine:  # a repeated block: the first copy can no longer pair
-            self.unpaired += mine.pop(stamp).shape[-1]
-        if stamp not in theirs:
-            mine[stamp] = block
-            while len(mine) > _MAX_UNPAIRED:
-                self.unpaired += mine.pop(min(mine)).shape[-1]
-            return None
-        other = theirs.pop(stamp)
-        for pending in self.pending.values():  # older blocks can no longer pair
-            for old in [s for s in pending if s < stamp]:
-                self.unpaired += pending.pop(old).shape[-1]
-        pressure, acceleration = (block, other) if topic == PRESSURE_RAW else (other, block)
-        if pressure.shape[-1] != acceleration.shape[-1]:
-            self.unpaired += pressure.shape[-1] + acceleration.shape[-1]
-            return None
-        return pressure[0], acceleration
-
-
 class _LiveShots:
     """
     Assemble paired blocks into a rolling buffer and find the shots that are complete.
 
     Stream sample indices count from the first sample received; a stamp gap becomes NaN
-    samples (a gap longer than the buffer empties it), an overlapping or out-of-order
-    block is dropped.
+    samples (a gap longer than the buffer empties it). The blocks come from a
+    :class:`~sensor_comp.core.streaming.BlockPairer`, which has dropped the overlapping and
+    out-of-order ones.
     """
 
     def __init__(self, *, fs: float, threshold_g: float | None, pre_ms: float,
@@ -193,12 +185,9 @@ class _LiveShots:
         self.length = 0
         self._since_scan = 0
         self._taken_until = 0  # stream index: shots with an earlier onset are done
-        self._next_stamp: int | None = None
         self._ref = (0, 0)  # (stream index, stamp) of the latest block start
         self._waiting = False  # a shot was found that has not settled yet
         self._quiet: tuple[float, float] | None = None  # (median, trigger level) in g
-        self.gaps = 0
-        self.dropped = 0  # samples of overlapping or out-of-order blocks
         self.detected = 0
 
     @property
@@ -211,26 +200,26 @@ class _LiveShots:
         ref_index, ref_stamp = self._ref
         return ref_stamp + round((index - ref_index) * 1e9 / self.fs)
 
-    def add(self, stamp: int, pressure: np.ndarray, acceleration: np.ndarray
+    def add(self, stamp: int, block: np.ndarray, missing: int
             ) -> list[tuple[ShotWindow, str | None]]:
-        """Append a block pair; return the shots now complete, each with a reason to skip."""
-        width = pressure.size
-        if self._next_stamp is not None:
-            offset = (stamp - self._next_stamp) * self.fs / 1e9
-            if offset < -0.5:
-                self.dropped += width
-                return []
-            if offset > 0.5:
-                self._gap(math.floor(offset + 0.5))
+        """
+        Append a block pair; return the shots now complete, each with a reason to skip.
+
+        Args:
+            stamp: Stamp of the block's first sample.
+            block: ``(4, w)``: the pressure row, then the acceleration rows.
+            missing: Samples missing before the block (a stamp gap).
+
+        """
+        if missing:
+            self._gap(missing)
         self._ref = (self.received_until, stamp)
-        self._next_stamp = stamp + round(width * 1e9 / self.fs)
-        self._append(np.vstack((pressure, acceleration)))
+        self._append(block)
         if self._since_scan < self.scan_step:
             return []
         return self._scan()
 
     def _gap(self, missing: int) -> None:
-        self.gaps += 1
         if missing >= self.capacity:
             self._chunks, self.start, self.length = [], self.received_until + missing, 0
         else:
@@ -343,8 +332,9 @@ class Identification(Node):
         windows: The shot windows kept (the latest ``max_shots``).
         rejected: Shots found but left out; ``rejections`` holds the latest reasons.
         fits: Fits done (successful or not).
-        samples_received: Samples received per input topic.
+        samples_received: Samples received per input topic (in decodable blocks).
         malformed: Messages skipped because they could not be decoded.
+        invalid_samples: Samples with a non-finite value, taken as a gap.
 
     Raises:
         NodeError: On a bad parameter.
@@ -366,7 +356,9 @@ class Identification(Node):
         self.held_dropped = 0
         self._infos: dict[str, StreamInfo] = {}
         self._live: _LiveShots | None = None
-        self._pairs = _BlockPairs()
+        self._pairer: BlockPairer | None = None
+        self._non_finite = NonFiniteRuns(self.get_logger().warning, effect=_NON_FINITE_NOTE)
+        self.invalid_samples = 0
         self._held: deque[tuple[str, bytes]] = deque()
         self._lock = threading.Lock()
         self._new_since_fit = 0
@@ -452,6 +444,11 @@ class Identification(Node):
         return None if self._live is None else self._live.fs
 
     @property
+    def counters(self) -> StreamCounters:
+        """Return the pairing's sample accounting (all zero before ``stream_info``)."""
+        return StreamCounters() if self._pairer is None else self._pairer.counters
+
+    @property
     def buffer_samples(self) -> int:
         """Return the number of samples in the rolling buffer now."""
         return 0 if self._live is None else self._live.length
@@ -467,9 +464,7 @@ class Identification(Node):
         except MessageError as exc:
             self._bad(STREAM_INFO, exc)
             return
-        for info in infos:
-            if info.topic in (PRESSURE_RAW, ACCELERATION):
-                self._infos.setdefault(info.topic, info)
+        merge_stream_infos(self, self._infos, infos)
         if self._live is not None or len(self._infos) < 2:
             return
         pressure, acceleration = self._infos[PRESSURE_RAW], self._infos[ACCELERATION]
@@ -481,6 +476,10 @@ class Identification(Node):
         self._live = _LiveShots(fs=pressure.fs, threshold_g=self.threshold_g,
                                 frame_id=pressure.frame_id, metadata=dict(pressure.metadata),
                                 **self._window_ms)
+        self._pairer = BlockPairer(
+            fs=pressure.fs, max_pending=_MAX_UNPAIRED, log=self.get_logger().warning,
+            gap_note=_GAP_NOTE, names=(self.resolve_topic_name(PRESSURE_RAW),
+                                       self.resolve_topic_name(ACCELERATION)))
         self.get_logger().info(f'streams at {pressure.fs:g} Hz; rolling buffer of '
                                f'{self._live.capacity} samples')
         held, self._held = self._held, deque()
@@ -503,20 +502,24 @@ class Identification(Node):
             return
         try:
             stamp, _, block = decode_block(data)
-        except MessageError as exc:
+            add = (self._pairer.add_pressure if topic == PRESSURE_RAW
+                   else self._pairer.add_acceleration)
+            pairs = add(stamp, block)
+        except (MessageError, BlockError) as exc:
             self._bad(topic, exc)
             return
-        rows = 1 if topic == PRESSURE_RAW else 3
-        if block.shape[0] != rows:
-            self._bad(topic, f'block at stamp {stamp} ns has {block.shape[0]} rows, '
-                             f'expected {rows}')
-            return
         self.samples_received[topic] += block.shape[1]
-        pair = self._pairs.add(topic, stamp, block)
-        if pair is None:
-            return
-        for window, reason in self._live.add(stamp, *pair):
-            self._take(window, reason)
+        for pair in pairs:
+            values = np.vstack((pair.pressure, pair.acceleration))
+            finite = np.isfinite(values)
+            bad = 0
+            if not finite.all():  # ±Inf as well as NaN: a gap for the shot detection
+                values[~finite] = np.nan
+                bad = values.shape[1] - int(np.count_nonzero(finite.all(axis=0)))
+                self.invalid_samples += bad
+            self._non_finite.update(pair.stamp_ns, bad, values.shape[1])
+            for window, reason in self._live.add(pair.stamp_ns, values, pair.missing):
+                self._take(window, reason)
 
     def _bad(self, topic: str, error) -> None:
         self.malformed += 1
@@ -710,14 +713,19 @@ class Identification(Node):
             model, kept, error = self.model, len(self.windows), self._last_error
             running = self._fit_running is not None
         live = self._live
+        counters = self.counters
         values = {'samples_received': self.samples_received[PRESSURE_RAW],
                   'shots_detected': 0 if live is None else live.detected,
                   'shots_kept': kept, 'shots_rejected': self.rejected,
                   'min_shots': self.min_shots, 'fits': self.fits, 'fit_running': running,
                   'buffer_samples': self.buffer_samples,
-                  'gaps': 0 if live is None else live.gaps,
-                  'dropped_samples': 0 if live is None else live.dropped,
-                  'unpaired_samples': self._pairs.unpaired,
+                  'paired_samples': counters.output_samples, 'gaps': len(counters.gaps),
+                  'missing_samples': sum(gap.count for gap in counters.gaps),
+                  'overlapping_samples': counters.overlapping,
+                  'unpaired_pressure_samples': counters.unpaired_pressure,
+                  'unpaired_acceleration_samples': counters.unpaired_acceleration,
+                  'mismatched_blocks': counters.mismatched,
+                  'invalid_samples': self.invalid_samples,
                   'malformed_messages': self.malformed, 'held_dropped': self.held_dropped}
         if error is not None:
             level, message = DiagnosticStatus.ERROR, f'last fit failed: {error}'

@@ -156,3 +156,101 @@ def test_peak_residual_percent():
     assert peak_residual_percent(raw, np.array([0.0, 0.2, -0.4, 0.1])) == pytest.approx(10.0)
     with pytest.raises(CompensationError, match='zero'):
         peak_residual_percent(np.zeros(4), np.zeros(4))
+
+
+def test_non_finite_and_overflowing_samples_never_poison_the_state():
+    acc = acceleration(6000)
+    acc[2, 1000:1040] = np.inf  # a corrupted stretch
+    acc[2, 2500] = np.nan  # a lost sample
+    acc[2, 4000] = 1e308  # a corrupted sample: finite, but the output overflows
+    whole = CompensationFilter(B, A, nk=NK).induced(acc)
+    invalid = np.flatnonzero(~np.isfinite(whole))
+    overflow = invalid[-1]
+    assert 4000 < overflow <= 4000 + NK + 2  # the recursion overflows within a few samples
+    assert invalid.tolist() == [*range(1000, 1040), 2500, overflow]
+    assert np.all(np.isnan(whole[invalid]))
+    # After each invalid stretch the output is that of a filter started from rest there.
+    for start, stop in ((1040, 2500), (2501, 4000), (overflow + 1, None)):
+        fresh = CompensationFilter(B, A, nk=NK).induced(acc[:, start:stop])
+        got = whole[start:stop][:fresh.size if stop is None else None]
+        assert np.max(np.abs(got - fresh)) <= 1e-9 * np.max(np.abs(fresh))
+    # Carrying the overflowed state on instead would give NaN for ever.
+    num = np.concatenate([np.zeros(NK), B])
+    assert np.isnan(signal.lfilter(num, A, acc[2, 2501:])[-1])
+    # Any split into blocks gives the same samples.
+    rng = np.random.default_rng(4)
+    edges = np.unique(np.concatenate([[0, 6000], rng.integers(1, 6000, size=300)]))
+    streaming = CompensationFilter(B, A, nk=NK)
+    blocks = np.concatenate([streaming.induced(acc[:, i:j])
+                             for i, j in zip(edges[:-1], edges[1:])])
+    assert np.array_equal(np.isnan(blocks), np.isnan(whole))
+    assert np.allclose(blocks, whole, rtol=1e-9, atol=0, equal_nan=True)
+
+
+def test_a_non_finite_raw_sample_gives_one_nan_compensated_sample():
+    acc = acceleration(1000)
+    raw = np.random.default_rng(3).standard_normal(1000) * 1e4
+    raw[[10, 20, 30]] = [np.inf, -np.inf, np.nan]
+    compensated, induced = CompensationFilter(B, A, nk=NK).process(acc, raw)
+    assert np.flatnonzero(np.isnan(compensated)).tolist() == [10, 20, 30]
+    assert np.all(np.isfinite(induced))
+    keep = np.isfinite(raw)
+    assert np.array_equal(compensated[keep], raw[keep] - induced[keep])
+
+
+@pytest.mark.parametrize('split', [10_050, 10_150, 10_500], ids=['shot', 'ringing', 'quiet'])
+@pytest.mark.parametrize('tolerance', [1e-2, 1e-4, 1e-6])
+def test_memory_samples_of_history_fix_the_state_to_the_tolerance(split, tolerance):
+    # Shots start every 2000 samples and last 100: 10 050 is mid-shot, 10 500 after the
+    # ringing has died down to the noise.
+    acc = acceleration(20_000)
+    whole = CompensationFilter(B, A, nk=NK).induced(acc)
+    peak = np.max(np.abs(whole))
+    n = CompensationFilter(B, A, nk=NK).memory(tolerance=tolerance)
+    warm = CompensationFilter(B, A, nk=NK)
+    warm.take_over(acc[:, split - n:split])
+    error = np.max(np.abs(warm.induced(acc[:, split:]) - whole[split:]))
+    assert error <= tolerance * peak
+    # From rest (no history) the state is wrong by up to the induced pressure itself.
+    cold = CompensationFilter(B, A, nk=NK).induced(acc[:, split:])
+    assert np.max(np.abs(cold - whole[split:])) > 1e2 * 1e-6 * peak
+
+
+def test_memory_counts_the_input_stages():
+    acc = acceleration(40_000)
+    names = ('a_z@highpass_ms=2',)  # a 2 ms charge-amplifier high-pass before the sensor
+    stage_pole = np.exp(-1e3 / (2.0 * FS))
+    plain = CompensationFilter(B, A, nk=NK).memory(tolerance=1e-6)
+    with_stage = CompensationFilter(B, A, nk=NK, inputs=names, fs=FS).memory(tolerance=1e-6)
+    assert with_stage - plain == np.ceil(np.log(1e-6) / np.log(stage_pole))
+    whole = CompensationFilter(B, A, nk=NK, inputs=names, fs=FS).induced(acc)
+    peak = np.max(np.abs(whole))
+    split = 30_050
+    errors = []
+    for n in (with_stage, plain):
+        warm = CompensationFilter(B, A, nk=NK, inputs=names, fs=FS)
+        warm.take_over(acc[:, split - n:split])
+        errors.append(np.max(np.abs(warm.induced(acc[:, split:]) - whole[split:])))
+    assert errors[0] <= 1e-6 * peak < errors[1]  # the sensor's memory alone is too short
+
+
+def test_a_new_filter_takes_over_trackers_with_the_same_settings():
+    from sensor_comp.core.effects.mains_hum import LineTracker
+    old = CompensationFilter(B, A, nk=NK, fs=FS,
+                             disturbances=[LineTracker([50.0, 150.0], fs=FS)])
+    old.process(acceleration(5000), np.sin(2 * np.pi * 50 * np.arange(5000) / FS))
+    same = CompensationFilter(2 * B, A, nk=NK, fs=FS,
+                              disturbances=[LineTracker([50.0, 150.0], fs=FS)])
+    other = CompensationFilter(2 * B, A, nk=NK, fs=FS,
+                               disturbances=[LineTracker([60.0, 180.0], fs=FS)])
+    same.take_over(np.zeros((3, 0)), previous=old)
+    other.take_over(np.zeros((3, 0)), previous=old)
+    assert same.disturbances[0] is old.disturbances[0]  # its estimate carries on
+    assert other.disturbances[0] is not old.disturbances[0]
+
+
+def test_an_unknown_effect_is_refused():
+    unknown = SimpleNamespace(fs=FS, inputs=('a_z',), b=np.atleast_2d(B), a=A, nk=NK,
+                              effects=({'id': 'mains_hum'}, {'id': 'flux_capacitor'}))
+    with pytest.raises(CompensationError, match="'flux_capacitor' unknown.*mains_hum"):
+        CompensationFilter.from_model(unknown)

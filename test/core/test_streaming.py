@@ -16,7 +16,7 @@ import pytest
 from scipy import signal
 
 from sensor_comp.core.compensation import CompensationError, CompensationFilter
-from sensor_comp.core.streaming import BlockCompensator
+from sensor_comp.core.streaming import BlockCompensator, BlockError
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import Gap
 
@@ -34,12 +34,19 @@ def run():
     return sim.recording
 
 
-def make_filter(scale: float = 1.0) -> CompensationFilter:
-    """Return a fresh filter: the simulated sensor on ``a_z``, a derivative path on ``da_x``."""
+def make_filter(scale: float = 1.0, *, fn_scale: float = 1.0,
+                zeta: float | None = None) -> CompensationFilter:
+    """
+    Return a fresh filter: the simulated sensor on ``a_z``, a derivative path on ``da_x``.
+
+    ``scale`` multiplies its gain, ``fn_scale`` its natural frequency; ``zeta`` replaces its
+    damping ratio.
+    """
     sensor = RigConfig().sensor
-    wn = 2 * np.pi * sensor.fn_hz
+    wn = 2 * np.pi * sensor.fn_hz * fn_scale
+    zeta = sensor.zeta if zeta is None else zeta
     num, den, _ = signal.cont2discrete(
-        ([sensor.gain_pa_per_ms2 * wn ** 2], [1, 2 * sensor.zeta * wn, wn ** 2]), 1 / FS,
+        ([sensor.gain_pa_per_ms2 * wn ** 2], [1, 2 * zeta * wn, wn ** 2]), 1 / FS,
         method='foh')
     num = np.ravel(num)
     b = scale * np.vstack([num, 1e-4 * num[::-1]])
@@ -61,7 +68,11 @@ def stamp(start: int) -> int:
 
 
 def whole(recording, start: int = 0, stop: int | None = None, **options):
-    """Return ``(compensated, induced)`` of a fresh filter run over ``start:stop`` at once."""
+    """
+    Return ``(compensated, induced)`` of a fresh filter run over ``start:stop`` at once.
+
+    ``options`` go to :func:`make_filter`.
+    """
     return make_filter(**options).process(recording.acceleration[:, start:stop],
                                           recording.pressure[start:stop])
 
@@ -101,10 +112,12 @@ def joined(blocks):
 
 
 def assert_accounted(counters):
-    """Assert every received sample was output or counted unpaired."""
-    assert counters.pressure_samples == counters.output_samples + counters.unpaired_pressure
+    """Assert every received sample was output or counted unpaired or overlapping."""
+    assert counters.pressure_samples == (counters.output_samples + counters.unpaired_pressure
+                                         + counters.overlapping)
     assert counters.acceleration_samples == (counters.output_samples
-                                             + counters.unpaired_acceleration)
+                                             + counters.unpaired_acceleration
+                                             + counters.overlapping)
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
@@ -231,23 +244,66 @@ def test_pairs_of_different_widths_are_counted_and_not_compensated(run):
     assert_accounted(counters)
 
 
-def test_set_filter_changes_the_output_from_the_next_block_only(run):
-    bounds = cut(run.n_samples, np.random.default_rng(7), largest=600)
-    half = len(bounds) // 2
+#: The model the swap tests change to: another sensor (fn +15 %, ζ 0.08, gain -20 %).
+OTHER = {'scale': 0.8, 'fn_scale': 1.15, 'zeta': 0.08}
+
+
+@pytest.mark.parametrize('where', ['quiet', 'shot'])
+def test_a_new_model_continues_as_if_it_had_run_all_along(run, where):
+    peak = int(np.argmax(np.abs(run.axial)))
+    # In the pre-trigger of the second shot, or at the first shot's peak.
+    split = {'quiet': 2400, 'shot': peak}[where]
+    assert (np.max(np.abs(run.axial[split - 50:split + 50])) < 0.01 * np.abs(run.axial[peak])
+            ) == (where == 'quiet')
+    rng = np.random.default_rng(7)
+    bounds = cut(split, rng, largest=600) + [(i + split, j + split) for i, j in
+                                             cut(run.n_samples - split, rng, largest=600)]
+    half = next(n for n, (i, _) in enumerate(bounds) if i == split)
     compensator = BlockCompensator(make_filter(), fs=FS)
     first = feed(compensator, run, in_order(bounds[:half]))
-    compensator.set_filter(make_filter(scale=0.5))
+    used = compensator.set_filter(make_filter(**OTHER))
     second = feed(compensator, run, in_order(bounds[half:]))
     compensator.flush()
-    split = bounds[half][0]
+    assert used == split  # the whole history: shorter than the filter's memory
     assert_close(joined(first)[1], whole(run, 0, split)[1])
-    # The new model from rest on the rest of the signal; no sample dropped or repeated.
-    assert_close(joined(second)[1], whole(run, split, scale=0.5)[1])
+    # After the swap: the new model's output as if it had run from the start; the step in
+    # the compensated pressure is the change of the induced estimate, nothing more.
+    assert_close(joined(second)[0], whole(run, **OTHER)[0][split:])
+    assert_close(joined(second)[1], whole(run, **OTHER)[1][split:])
+    # A new filter from rest would differ by far more (its start-up transient).
+    cold = whole(run, split, **OTHER)[1]
+    scale = np.max(np.abs(whole(run, **OTHER)[1]))
+    assert np.max(np.abs(cold - joined(second)[1])) > {'quiet': 1e3, 'shot': 1e8}[where] * (
+        REL * scale)
     counters = compensator.counters
     assert counters.model_changes == 1 and counters.gaps == []
     assert counters.output_samples == run.n_samples
     compensator.set_filter(make_filter())
     assert counters.model_changes == 2
+
+
+def test_the_history_for_a_new_model_is_bounded_and_restarts_at_a_gap():
+    # Four shots at 192 kS/s: longer than twice the filter's memory.
+    sim = simulate(RigConfig(shots=TABLE2[6:10], fs=FS, pre_trigger_s=0.002,
+                             post_shot_s=0.02, seed=5))
+    rec = sim.recording
+    keep = 2 * make_filter().memory()
+    bounds = [(i, min(i + 500, rec.n_samples)) for i in range(0, rec.n_samples, 500)]
+    split = bounds[-6][0]
+    assert split > keep + 2000
+    compensator = BlockCompensator(make_filter(), fs=FS)
+    feed(compensator, rec, in_order(bounds[:-6]))
+    assert compensator.set_filter(make_filter(**OTHER)) == keep
+    second = feed(compensator, rec, in_order(bounds[-6:]))
+    # The history left out has decayed far below round-off.
+    assert_close(joined(second)[1], whole(rec, **OTHER)[1][split:])
+    # After a stamp gap only the samples since the gap count: the filter restarted there.
+    gap_compensator = BlockCompensator(make_filter(), fs=FS)
+    restart = bounds[-9][0]  # the block before it is lost
+    feed(gap_compensator, rec, in_order(bounds[:-10] + bounds[-9:-6]))
+    assert gap_compensator.set_filter(make_filter(**OTHER)) == split - restart < keep
+    after = feed(gap_compensator, rec, in_order(bounds[-6:]))
+    assert_close(joined(after)[1], whole(rec, restart, **OTHER)[1][split - restart:])
 
 
 @pytest.mark.parametrize('seed', range(8))
@@ -292,12 +348,88 @@ def test_a_pressure_block_received_twice_is_accounted(run):
     assert_accounted(counters)
 
 
-def test_blocks_with_the_wrong_channels_are_refused(run):
+def test_blocks_with_the_wrong_channels_or_no_sample_are_refused(run):
     compensator = BlockCompensator(make_filter(), fs=FS)
-    with pytest.raises(CompensationError, match=r'one channel.*\(2, 10\)'):
+    with pytest.raises(CompensationError, match=rf'pressure/raw block at stamp {T0_NS} ns '
+                                                r'must be one channel.*\(2, 10\)'):
         compensator.add_pressure(T0_NS, np.zeros((2, 10)))
     with pytest.raises(CompensationError, match=r'3 rows.*\(2, 10\)'):
         compensator.add_acceleration(T0_NS, np.zeros((2, 10)))
+    with pytest.raises(BlockError, match=rf'acceleration block at stamp {T0_NS} ns holds no '
+                                         r'sample \(width 0\)'):
+        compensator.add_acceleration(T0_NS, np.zeros((3, 0)))
+    with pytest.raises(BlockError, match='width 0'):
+        compensator.add_pressure(T0_NS, np.zeros(0))
+    assert compensator.counters.pressure_samples == 0
     # A (1, w) pressure block is one channel.
     assert compensator.add_pressure(stamp(0), run.pressure[None, :10]) == []
     assert len(compensator.add_acceleration(stamp(0), run.acceleration[:, :10])) == 1
+
+
+def test_every_stream_fault_is_one_log_line_and_the_state_survives_it(run):
+    lines = []
+    compensator = BlockCompensator(make_filter(), fs=FS, log=lines.append)
+    bounds = [(i, min(i + 300, run.n_samples)) for i in range(0, run.n_samples, 300)]
+    bad_a = run.acceleration.copy()
+    bad_a[2, 1210:1220] = np.nan  # ten lost acceleration samples in block 4
+    bad_a[2, 1500] = np.inf  # and a corrupted one in block 5
+    out = []
+
+    def pair(i, j, *, acceleration=run.acceleration, at=None, p_width=None):
+        at = i if at is None else at
+        out.extend(compensator.add_pressure(stamp(at), run.pressure[i:p_width or j]))
+        out.extend(compensator.add_acceleration(stamp(at), acceleration[:, i:j]))
+
+    for k, (i, j) in enumerate(bounds):
+        if k == 2:
+            pair(*bounds[0])  # block 0 again: out of order
+            pair(i - 150, j - 150)  # half of block 1 again: overlapping
+        if k in (4, 5):
+            pair(i, j, acceleration=bad_a)
+        elif k == 8:
+            pair(i, j, p_width=j - 1)  # a pair of two widths
+        elif k == 12:
+            continue  # lost: a stamp gap
+        elif k == 14:
+            out.extend(compensator.add_pressure(stamp(i) + 7, run.pressure[i:j]))  # no partner
+            pair(i, j)
+        else:
+            pair(i, j)
+    compensator.flush()
+    counters = compensator.counters
+    assert_accounted(counters)
+    assert counters.overlapping == 600 and counters.mismatched == 1
+    assert counters.unpaired_pressure == 299 + 300 and counters.unpaired_acceleration == 300
+    assert counters.invalid_samples == 11
+    # Block 8 (dropped) and block 12 (lost) are missing from the output.
+    assert counters.gaps == [Gap(2400, 300), Gap(3300, 300)]
+    expected = {
+        f'stamp {stamp(0)} ns (300 samples) dropped: it starts 600 samples before the end of '
+        f'the previous pair (stamp {stamp(300)} ns); out of order',
+        f'stamp {stamp(450)} ns (300 samples) dropped: it starts 150 samples before',
+        f'non-finite samples from the block at stamp {stamp(1200)} ns on (10 of its 300): '
+        f'their compensated samples are NaN',
+        f'finite samples again from the block at stamp {stamp(1800)} ns: 11 non-finite samples '
+        f'since stamp {stamp(1200)} ns',
+        f'pair at stamp {stamp(2400)} ns dropped: the pressure/raw block has 299 samples but the '
+        f'acceleration block 300',
+        f'stamp gap: 300 samples missing before the pair at stamp {stamp(2700)} ns (the '
+        f'previous pair ended at {stamp(2400)} ns); the compensation filter restarts from rest',
+        f'stamp gap: 300 samples missing before the pair at stamp {stamp(3900)} ns (the '
+        f'previous pair ended at {stamp(3600)} ns); the compensation filter restarts from rest',
+        f'pressure/raw block at stamp {stamp(4200) + 7} ns (300 samples) got no acceleration '
+        f'block (the pair at stamp {stamp(4500)} ns came first): counted as unpaired',
+    }
+    assert len(lines) == len(expected)
+    for text in expected:
+        assert sum(text in line for line in lines) == 1, (text, lines)
+    # The output: the whole-signal compensation of each stretch between gaps, from rest
+    # (the dropped pairs changed no state; the non-finite samples restart the filter as
+    # offline).
+    compensated = joined(out)[0]
+    expected_out = np.concatenate([make_filter().process(bad_a[:, i:j], run.pressure[i:j])[0]
+                                   for i, j in ((0, 2400), (2700, 3600), (3900, None))])
+    assert np.flatnonzero(np.isnan(compensated)).tolist() == [*range(1210, 1220), 1500]
+    assert np.array_equal(np.isnan(compensated), np.isnan(expected_out))
+    finite = ~np.isnan(expected_out)
+    assert_close(compensated[finite], expected_out[finite])

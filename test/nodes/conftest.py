@@ -5,6 +5,10 @@ Every test gets its own ``ROS_DOMAIN_ID``, reserved with a lock file so that par
 runs on this machine never share one, and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``;
 node processes started by a test inherit both. In-process nodes use a fresh
 ``rclpy.Context`` on that domain.
+
+Helpers (test files cannot import each other, so they come as fixtures): ``params``
+(parameter overrides from keywords), ``wait`` (poll a condition), ``spin`` (spin nodes in
+a thread), ``make_player`` and ``play`` (replay a bag from this process).
 """
 
 import fcntl
@@ -23,7 +27,11 @@ import pytest
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 rclpy = pytest.importorskip('rclpy')
 
-from sensor_comp.nodes._common import use_fastdds_profile  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from sensor_comp.nodes._common import join_callbacks, use_fastdds_profile  # noqa: E402
+from sensor_comp.nodes.player import Player  # noqa: E402
 
 # Before the first context of this process: Fast DDS reads its profile once.
 use_fastdds_profile()
@@ -192,3 +200,87 @@ def in_thread():
     for stop, thread in threads:
         stop.set()
         thread.join(20.0)
+
+
+def _params(**values) -> list[Parameter]:
+    return [Parameter(key, value=value) for key, value in values.items()]
+
+
+@pytest.fixture
+def params():
+    """Return the maker of a node's parameter overrides from keywords (``key=value``)."""
+    return _params
+
+
+def _wait(condition, timeout: float = 20.0, what: str = 'the condition') -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def wait():
+    """Return the poller: call it with a condition (and ``timeout``, ``what``) to wait for."""
+    return _wait
+
+
+@pytest.fixture
+def spin():
+    """
+    Return the spinner: called with nodes, it spins them in a thread and returns a stopper.
+
+    The executor (2 threads) uses the first node's context. Calling the stopper shuts it
+    down, joins its thread and waits for its callbacks (destroy the nodes only after that);
+    spinners not stopped by the test are stopped at its end.
+    """
+    stoppers = []
+
+    def start(*nodes):
+        executor = MultiThreadedExecutor(num_threads=2, context=nodes[0].context)
+        for node in nodes:
+            executor.add_node(node)
+        thread = threading.Thread(target=executor.spin, daemon=True)
+        thread.start()
+        done = []
+
+        def stop():
+            if not done:
+                done.append(True)
+                executor.shutdown()
+                thread.join()
+                join_callbacks(executor)
+        stoppers.append(stop)
+        return stop
+
+    yield start
+    for stop in stoppers:
+        stop()
+
+
+@pytest.fixture
+def make_player(context):
+    """Return the maker of players of a bag (with parameters as keywords) in the context."""
+    made = []
+
+    def make(bag, **values) -> Player:
+        node = Player(context=context, parameter_overrides=_params(bag=str(bag), **values))
+        made.append(node)
+        return node
+
+    yield make
+    for node in made:
+        node.destroy_node()
+
+
+@pytest.fixture
+def play(make_player):
+    """Return the replayer: called with a bag, it plays it as fast as the readers take it."""
+    def run(bag, subscribers: int = 1) -> int:
+        player = make_player(bag, as_fast_as_possible=True, wait_for_subscribers=subscribers,
+                             wait_timeout=20.0)
+        try:
+            return player.play()
+        finally:
+            player.destroy_node()
+    return run

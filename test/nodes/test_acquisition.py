@@ -2,14 +2,11 @@
 
 from pathlib import Path
 import signal
-import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
 
 from sensor_comp.errors import SensorCompError
 from sensor_comp.io.bag_reader import BagReader, read_recording
@@ -30,18 +27,20 @@ def _expected():
     return simulate(RigConfig(fs=FS, shots=random_shots(2, seed=9), seed=9)).recording
 
 
-def _acquisition(context, **params) -> Acquisition:
-    return Acquisition(context=context, parameter_overrides=[
-        Parameter(k, value=v) for k, v in params.items()])
+@pytest.fixture
+def make_acquisition(context, params):
+    """Return the maker of acquisition nodes (parameters as keywords) in the context."""
+    return lambda **values: Acquisition(context=context, parameter_overrides=params(**values))
 
 
-def test_fast_simulated_acquisition_is_recorded_completely(context, node_process, tmp_path):
+def test_fast_simulated_acquisition_is_recorded_completely(context, node_process, tmp_path,
+                                                           make_acquisition):
     out = tmp_path / 'acquired.mcap'
     recorder = node_process('recorder', output=out, discovery_period=0.1)
     recorder.wait_for_log('recording every topic under /rig')
     before = time.time_ns()
-    node = _acquisition(context, **SIM, block_size=1000, pacing='fast',
-                        wait_for_subscribers=1, wait_timeout=20.0)
+    node = make_acquisition(**SIM, block_size=1000, pacing='fast', wait_for_subscribers=1,
+                            wait_timeout=20.0)
     node.run()
     node.destroy_node()
     assert recorder.stop() == 0, recorder.output()
@@ -64,21 +63,9 @@ def test_fast_simulated_acquisition_is_recorded_completely(context, node_process
     assert np.array_equal(got.acceleration, expected.acceleration)
 
 
-def _spin(node):
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-
-    def stop():
-        executor.shutdown()
-        thread.join()
-    return stop
-
-
 def test_late_subscriber_gets_the_latched_stream_info(context, other_context, make_node,
-                                                      in_thread):
-    node = _acquisition(context, **SIM, block_size=500, pacing='realtime', loop=True)
+                                                      in_thread, make_acquisition, spin):
+    node = make_acquisition(**SIM, block_size=500, pacing='realtime', loop=True)
     _, join = in_thread(node.run)
     deadline = time.monotonic() + 20
     while node.blocks_published < 3:
@@ -89,7 +76,7 @@ def test_late_subscriber_gets_the_latched_stream_info(context, other_context, ma
     late.create_subscription(DiagnosticArray, 'stream_info',
                              lambda data: infos.append(decode_stream_info(data)), LATCHED_QOS,
                              raw=True)
-    stop_spinning = _spin(late)
+    stop_spinning = spin(late)
     while not infos and time.monotonic() < deadline:
         time.sleep(0.01)
     stop_spinning()
@@ -104,7 +91,8 @@ def test_late_subscriber_gets_the_latched_stream_info(context, other_context, ma
                for info in by_topic.values())
 
 
-def test_looping_keeps_the_stamps_running_on(context, make_node, in_thread):
+def test_looping_keeps_the_stamps_running_on(context, make_node, in_thread, make_acquisition,
+                                             spin):
     widths, stamps = [], []
     listener = make_node('listener')
 
@@ -118,9 +106,9 @@ def test_looping_keeps_the_stamps_running_on(context, make_node, in_thread):
     listener.create_subscription(message_class(IMAGE), 'acceleration', len, BLOCK_QOS,
                                  raw=True)
     listener.create_subscription(DiagnosticArray, 'stream_info', len, LATCHED_QOS, raw=True)
-    stop_spinning = _spin(listener)
-    node = _acquisition(context, **SIM, block_size=3000, pacing='fast', loop=True,
-                        stamp_origin='source', wait_for_subscribers=1)
+    stop_spinning = spin(listener)
+    node = make_acquisition(**SIM, block_size=3000, pacing='fast', loop=True,
+                            stamp_origin='source', wait_for_subscribers=1)
     _, join = in_thread(node.run)
     n = node.recording.n_samples
     deadline = time.monotonic() + 20
@@ -139,7 +127,7 @@ def test_looping_keeps_the_stamps_running_on(context, make_node, in_thread):
 
 @pytest.mark.parametrize('pacing, speed', [('realtime', 1.0), (0.5, 0.5)])
 def test_paced_blocks_leave_when_their_last_sample_is_acquired(context, make_node, pacing,
-                                                               speed):
+                                                               speed, make_acquisition, spin):
     sent = []  # (DDS send time, samples up to the block's end)
     listener = make_node('listener')
 
@@ -151,8 +139,8 @@ def test_paced_blocks_leave_when_their_last_sample_is_acquired(context, make_nod
     listener.create_subscription(message_class(IMAGE), 'acceleration', len, BLOCK_QOS,
                                  raw=True)
     listener.create_subscription(DiagnosticArray, 'stream_info', len, LATCHED_QOS, raw=True)
-    stop_spinning = _spin(listener)
-    node = _acquisition(context, **SIM, block_size=500, pacing=pacing, wait_for_subscribers=1)
+    stop_spinning = spin(listener)
+    node = make_acquisition(**SIM, block_size=500, pacing=pacing, wait_for_subscribers=1)
     node.run()
     n = node.recording.n_samples
     node.destroy_node()
@@ -173,21 +161,21 @@ def test_paced_blocks_leave_when_their_last_sample_is_acquired(context, make_nod
     assert np.median(late) < 0.02
 
 
-def test_bag_and_csv_sources(context, tmp_path):
+def test_bag_and_csv_sources(context, tmp_path, make_acquisition):
     rec = _expected()
     write_recording(tmp_path / 'in.mcap', rec)
-    node = _acquisition(context, source='bag', path=str(tmp_path / 'in.mcap'))
+    node = make_acquisition(source='bag', path=str(tmp_path / 'in.mcap'))
     assert np.array_equal(node.recording.pressure, rec.pressure)
     assert node.recording.t0_ns == rec.t0_ns and node.recording.fs == rec.fs
     node.destroy_node()
-    node = _acquisition(context, source='csv', path=str(CSV))
+    node = make_acquisition(source='csv', path=str(CSV))
     expected = read_csv(CSV)
     assert np.array_equal(node.recording.acceleration, expected.acceleration)
     assert node.recording.frame_id == expected.frame_id
     node.destroy_node()
 
 
-@pytest.mark.parametrize('params, name', [
+@pytest.mark.parametrize('values, name', [
     ({'source': 'daq'}, 'source'),
     ({'block_size': 0}, 'block_size'),
     ({'pacing': 'slow'}, 'pacing'),
@@ -201,16 +189,16 @@ def test_bag_and_csv_sources(context, tmp_path):
     ({'block_size': 'big'}, 'block_size'),
     ({'loop': 'yes'}, 'loop'),
 ])
-def test_acquisition_rejects_bad_parameters(context, params, name):
+def test_acquisition_rejects_bad_parameters(values, name, make_acquisition):
     with pytest.raises(SensorCompError, match=name):
-        _acquisition(context, **params)
+        make_acquisition(**values)
 
 
-def test_pacing_accepts_a_speed_factor(context):
-    node = _acquisition(context, **SIM, pacing='4')
+def test_pacing_accepts_a_speed_factor(context, make_acquisition):
+    node = make_acquisition(**SIM, pacing='4')
     assert node.speed == 4.0
     node.destroy_node()
-    node = _acquisition(context, **SIM, pacing=2)
+    node = make_acquisition(**SIM, pacing=2)
     assert node.speed == 2.0
     node.destroy_node()
 

@@ -2,13 +2,10 @@
 
 import json
 import threading
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
-from rclpy.executors import MultiThreadedExecutor
-from rclpy.parameter import Parameter
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
@@ -21,12 +18,10 @@ from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
 from sensor_comp.nodes import identification as identification_module
-from sensor_comp.nodes._common import (DIAGNOSTICS_QOS, join_callbacks, LATCHED_QOS,
-                                       NodeError)
+from sensor_comp.nodes._common import DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
 from sensor_comp.nodes.compensation import model_from_text
 from sensor_comp.nodes.identification import (Identification, provenance_shots,
                                               STATUS_NAME)
-from sensor_comp.nodes.player import Player
 from sensor_comp.sim import random_shots, RigConfig, simulate
 from sensor_comp.streams import G0
 
@@ -50,47 +45,12 @@ def calibration_bag(tmp_path):
     return path
 
 
-def _params(**values):
-    return [Parameter(k, value=v) for k, v in values.items()]
-
-
-def _spin(context, *nodes):
-    """Spin ``nodes`` on a multi-threaded executor in a thread; return the stopper."""
-    executor = MultiThreadedExecutor(num_threads=2, context=context)
-    for node in nodes:
-        executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-
-    def stop():
-        executor.shutdown()
-        thread.join()
-        join_callbacks(executor)
-    return stop
-
-
-def _play(context, bag, subscribers: int = 1) -> int:
-    player = Player(context=context, parameter_overrides=_params(
-        bag=str(bag), as_fast_as_possible=True, wait_for_subscribers=subscribers,
-        wait_timeout=20.0))
-    try:
-        return player.play()
-    finally:
-        player.destroy_node()
-
-
-def _wait(condition, timeout=20.0, what='the condition'):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.01)
-
-
 def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_context,
                                                                make_node, calibration_bag,
-                                                               tmp_path):
+                                                               tmp_path, params, play, spin,
+                                                               wait):
     model_file = tmp_path / 'live.json'
-    node = Identification(context=context, parameter_overrides=_params(
+    node = Identification(context=context, parameter_overrides=params(
         **FIT, min_shots=4, model_file=str(model_file), diagnostics_period=0.2))
     statuses = []
     probe = make_node('probe')
@@ -98,19 +58,19 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
                               lambda msg: statuses.extend(s for s in msg.status
                                                           if s.name == STATUS_NAME),
                               DIAGNOSTICS_QOS)
-    stop = _spin(context, node, probe)
+    stop = spin(node, probe)
     try:
-        _play(context, calibration_bag)
-        _wait(lambda: node.model is not None, what='the model')
+        play(calibration_bag)
+        wait(lambda: node.model is not None, what='the model')
         # A subscriber that comes after the fit still gets the model (latched).
         texts = []
         late = make_node('late', ctx=other_context)
         late.create_subscription(String, 'model', lambda msg: texts.append(msg.data),
                                  LATCHED_QOS)
-        stop_late = _spin(other_context, late)
-        _wait(lambda: texts and statuses and 'diagnosis_verdict' in
-              {v.key for v in statuses[-1].values}, timeout=60.0,
-              what='the latched model and the diagnosis on diagnostics')
+        stop_late = spin(late)
+        wait(lambda: texts and statuses and 'diagnosis_verdict' in
+             {v.key for v in statuses[-1].values}, timeout=60.0,
+             what='the latched model and the diagnosis on diagnostics')
         stop_late()
     finally:
         stop()
@@ -175,23 +135,24 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     assert 0 < buffered <= 3 * span + 1000 < recording.n_samples
 
 
-def test_fit_service_answers_with_the_fit_or_the_reason(context, make_node, calibration_bag):
-    node = Identification(context=context, parameter_overrides=_params(**FIT, min_shots=10))
+def test_fit_service_answers_with_the_fit_or_the_reason(context, make_node, calibration_bag,
+                                                        params, play, spin, wait):
+    node = Identification(context=context, parameter_overrides=params(**FIT, min_shots=10))
     client_node = make_node('client')
     client = client_node.create_client(Trigger, '/rig/identification/fit')
-    stop = _spin(context, node, client_node)
+    stop = spin(node, client_node)
 
     def call():
         future = client.call_async(Trigger.Request())
-        _wait(future.done, what='the service answer')
+        wait(future.done, what='the service answer')
         return future.result()
 
     try:
         assert client.wait_for_service(timeout_sec=10.0)
         empty = call()
         assert not empty.success and empty.message.startswith('0 shots kept, need at least 2')
-        _play(context, calibration_bag)
-        _wait(lambda: len(node.windows) == 4, what='four shots')
+        play(calibration_bag)
+        wait(lambda: len(node.windows) == 4, what='four shots')
         assert node.model is None  # min_shots not reached: no automatic fit
         answer = call()
     finally:
@@ -205,13 +166,14 @@ def test_fit_service_answers_with_the_fit_or_the_reason(context, make_node, cali
     assert f'{model.continuous().natural_frequency_hz / 1e3:.4g} kHz' in answer.message
 
 
-def test_automatic_fit_at_min_shots_and_refit_after_more(context, calibration_bag):
-    node = Identification(context=context, parameter_overrides=_params(
+def test_automatic_fit_at_min_shots_and_refit_after_more(context, calibration_bag, params,
+                                                         play, spin, wait):
+    node = Identification(context=context, parameter_overrides=params(
         **FIT, min_shots=2, refit_shots=2))
-    stop = _spin(context, node)
+    stop = spin(node)
     try:
-        _play(context, calibration_bag)
-        _wait(lambda: node.fits == 2 and node._fit_running is None, what='two fits')
+        play(calibration_bag)
+        wait(lambda: node.fits == 2 and node._fit_running is None, what='two fits')
     finally:
         stop()
     node.destroy_node()
@@ -219,7 +181,8 @@ def test_automatic_fit_at_min_shots_and_refit_after_more(context, calibration_ba
     assert [entry['index'] for entry in node.model.provenance[0].shots] == [0, 1, 2, 3]
 
 
-def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkeypatch):
+def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkeypatch, params,
+                                                play, spin, wait):
     started, release = threading.Event(), threading.Event()
 
     def slow_identify(*args, **kwargs):
@@ -228,30 +191,30 @@ def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkey
         return identify(*args, **kwargs)
 
     monkeypatch.setattr(identification_module, 'identify', slow_identify)
-    node = Identification(context=context, parameter_overrides=_params(**FIT, min_shots=2))
-    stop = _spin(context, node)
+    node = Identification(context=context, parameter_overrides=params(**FIT, min_shots=2))
+    stop = spin(node)
     try:
-        _play(context, calibration_bag)
+        play(calibration_bag)
         n = read_recording(calibration_bag).n_samples
         # The first fit (2 shots) is held in the worker; the rest of the stream still
         # arrives and its shots are found.
-        _wait(lambda: started.is_set() and node.samples_received['pressure/raw'] == n and
-              len(node.windows) == 4, what='reception during the fit')
+        wait(lambda: started.is_set() and node.samples_received['pressure/raw'] == n and
+             len(node.windows) == 4, what='reception during the fit')
         assert node.model is None
         release.set()
-        _wait(lambda: node.model is not None, what='the model')
+        wait(lambda: node.model is not None, what='the model')
     finally:
         release.set()
         stop()
     node.destroy_node()
 
 
-def test_identification_process_writes_the_model(context, node_process, calibration_bag,
-                                                 tmp_path):
+def test_identification_process_writes_the_model(node_process, calibration_bag, tmp_path,
+                                                 play):
     model_file = tmp_path / 'process.json'
     proc = node_process('identification', **FIT, min_shots=4, model_file=model_file)
     proc.wait_for_log('fit after 4 shots')
-    _play(context, calibration_bag)
+    play(calibration_bag)
     proc.wait_for_log('model: oe')
     assert proc.stop() == 0, proc.output()
     model = load(model_file)
@@ -259,7 +222,7 @@ def test_identification_process_writes_the_model(context, node_process, calibrat
     assert 'shot 3:' in proc.output()
 
 
-def test_shots_with_gaps_or_clipping_are_left_out(context, tmp_path):
+def test_shots_with_gaps_or_clipping_are_left_out(context, params):
     sim = simulate(RigConfig(fs=FS, shots=random_shots(4, seed=5), seed=5, t0_ns=T0_NS))
     rec = sim.recording
     onsets = sim.onsets
@@ -270,7 +233,7 @@ def test_shots_with_gaps_or_clipping_are_left_out(context, tmp_path):
         rec.acceleration[2, onsets[1]:onsets[1] + 2000], limit)
     accel, press = rec.streams()
     hole = onsets[2] + 3000  # in the post-trigger
-    node = Identification(context=context, parameter_overrides=_params(**FIT, min_shots=4))
+    node = Identification(context=context, parameter_overrides=params(**FIT, min_shots=4))
     # Fed directly, without DDS: the callbacks' bodies.
     node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
     for (stamp, a), (_, p) in zip(iter_blocks(accel, width=500), iter_blocks(press, width=500)):
@@ -285,11 +248,11 @@ def test_shots_with_gaps_or_clipping_are_left_out(context, tmp_path):
     assert len(reasons) == 2
     assert 'shot 1' in reasons[0] and 'clipped' in reasons[0]
     assert 'shot 2' in reasons[1] and 'gap' in reasons[1]
-    assert node._live.gaps == 1
+    assert len(node.counters.gaps) == 1
     assert limit / G0 > 100  # the clipped shot was a real one
 
 
-@pytest.mark.parametrize('params, name', [
+@pytest.mark.parametrize('values, name', [
     ({'structure': 'fir'}, 'structure'),
     ({'orders': [2]}, 'orders'),
     ({'orders': [0, 2]}, 'orders'),
@@ -301,19 +264,19 @@ def test_shots_with_gaps_or_clipping_are_left_out(context, tmp_path):
     ({'diagnostics_period': 0.0}, 'diagnostics_period'),
     ({'min_shots': 'four'}, 'min_shots'),
 ])
-def test_identification_rejects_bad_parameters(context, params, name):
+def test_identification_rejects_bad_parameters(context, params, values, name):
     with pytest.raises(NodeError, match=name):
-        Identification(context=context, parameter_overrides=_params(**params))
+        Identification(context=context, parameter_overrides=params(**values))
 
 
-def test_effects_need_an_identify_that_fits_them(context, monkeypatch):
+def test_effects_need_an_identify_that_fits_them(context, monkeypatch, params):
     def without_effects(calibration, *, structure='auto'):
         raise AssertionError('not called')
 
     def with_effects(calibration, *, structure='auto', effects=()):
         raise AssertionError('not called')
 
-    effects = _params(effects=['amplifier_highpass'])
+    effects = params(effects=['amplifier_highpass'])
     monkeypatch.setattr(identification_module, 'identify', without_effects)
     with pytest.raises(NodeError, match='effects'):
         Identification(context=context, parameter_overrides=effects)

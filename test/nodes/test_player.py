@@ -7,7 +7,6 @@ import time
 import numpy as np
 import pytest
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
@@ -21,31 +20,25 @@ from sensor_comp.sim import random_shots, RigConfig, simulate
 T0_NS = 1_700_000_000_000_000_000
 
 
-def _player(context, bag, **params) -> Player:
-    return Player(context=context, parameter_overrides=[
-        Parameter('bag', value=str(bag)),
-        *(Parameter(k, value=v) for k, v in params.items())])
-
-
-def _replay_into_recorder(context, node_process, bag, out) -> Player:
+def _replay_into_recorder(make_player, node_process, bag, out) -> Player:
     """Play ``bag`` in this process into a recorder process writing ``out``."""
     recorder = node_process('recorder', output=out, discovery_period=0.1)
     recorder.wait_for_log('recording every topic under /rig')
-    player = _player(context, bag, as_fast_as_possible=True, wait_for_subscribers=1,
-                     wait_timeout=20.0)
+    player = make_player(bag, as_fast_as_possible=True, wait_for_subscribers=1,
+                         wait_timeout=20.0)
     player.play()
     player.destroy_node()
     assert recorder.stop() == 0, recorder.output()
     return player
 
 
-def test_simulated_bag_round_trip_through_player_and_recorder(context, node_process,
-                                                              tmp_path):
+def test_simulated_bag_round_trip_through_player_and_recorder(node_process, tmp_path,
+                                                              make_player):
     rec = simulate(RigConfig(fs=1e5, shots=random_shots(2, seed=4), seed=4,
                              t0_ns=T0_NS)).recording
     original, copy = tmp_path / 'sim.mcap', tmp_path / 'copy.mcap'
     write_recording(original, rec, block_width=1000)
-    player = _replay_into_recorder(context, node_process, original, copy)
+    player = _replay_into_recorder(make_player, node_process, original, copy)
     with BagReader(original) as a, BagReader(copy) as b:
         assert player.published == sum(t.message_count for t in a.topics.values())
         assert b.topics == a.topics  # same counts; stream_info still latched
@@ -59,7 +52,7 @@ def test_simulated_bag_round_trip_through_player_and_recorder(context, node_proc
     assert np.array_equal(again.acceleration, rec.acceleration)
 
 
-def test_rosbags_bag_replays_with_identical_values(context, node_process, tmp_path):
+def test_rosbags_bag_replays_with_identical_values(node_process, tmp_path, make_player):
     rosbag2 = pytest.importorskip('rosbags.rosbag2')
     typesys = pytest.importorskip('rosbags.typesys')
     interfaces = pytest.importorskip('rosbags.interfaces')
@@ -102,7 +95,7 @@ def test_rosbags_bag_replays_with_identical_values(context, node_process, tmp_pa
                             np.frombuffer(block.tobytes(), np.uint8))
                 writer.write(conns[name], stamp, store.serialize_cdr(img, IMAGE))
     copy = tmp_path / 'copy.mcap'
-    _replay_into_recorder(context, node_process, bag_dir, copy)
+    _replay_into_recorder(make_player, node_process, bag_dir, copy)
     streams = read_streams(copy)
     for name, samples in data.items():
         assert streams[name].t0_ns == T0_NS and streams[name].fs == fs
@@ -159,9 +152,10 @@ class _Listener:
 
 
 @pytest.mark.parametrize('rate', [1.0, 2.5])
-def test_player_keeps_the_recorded_timing_scaled_by_rate(context, make_node, string_bag, rate):
+def test_player_keeps_the_recorded_timing_scaled_by_rate(context, make_node, string_bag, rate,
+                                                         make_player):
     listener = _Listener(make_node('listener'), ['text'])
-    player = _player(context, string_bag, rate=rate, wait_for_subscribers=1, topics=[
+    player = make_player(string_bag, rate=rate, wait_for_subscribers=1, topics=[
         '/rig/text'])
     player.play()
     texts = listener.wait('text', 10)
@@ -176,11 +170,12 @@ def test_player_keeps_the_recorded_timing_scaled_by_rate(context, make_node, str
     assert 0.9 * expected < span < expected + 0.1
 
 
-def test_player_offset_loop_and_namespace_remap(context, make_node, in_thread, string_bag):
+def test_player_offset_loop_and_namespace_remap(context, make_node, in_thread, string_bag,
+                                                make_player):
     listener = _Listener(make_node('listener', namespace='/bench'), ['text'])
     early = _Listener(make_node('early', namespace='/bench'), ['note'], qos=latched_qos(2))
-    player = _player(context, string_bag, start_offset=0.3, loop=True, rate=10.0,
-                     wait_for_subscribers=1, namespace_remap='/rig:=/bench')
+    player = make_player(string_bag, start_offset=0.3, loop=True, rate=10.0,
+                         wait_for_subscribers=1, namespace_remap='/rig:=/bench')
     _, join = in_thread(player.play)
     texts = listener.wait('text', 12)
     late = _Listener(make_node('late', namespace='/bench'), ['note'], qos=latched_qos(2))
@@ -195,8 +190,8 @@ def test_player_offset_loop_and_namespace_remap(context, make_node, in_thread, s
     assert early.texts('note') == notes
 
 
-def test_as_fast_as_possible_loses_nothing_to_a_slow_subscriber(context, make_node,
-                                                                tmp_path):
+def test_as_fast_as_possible_loses_nothing_to_a_slow_subscriber(context, make_node, tmp_path,
+                                                                make_player):
     path = tmp_path / 'blocks.mcap'
     n, width = 150, 10_000  # 80 kB messages
     rng = np.random.default_rng(5)
@@ -218,7 +213,7 @@ def test_as_fast_as_possible_loses_nothing_to_a_slow_subscriber(context, make_no
     executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)
     thread.start()
-    player = _player(context, path, as_fast_as_possible=True, wait_for_subscribers=1)
+    player = make_player(path, as_fast_as_possible=True, wait_for_subscribers=1)
     assert player.play() == n
     player.destroy_node()
     deadline = time.monotonic() + 10
@@ -241,12 +236,13 @@ def many_strings(tmp_path):
     return path
 
 
-def test_a_reader_that_takes_nothing_for_a_while_still_gets_everything(
-        context, other_context, make_node, many_strings):
+def test_a_reader_that_takes_nothing_for_a_while_still_gets_everything(context, other_context,
+                                                                       make_node, many_strings,
+                                                                       make_player):
     node = make_node('stalled', ctx=other_context)  # another participant, like a process
     got = []
     node.create_subscription(String, 'text', lambda m: got.append(m.data), BLOCK_QOS)
-    player = _player(context, many_strings, as_fast_as_possible=True, wait_for_subscribers=1)
+    player = make_player(many_strings, as_fast_as_possible=True, wait_for_subscribers=1)
     assert player.play() == 6000  # all acknowledged: queued in the reader
     player.destroy_node()
     executor = SingleThreadedExecutor(context=other_context)
@@ -260,10 +256,10 @@ def test_a_reader_that_takes_nothing_for_a_while_still_gets_everything(
 
 @pytest.mark.slow
 def test_player_waits_while_a_recorder_process_is_paused(context, node_process, in_thread,
-                                                         many_strings, tmp_path):
+                                                         many_strings, tmp_path, make_player):
     out = tmp_path / 'paused.mcap'
     recorder = node_process('recorder', output=out, discovery_period=0.1)
-    player = _player(context, many_strings, as_fast_as_possible=True)
+    player = make_player(many_strings, as_fast_as_possible=True)
     (text,) = (p for p in player.publishers if p.topic_name == '/rig/text')
     deadline = time.monotonic() + 20
     while text.get_subscription_count() < 1:
@@ -285,21 +281,21 @@ def test_player_waits_while_a_recorder_process_is_paused(context, node_process, 
         assert [decode_string(m.data) for m in bag.messages()] == [str(i) for i in range(6000)]
 
 
-def test_player_reports_bad_parameters(context, string_bag, tmp_path):
+def test_player_reports_bad_parameters(context, string_bag, tmp_path, make_player):
     with pytest.raises(NodeError, match='rate'):
-        _player(context, string_bag, rate=0.0)
+        make_player(string_bag, rate=0.0)
     for remap in ('rig', '/rig:=bench', '/rig:=/be nch'):
         with pytest.raises(NodeError, match='namespace_remap'):
-            _player(context, string_bag, namespace_remap=remap)
+            make_player(string_bag, namespace_remap=remap)
     with pytest.raises(NodeError, match='/rig/missing'):
-        _player(context, string_bag, topics=['/rig/missing'])
+        make_player(string_bag, topics=['/rig/missing'])
     with pytest.raises(Exception, match='missing.mcap'):
-        _player(context, tmp_path / 'missing.mcap')
-    player = _player(context, string_bag, wait_for_subscribers=1, wait_timeout=0.2)
+        make_player(tmp_path / 'missing.mcap')
+    player = make_player(string_bag, wait_for_subscribers=1, wait_timeout=0.2)
     with pytest.raises(NodeError, match='no 1 subscriber'):
         player.play()
     player.destroy_node()
-    player = _player(context, string_bag, start_offset=5.0, as_fast_as_possible=True)
+    player = make_player(string_bag, start_offset=5.0, as_fast_as_possible=True)
     with pytest.raises(NodeError, match='start_offset 5 s skips every message'):
         player.play()
     player.destroy_node()
