@@ -147,6 +147,11 @@ def _quiet(text: str) -> None:
     """Log nothing (the default of the ``log`` arguments)."""
 
 
+def _count(samples: float) -> str:
+    """Return a number of samples as text: whole, or with the tenth stamps can show."""
+    return f'{samples:.1f}'.rstrip('0').rstrip('.')
+
+
 class BlockPairer:
     """
     Pair pressure and acceleration blocks by stamp and check their continuity.
@@ -162,6 +167,7 @@ class BlockPairer:
 
     Attributes:
         counters: The sample accounting.
+        pair_name: How the log lines name the two topics together.
 
     """
 
@@ -174,6 +180,7 @@ class BlockPairer:
         self._log = log or _quiet
         self._gap_note = gap_note
         self._names = {PRESSURE_RAW: names[0], ACCELERATION: names[1]}
+        self.pair_name = f'{names[0]} + {names[1]}'
         self._pending: dict[str, dict[int, np.ndarray]] = {PRESSURE_RAW: {}, ACCELERATION: {}}
         self._next_stamp: int | None = None
         self._last_stamp: int | None = None
@@ -262,8 +269,8 @@ class BlockPairer:
             self.counters.mismatched += 1
             self.counters.unpaired_pressure += width
             self.counters.unpaired_acceleration += acceleration.shape[1]
-            self._log(f'pair at stamp {stamp} ns dropped: the {self._names[PRESSURE_RAW]} '
-                      f'block has {width} samples but the {self._names[ACCELERATION]} block '
+            self._log(f'{self.pair_name} pair at stamp {stamp} ns dropped: the pressure block '
+                      f'has {width} samples but the acceleration block '
                       f'{acceleration.shape[1]}; counted as unpaired')
             return None
         missing = 0
@@ -271,15 +278,17 @@ class BlockPairer:
             offset = (stamp - self._next_stamp) * self.fs / 1e9
             if offset <= -0.5:
                 self.counters.overlapping += width
-                self._log(f'pair at stamp {stamp} ns ({width} samples) dropped: it starts '
-                          f'{-offset:.4g} samples before the end of the previous pair (stamp '
-                          f'{self._last_stamp} ns); out of order, overlapping or repeated')
+                self._log(f'{self.pair_name} pair at stamp {stamp} ns ({width} samples) '
+                          f'dropped: it starts {_count(-offset)} samples before the end of the '
+                          f'previous pair (stamp {self._last_stamp} ns); out of order, '
+                          f'overlapping or repeated')
                 return None
             missing = math.floor(offset + 0.5)
             if missing:
                 self.counters.gaps.append(Gap(self.counters.output_samples, missing))
-                self._log(f'stamp gap: {missing} samples missing before the pair at stamp '
-                          f'{stamp} ns (the previous pair ended at {self._next_stamp} ns)'
+                self._log(f'{self.pair_name}: stamp gap, {missing} samples missing before '
+                          f'the pair at stamp {stamp} ns (the previous pair ended at '
+                          f'{self._next_stamp} ns)'
                           + (f'; {self._gap_note}' if self._gap_note else ''))
         self._last_stamp = stamp
         self._next_stamp = stamp + round(width * 1e9 / self.fs)
@@ -296,12 +305,14 @@ class NonFiniteRuns:
 
     Args:
         log: Called with each line.
+        where: The stream, as the lines name it (e.g. the topics).
         effect: What the non-finite samples do, for the line at the start of a run.
 
     """
 
-    def __init__(self, log: Callable[[str], None] | None, *, effect: str):
+    def __init__(self, log: Callable[[str], None] | None, *, where: str, effect: str):
         self._log = log or _quiet
+        self._where = where
         self._effect = effect
         self._run: tuple[int, int] | None = None  # (first stamp, samples so far)
 
@@ -309,15 +320,15 @@ class NonFiniteRuns:
         """Note a block of ``width`` samples, ``bad`` of them non-finite."""
         if bad:
             if self._run is None:
-                self._log(f'non-finite samples from the block at stamp {stamp_ns} ns on ({bad} '
-                          f'of its {width}): {self._effect}')
+                self._log(f'{self._where}: non-finite samples from the block at stamp '
+                          f'{stamp_ns} ns on ({bad} of its {width}): {self._effect}')
                 self._run = (stamp_ns, 0)
             self._run = (self._run[0], self._run[1] + bad)
         elif self._run is not None:
             first, count = self._run
             self._run = None
-            self._log(f'finite samples again from the block at stamp {stamp_ns} ns: {count} '
-                      f'non-finite samples since stamp {first} ns')
+            self._log(f'{self._where}: finite samples again from the block at stamp '
+                      f'{stamp_ns} ns: {count} non-finite samples since stamp {first} ns')
 
 
 class BlockCompensator:
@@ -346,9 +357,10 @@ class BlockCompensator:
         self.pairer = BlockPairer(fs=fs, max_pending=max_pending, log=log, names=names,
                                   gap_note='the compensation filter restarts from rest')
         self.counters = self.pairer.counters
-        self._invalid = NonFiniteRuns(log, effect='their compensated samples are NaN (and '
-                                                  'the filter restarts from rest after '
-                                                  'non-finite acceleration)')
+        self._invalid = NonFiniteRuns(log, where=self.pairer.pair_name,
+                                      effect='their compensated samples are NaN (and the '
+                                             'filter restarts from rest after non-finite '
+                                             'acceleration)')
         # The acceleration since the latest restart, for the next model's state.
         self._history: deque[np.ndarray] = deque()
         self._history_samples = 0

@@ -318,8 +318,7 @@ class Compensation(Node):
                 return
             model = model_from_text(text, where=where)
         except (MessageError, ModelError) as exc:
-            self.refused += 1
-            self.get_logger().error(f'{where} refused, the model in use is kept: {exc}')
+            self._refuse(where, str(exc))
             return
         if self._offer(model, where):
             self._model_text = text

@@ -333,6 +333,7 @@ class Identification(Node):
         rejected: Shots found but left out; ``rejections`` holds the latest reasons.
         fits: Fits done (successful or not).
         samples_received: Samples received per input topic (in decodable blocks).
+        received: Input block messages received, malformed ones too.
         malformed: Messages skipped because they could not be decoded.
         invalid_samples: Samples with a non-finite value, taken as a gap.
 
@@ -353,11 +354,12 @@ class Identification(Node):
         self.rejected = 0
         self.rejections: deque[str] = deque(maxlen=100)  # the latest reasons
         self.malformed = 0
+        self.received = 0
         self.held_dropped = 0
         self._infos: dict[str, StreamInfo] = {}
         self._live: _LiveShots | None = None
         self._pairer: BlockPairer | None = None
-        self._non_finite = NonFiniteRuns(self.get_logger().warning, effect=_NON_FINITE_NOTE)
+        self._non_finite: NonFiniteRuns | None = None
         self.invalid_samples = 0
         self._held: deque[tuple[str, bytes]] = deque()
         self._lock = threading.Lock()
@@ -480,6 +482,8 @@ class Identification(Node):
             fs=pressure.fs, max_pending=_MAX_UNPAIRED, log=self.get_logger().warning,
             gap_note=_GAP_NOTE, names=(self.resolve_topic_name(PRESSURE_RAW),
                                        self.resolve_topic_name(ACCELERATION)))
+        self._non_finite = NonFiniteRuns(self.get_logger().warning,
+                                         where=self._pairer.pair_name, effect=_NON_FINITE_NOTE)
         self.get_logger().info(f'streams at {pressure.fs:g} Hz; rolling buffer of '
                                f'{self._live.capacity} samples')
         held, self._held = self._held, deque()
@@ -487,10 +491,12 @@ class Identification(Node):
             self._handle(topic, message)
 
     def _on_block(self, topic: str, data: bytes) -> None:
+        self.received += 1
         self._handle(topic, data)
         take_queued(self._takers, limit=_BATCH)
 
     def _take_queued(self, topic: str, data: bytes, info: dict) -> None:
+        self.received += 1
         self._handle(topic, data)
 
     def _handle(self, topic: str, data: bytes) -> None:

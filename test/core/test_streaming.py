@@ -404,18 +404,20 @@ def test_every_stream_fault_is_one_log_line_and_the_state_survives_it(run):
     # Block 8 (dropped) and block 12 (lost) are missing from the output.
     assert counters.gaps == [Gap(2400, 300), Gap(3300, 300)]
     expected = {
-        f'stamp {stamp(0)} ns (300 samples) dropped: it starts 600 samples before the end of '
-        f'the previous pair (stamp {stamp(300)} ns); out of order',
-        f'stamp {stamp(450)} ns (300 samples) dropped: it starts 150 samples before',
-        f'non-finite samples from the block at stamp {stamp(1200)} ns on (10 of its 300): '
-        f'their compensated samples are NaN',
-        f'finite samples again from the block at stamp {stamp(1800)} ns: 11 non-finite samples '
-        f'since stamp {stamp(1200)} ns',
-        f'pair at stamp {stamp(2400)} ns dropped: the pressure/raw block has 299 samples but the '
+        f'pressure/raw + acceleration pair at stamp {stamp(0)} ns (300 samples) dropped: it '
+        f'starts 600 samples before the end of the previous pair (stamp {stamp(300)} ns); out '
+        f'of order',
+        f'pair at stamp {stamp(450)} ns (300 samples) dropped: it starts 150 samples before',
+        f'pressure/raw + acceleration: non-finite samples from the block at stamp {stamp(1200)} '
+        f'ns on (10 of its 300): their compensated samples are NaN',
+        f'pressure/raw + acceleration: finite samples again from the block at stamp '
+        f'{stamp(1800)} ns: 11 non-finite samples since stamp {stamp(1200)} ns',
+        f'pair at stamp {stamp(2400)} ns dropped: the pressure block has 299 samples but the '
         f'acceleration block 300',
-        f'stamp gap: 300 samples missing before the pair at stamp {stamp(2700)} ns (the '
-        f'previous pair ended at {stamp(2400)} ns); the compensation filter restarts from rest',
-        f'stamp gap: 300 samples missing before the pair at stamp {stamp(3900)} ns (the '
+        f'pressure/raw + acceleration: stamp gap, 300 samples missing before the pair at stamp '
+        f'{stamp(2700)} ns (the previous pair ended at {stamp(2400)} ns); the compensation '
+        f'filter restarts from rest',
+        f'stamp gap, 300 samples missing before the pair at stamp {stamp(3900)} ns (the '
         f'previous pair ended at {stamp(3600)} ns); the compensation filter restarts from rest',
         f'pressure/raw block at stamp {stamp(4200) + 7} ns (300 samples) got no acceleration '
         f'block (the pair at stamp {stamp(4500)} ns came first): counted as unpaired',

@@ -8,9 +8,12 @@ node processes started by a test inherit both. In-process nodes use a fresh
 
 Helpers (test files cannot import each other, so they come as fixtures): ``params``
 (parameter overrides from keywords), ``wait`` (poll a condition), ``spin`` (spin nodes in
-a thread), ``make_player`` and ``play`` (replay a bag from this process).
+a thread), ``make_player`` and ``play`` (replay a bag from this process), ``node_log`` (the
+log lines of the nodes in this process), ``faulty_stream`` (a rig stream with every kind
+of fault between its good blocks, and what a node must make of it).
 """
 
+from dataclasses import dataclass, field
 import fcntl
 import os
 from pathlib import Path
@@ -22,16 +25,24 @@ import tempfile
 import threading
 import time
 
+import numpy as np
 import pytest
 
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 rclpy = pytest.importorskip('rclpy')
 
+from builtin_interfaces.msg import Time  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
+from sensor_msgs.msg import Image  # noqa: E402
+from std_msgs.msg import Header  # noqa: E402
 
+from sensor_comp.io.messages import encode_block, encode_stream_info  # noqa: E402
 from sensor_comp.nodes._common import join_callbacks, use_fastdds_profile  # noqa: E402
 from sensor_comp.nodes.player import Player  # noqa: E402
+from sensor_comp.streams import Recording, StreamInfo  # noqa: E402
 
 # Before the first context of this process: Fast DDS reads its profile once.
 use_fastdds_profile()
@@ -284,3 +295,220 @@ def play(make_player):
         finally:
             player.destroy_node()
     return run
+
+
+class NodeLog:
+    """The log lines written so far by the nodes of this process (captured from fd 2)."""
+
+    def __init__(self, capfd):
+        self._capfd = capfd
+        self._text = ''
+
+    def lines(self) -> list[str]:
+        """Return every line logged so far."""
+        out, err = self._capfd.readouterr()
+        self._text += out + err
+        return self._text.splitlines()
+
+    def matching(self, *fragments: str) -> list[str]:
+        """Return the lines holding every fragment."""
+        return [line for line in self.lines() if all(f in line for f in fragments)]
+
+
+@pytest.fixture
+def node_log(capfd):
+    """Return the :class:`NodeLog` of this test (rclpy logs to the process's stderr)."""
+    return NodeLog(capfd)
+
+
+@dataclass
+class FaultyStream:
+    """
+    A rig stream with faults between its good blocks, and what a node must make of it.
+
+    Attributes:
+        recording: The streams as a node should see them: NaN where samples are lost, the
+            non-finite samples in place.
+        info: The good ``stream_info`` message.
+        bad_infos: ``(message, fragments)``: bad ``stream_info`` messages and what the log
+            line about each must hold.
+        events: ``(relative topic, message)`` block messages in publication order.
+        faults: Fragments that one log line must hold, for each fault among the blocks.
+        malformed: How many of ``events`` (and of ``bad_infos``) cannot be decoded.
+        lost: ``(start, stop)`` sample ranges of the recording missing from the output.
+        invalid: Sample indices of the non-finite samples.
+        counts: The accounting a node must end with (``StreamCounters`` names).
+
+    """
+
+    recording: Recording
+    info: bytes
+    bad_infos: list[tuple[bytes, tuple[str, ...]]]
+    events: list[tuple[str, bytes]] = field(default_factory=list)
+    faults: list[tuple[str, ...]] = field(default_factory=list)
+    malformed: int = 0
+    lost: list[tuple[int, int]] = field(default_factory=list)
+    invalid: list[int] = field(default_factory=list)
+    counts: dict = field(default_factory=dict)
+
+    def segments(self) -> list[tuple[int, int]]:
+        """Return the stretches between the lost ranges (a node restarts after each)."""
+        edges = [0] + [i for lost in self.lost for i in lost] + [self.recording.n_samples]
+        return list(zip(edges[::2], edges[1::2]))
+
+
+def _image(stamp_ns: int, *, height: int, width: int, encoding: str = '64FC1',
+           bigendian: int = 0, step: int | None = None, data: bytes | None = None) -> bytes:
+    step = 8 * width if step is None else step
+    data = bytes(height * step) if data is None else data
+    header = Header(stamp=Time(sec=stamp_ns // 10 ** 9, nanosec=stamp_ns % 10 ** 9),
+                    frame_id='piezo')
+    return serialize_message(Image(header=header, height=height, width=width,
+                                   encoding=encoding, is_bigendian=bigendian, step=step,
+                                   data=data))
+
+
+def _faulty_stream(recording: Recording, *, width: int = 1000) -> FaultyStream:
+    """
+    Return ``recording`` as 1000-sample blocks with every kind of fault in between.
+
+    The faults sit outside the windows of the shots (5 random shots at 200 kS/s, seed 3:
+    windows 3000-8213, 11212-16536, 19541-25083, 28092-33649, 36656-41988), so that the
+    shots are those of the good blocks.
+    """
+    fs, t0 = recording.fs, recording.t0_ns
+    pressure, acceleration = recording.pressure.copy(), recording.acceleration.copy()
+    pressure[1100] = np.inf  # non-finite samples in block 1
+    acceleration[2, 1200:1210] = np.nan
+
+    def stamp(sample: int) -> int:
+        return t0 + round(sample * 1e9 / fs)
+
+    accel_info, press_info = recording.streams()[0].info, recording.streams()[1].info
+    info = encode_stream_info([accel_info, press_info], stamp_ns=t0)
+    keyless = DiagnosticArray(status=[DiagnosticStatus(
+        name='pressure/raw', values=[KeyValue(key='unit', value='Pa')])])
+    faster = StreamInfo('pressure/raw', 2 * fs, ('p',), 'Pa', recording.frame_id)
+    out = FaultyStream(recording, info, [
+        (b'\x00\x01\x00\x00\x07', ('/rig/stream_info: message skipped: not a valid '
+                                   'diagnostic_msgs/msg/DiagnosticArray',)),
+        (serialize_message(keyless), ('/rig/stream_info: message skipped:',
+                                      "'pressure/raw' lacks the key(s) sample_rate_hz")),
+        (encode_stream_info([faster], stamp_ns=t0), (
+            f'/rig/stream_info: pressure/raw now at {2 * fs:g} Hz, was {fs:g} Hz',))])
+    out.malformed = 2  # the undecodable stream_info messages
+    n = recording.n_samples
+    pressure_samples = acceleration_samples = 0
+
+    def send(topic: str, data: bytes) -> None:
+        out.events.append((topic, data))
+
+    def block(topic: str, start: int, stop: int, *, at: int | None = None, values=None):
+        nonlocal pressure_samples, acceleration_samples
+        at = stamp(start) if at is None else at
+        if topic == 'pressure/raw':
+            data = pressure[start:stop] if values is None else values
+            pressure_samples += data.size
+            send(topic, encode_block(data[np.newaxis], stamp_ns=at, frame_id='piezo'))
+        else:
+            data = acceleration[:, start:stop] if values is None else values
+            acceleration_samples += data.shape[1]
+            send(topic, encode_block(data, stamp_ns=at, frame_id='piezo'))
+
+    def malformed(topic: str, data: bytes, *fragments: str) -> None:
+        send(topic, data)
+        out.malformed += 1
+        out.faults.append((f'/rig/{topic}: message skipped:', *fragments))
+
+    odd = t0 + 7 * 10 ** 9  # stamps of the malformed blocks: easy to find in the log
+    garbage = np.full((3, width), 1e300)
+    for k, start in enumerate(range(0, n, width)):
+        stop = min(start + width, n)
+        if k == 4:
+            malformed('pressure/raw', _image(odd + 1, height=1, width=width, encoding='mono8'),
+                      f'at stamp {odd + 1} ns', "encoding is 'mono8'")
+            malformed('acceleration', _image(odd + 2, height=3, width=width, bigendian=1),
+                      f'at stamp {odd + 2} ns', 'is_bigendian is 1')
+        elif k == 6:
+            malformed('pressure/raw', _image(odd + 3, height=2, width=width),
+                      f'/rig/pressure/raw block at stamp {odd + 3} ns must be one channel, '
+                      f'got shape (2, {width})')
+            malformed('acceleration', _image(odd + 4, height=1, width=width),
+                      f'/rig/acceleration block at stamp {odd + 4} ns must have 3 rows',
+                      f'got shape (1, {width})')
+        elif k == 8:
+            malformed('pressure/raw', _image(odd + 5, height=1, width=width, step=8 * width + 8),
+                      f'at stamp {odd + 5} ns', f'step is {8 * width + 8} bytes')
+            malformed('acceleration', _image(odd + 6, height=3, width=width,
+                                             data=bytes(8 * width)),
+                      f'at stamp {odd + 6} ns', f'data holds {8 * width} bytes, height*step')
+        elif k == 12:
+            malformed('pressure/raw', _image(odd + 7, height=1, width=width, data=b''),
+                      f'at stamp {odd + 7} ns', 'data holds 0 bytes')
+            malformed('acceleration', _image(odd + 8, height=3, width=0),
+                      f'/rig/acceleration block at stamp {odd + 8} ns holds no sample '
+                      f'(width 0)')
+            malformed('pressure/raw', b'\x00\x01\x00\x00garbage',
+                      'not a valid sensor_msgs/msg/Image')
+        elif k == 27:  # a pair from the past (block 3, garbage values): out of order
+            block('pressure/raw', 0, width, at=stamp(3000), values=garbage[0])
+            block('acceleration', 0, width, at=stamp(3000), values=garbage)
+            out.faults.append((f'/rig/pressure/raw + /rig/acceleration pair at stamp '
+                               f'{stamp(3000)} ns ({width} samples) dropped: it starts '
+                               f'{start - 3000} samples before the end of the previous pair '
+                               f'(stamp {stamp(start - width)} ns); out of order',))
+        elif k == 28:  # half a block again: overlapping
+            block('pressure/raw', start - width // 2, start + width // 2)
+            block('acceleration', start - width // 2, start + width // 2)
+            out.faults.append((f'pair at stamp {stamp(start - width // 2)} ns ({width} '
+                               f'samples) dropped: it starts {width // 2} samples before',))
+        elif k == 35:  # a pressure block off the acquisition grid: no partner
+            block('pressure/raw', start - width, start, at=stamp(start - width) + 2500)
+            out.faults.append((f'/rig/pressure/raw block at stamp {stamp(start - width) + 2500} '
+                               f'ns ({width} samples) got no /rig/acceleration block (the pair '
+                               f'at stamp {stamp(start)} ns came first): counted as unpaired',))
+        elif k == 36:  # and an acceleration block
+            block('acceleration', start - width, start, at=stamp(start - width) + 7)
+            out.faults.append((f'/rig/acceleration block at stamp {stamp(start - width) + 7} ns '
+                               f'({width} samples) got no /rig/pressure/raw block (the pair at '
+                               f'stamp {stamp(start)} ns came first)',))
+        if k == 9:  # lost: a stamp gap
+            out.lost.append((start, stop))
+            out.faults.append((f'/rig/pressure/raw + /rig/acceleration: stamp gap, {width} '
+                               f'samples missing before the pair at stamp {stamp(stop)} ns',))
+            continue
+        if k == 17:  # two widths: the pair is dropped, a gap follows
+            block('pressure/raw', start, stop)
+            block('acceleration', start, stop - 1)
+            out.lost.append((start, stop))
+            out.faults += [(f'pair at stamp {stamp(start)} ns dropped: the pressure block has '
+                            f'{width} samples but the acceleration block {width - 1}',),
+                           (f'stamp gap, {width} samples missing before the pair at stamp '
+                            f'{stamp(stop)} ns',)]
+            continue
+        block('pressure/raw', start, stop)
+        block('acceleration', start, stop)
+    out.invalid = [1100, *range(1200, 1210)]
+    out.faults += [(f'/rig/pressure/raw + /rig/acceleration: non-finite samples from the block '
+                    f'at stamp {stamp(1000)} ns on (11 of its {width})',),
+                   (f'finite samples again from the block at stamp {stamp(2000)} ns: 11 '
+                    f'non-finite samples since stamp {stamp(1000)} ns',)]
+    for lost in out.lost:
+        pressure[lost[0]:lost[1]] = np.nan
+        acceleration[:, lost[0]:lost[1]] = np.nan
+    out.recording = Recording(fs=fs, t0_ns=t0, pressure=pressure, acceleration=acceleration,
+                              frame_id=recording.frame_id, metadata=recording.metadata)
+    output = n - sum(stop - start for start, stop in out.lost)
+    out.counts = {'pressure_samples': pressure_samples,
+                  'acceleration_samples': acceleration_samples, 'output_samples': output,
+                  'unpaired_pressure_samples': 2 * width,
+                  'unpaired_acceleration_samples': 2 * width - 1,
+                  'mismatched_blocks': 1, 'overlapping_samples': 2 * width,
+                  'gaps': len(out.lost), 'invalid_samples': len(out.invalid)}
+    return out
+
+
+@pytest.fixture
+def faulty_stream():
+    """Return the maker of :class:`FaultyStream` from a recording (1000-sample blocks)."""
+    return _faulty_stream

@@ -1,6 +1,7 @@
 """The compensation node: live output equal to offline compensation, sample by sample."""
 
 import json
+import signal
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
@@ -14,8 +15,8 @@ from sensor_comp.core.model import Model
 from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import (decode_block, decode_stream_info, decode_string,
-                                     encode_block, encode_stream_info, encode_string, IMAGE,
-                                     STRING)
+                                     DIAGNOSTIC_ARRAY, encode_block, encode_stream_info,
+                                     encode_string, IMAGE, STRING)
 from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS,
                                        message_class, NodeError)
 from sensor_comp.nodes.compensation import Compensation, model_from_text, STATUS_NAME
@@ -299,3 +300,158 @@ def test_an_unstable_model_file_stops_the_node(context, model, tmp_path, params)
     path.write_text(json.dumps(doc))
     with pytest.raises(NodeError, match='model_file'):
         Compensation(context=context, parameter_overrides=params(model_file=str(path)))
+
+
+def _bad_models(model: Model) -> list[tuple[bytes, tuple[str, ...]]]:
+    """Return bad messages for the model topic, each with what its log line must hold."""
+    doc = model.to_json()
+    cases = [(encode_string('{"schema": "sensor_comp.model/1", "fs": '), ('not valid JSON',)),
+             (encode_string(json.dumps({**doc, 'schema': 'sensor_comp.model/99'})),
+              ("schema 'sensor_comp.model/99'",)),
+             (encode_string(json.dumps({**doc, 'effects': [{'id': 'flux_capacitor'}]})),
+              ("'flux_capacitor'",)),
+             (encode_string(json.dumps({**doc, 'denominator': [1.0, -2.0, 1.1]})),
+              ('pole of magnitude',)),
+             (encode_string(json.dumps({**doc, 'fs': 2 * FS})),
+              (f'identified at {2 * FS:g} Hz but the stream is sampled at {FS:g} Hz',)),
+             (b'\x00\x01\x00\x00\xff\xff\xff\x7f', ('not a valid std_msgs/msg/String',))]
+    return [(data, ('model on /rig/model refused', *fragments)) for data, fragments in cases]
+
+
+def test_every_fault_is_logged_and_skipped_and_the_good_blocks_compensated_as_offline(
+        context, make_node, model, recording, faulty_stream, node_log, params, spin, wait):
+    stream = faulty_stream(recording, width=WIDTH)
+    node = Compensation(context=context, parameter_overrides=params(diagnostics_period=0.1))
+    probe = make_node('probe')
+    outputs = _Outputs(probe)
+    blocks = {topic: probe.create_publisher(message_class(IMAGE), topic, BLOCK_QOS)
+              for topic in ('pressure/raw', 'acceleration')}
+    infos = probe.create_publisher(message_class(DIAGNOSTIC_ARRAY), 'stream_info', LATCHED_QOS)
+    models = probe.create_publisher(message_class(STRING), 'model', LATCHED_QOS)
+    bad_models = _bad_models(model)
+    stop = spin(node, probe)
+    try:
+        wait(lambda: all(p.get_subscription_count() for p in (*blocks.values(), infos, models)),
+             what='the node to subscribe')
+        # One message at a time, each handled before the next: the log lines and the
+        # accounting do not depend on how DDS interleaves the topics.
+        infos.publish(stream.info)
+        wait(lambda: node._fs == FS, what='the stream rate')
+        for data, fragments in stream.bad_infos:
+            infos.publish(data)
+            wait(lambda: node_log.matching(*fragments), what=' '.join(fragments))
+        models.publish(encode_string(json.dumps(model.to_json())))
+        wait(lambda: node.compensator is not None, what='the model')
+        for count, (data, _) in enumerate(bad_models, 1):
+            models.publish(data)
+            wait(lambda: node.refused == count, what=f'bad model {count}')
+        for count, (topic, data) in enumerate(stream.events, 1):
+            blocks[topic].publish(data)
+            wait(lambda: node.received == count, what=f'block message {count}')
+        node.finish()  # what SIGINT does: the blocks still without partner count as unpaired
+        wait(lambda: outputs.samples() == outputs.samples('pressure/induced') ==
+             stream.counts['output_samples'], what='every output block')
+        wait(lambda: outputs.statuses and outputs.statuses[-1]['unpaired_acceleration_samples']
+             == str(stream.counts['unpaired_acceleration_samples']), what='the last status')
+    finally:
+        stop()
+    status = outputs.statuses[-1]
+    assert node.model.created == model.created  # the bad models changed nothing
+    node.destroy_node()
+
+    # Each fault is one log line that names its topic, its stamp and the reason.
+    for fragments in (stream.faults + [f for _, f in stream.bad_infos]
+                      + [f for _, f in bad_models]):
+        assert len(node_log.matching(*fragments)) == 1, (fragments, node_log.lines())
+    # The good blocks are compensated as offline: each stretch between lost blocks from
+    # rest, NaN exactly at the non-finite samples, the filter restarted after them.
+    good = stream.recording
+    compensated, induced = (np.concatenate(parts) for parts in zip(*(
+        CompensationFilter.from_model(model).process(good.acceleration[:, i:j],
+                                                     good.pressure[i:j])
+        for i, j in stream.segments())))
+    live = outputs.joined('pressure/compensated')
+    assert np.flatnonzero(np.isnan(live)).tolist() == stream.invalid
+    assert np.array_equal(np.isnan(outputs.joined('pressure/induced')), np.isnan(induced))
+    finite = ~np.isnan(compensated)
+    _assert_equal_samples(live[finite], compensated[finite])
+    _assert_equal_samples(outputs.joined('pressure/induced')[finite], induced[finite])
+    lost = {good.t0_ns + round(i * 1e9 / FS) for start, stop in stream.lost
+            for i in range(start, stop, WIDTH)}
+    assert [s for s, _ in sorted(outputs.blocks['pressure/compensated'])] == [
+        good.t0_ns + round(i * 1e9 / FS) for i in range(0, good.n_samples, WIDTH)
+        if good.t0_ns + round(i * 1e9 / FS) not in lost]
+    # /diagnostics accounts for every sample received.
+    for key, value in stream.counts.items():
+        assert status[key] == str(value), key
+    for topic in ('pressure', 'acceleration'):
+        assert int(status[f'{topic}_samples']) == int(status['output_samples']) + int(
+            status[f'unpaired_{topic}_samples']) + int(status['overlapping_samples'])
+    assert status['malformed_messages'] == str(stream.malformed)
+    assert status['models_refused'] == str(len(bad_models))
+    assert status['held_blocks'] == status['unpublished_blocks'] == '0'
+
+
+def test_a_killed_compensation_process_restarts_on_the_latched_model(
+        make_node, node_process, model, recording, spin, wait):
+    probe = make_node('probe')
+    outputs = _Outputs(probe)
+    blocks = {topic: probe.create_publisher(message_class(IMAGE), topic, BLOCK_QOS)
+              for topic in ('pressure/raw', 'acceleration')}
+    accel, press = recording.streams()
+    infos = probe.create_publisher(message_class(DIAGNOSTIC_ARRAY), 'stream_info', LATCHED_QOS)
+    infos.publish(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
+    _latched_model(probe, model)  # as the identification node publishes it
+    pairs = list(zip(iter_blocks(press, width=WIDTH), iter_blocks(accel, width=WIDTH)))
+    restart = 10  # the first block of the new process, in the quiet stretch before shot 1
+    stop = spin(probe)
+
+    def readers(topic: str) -> set:
+        return {bytes(info.endpoint_gid)
+                for info in probe.get_subscriptions_info_by_topic(f'/rig/{topic}')}
+
+    def subscribed(seen: dict) -> bool:
+        # The killed process's readers may stay listed (and matched) for a while.
+        return all(len(readers(topic) - seen.get(topic, set())) == 1 and
+                   publisher.get_subscription_count() >= len(readers(topic))
+                   for topic, publisher in blocks.items())
+
+    def feed(chunk, seen: dict) -> None:
+        # Only once the process's own subscriptions are matched: the blocks are volatile.
+        wait(lambda: subscribed(seen), what='the new process to subscribe')
+        for (stamp, p), (_, a) in chunk:
+            blocks['pressure/raw'].publish(encode_block(p, stamp_ns=stamp, frame_id='s'))
+            blocks['acceleration'].publish(encode_block(a, stamp_ns=stamp, frame_id='s'))
+
+    try:
+        first = node_process('compensation')
+        first.wait_for_log('using the oe model')
+        feed(pairs[:restart], {})
+        wait(lambda: outputs.samples() == restart * WIDTH, what='the first blocks')
+        seen = {topic: readers(topic) for topic in blocks}
+        first.popen.kill()  # a crash: no clean-up, no last word
+        assert first.wait() == -signal.SIGKILL
+        second = node_process('compensation')
+        second.wait_for_log(f'using the oe model (na=2 nb=2 nc=0 nd=0 nk=1, {FS:g} Hz, '
+                            f'created {model.created}) of model on /rig/model')
+        feed(pairs[restart:], seen)
+        wait(lambda: outputs.samples() == recording.n_samples, what='the remaining blocks')
+        assert second.stop() == 0, second.output()
+    finally:
+        stop()
+    n = recording.n_samples - restart * WIDTH
+    assert f'compensated {n} of {n} pressure samples' in second.output()
+    # The new process compensates from its first block on, from rest: the offline
+    # compensation of the rest of the recording.
+    cut = restart * WIDTH
+    compensated = outputs.joined('pressure/compensated')
+    expected = CompensationFilter.from_model(model).process(recording.acceleration[:, cut:],
+                                                            recording.pressure[cut:])[0]
+    _assert_equal_samples(compensated[cut:], expected)
+    # In a quiet stretch the lost filter state costs less than the noise.
+    whole = CompensationFilter.from_model(model).process(recording.acceleration,
+                                                         recording.pressure)[0]
+    noise = np.std(recording.pressure[:2000])
+    assert np.max(np.abs(compensated[cut:] - whole[cut:])) < noise
+    assert [s for s, _ in sorted(outputs.blocks['pressure/compensated'])] == [
+        stamp for (stamp, _), _ in pairs]

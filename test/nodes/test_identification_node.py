@@ -6,6 +6,7 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
+from sensor_msgs.msg import Image
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
@@ -18,7 +19,7 @@ from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
 from sensor_comp.nodes import identification as identification_module
-from sensor_comp.nodes._common import DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
+from sensor_comp.nodes._common import BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
 from sensor_comp.nodes.compensation import model_from_text
 from sensor_comp.nodes.identification import (Identification, provenance_shots,
                                               STATUS_NAME)
@@ -294,3 +295,68 @@ def test_model_json_round_trips(calibration_bag):
     np.testing.assert_array_equal(again.b, model.b)
     with pytest.raises(Exception, match='model on /rig/model'):
         model_from_text('{"schema": "sensor_comp.model/1"}', where='model on /rig/model')
+
+
+def test_every_fault_is_logged_and_skipped_and_the_model_is_the_offline_fit(
+        context, make_node, faulty_stream, node_log, params, spin, wait):
+    recording = simulate(RigConfig(fs=FS, shots=random_shots(SHOTS, seed=3), seed=3,
+                                   t0_ns=T0_NS)).recording
+    stream = faulty_stream(recording)
+    node = Identification(context=context, parameter_overrides=params(
+        **FIT, min_shots=4, diagnose=False, diagnostics_period=0.1))
+    probe = make_node('probe')
+    statuses = []
+    probe.create_subscription(DiagnosticArray, '/diagnostics',
+                              lambda msg: statuses.extend({v.key: v.value for v in s.values}
+                                                          for s in msg.status
+                                                          if s.name == STATUS_NAME),
+                              DIAGNOSTICS_QOS)
+    blocks = {topic: probe.create_publisher(Image, topic, BLOCK_QOS)
+              for topic in ('pressure/raw', 'acceleration')}
+    infos = probe.create_publisher(DiagnosticArray, 'stream_info', LATCHED_QOS)
+    stop = spin(node, probe)
+    try:
+        wait(lambda: all(p.get_subscription_count() for p in (*blocks.values(), infos)),
+             what='the node to subscribe')
+        # One message at a time, each handled before the next (see the compensation test).
+        infos.publish(stream.info)
+        wait(lambda: node.fs == FS, what='the stream rate')
+        for data, fragments in stream.bad_infos:
+            infos.publish(data)
+            wait(lambda: node_log.matching(*fragments), what=' '.join(fragments))
+        for count, (topic, data) in enumerate(stream.events, 1):
+            blocks[topic].publish(data)
+            wait(lambda: node.received == count, what=f'block message {count}')
+        wait(lambda: node.model is not None and statuses and
+             statuses[-1].get('fits') == '1', what='the model')
+    finally:
+        stop()
+    status = statuses[-1]
+    model = node.model
+    node.destroy_node()
+
+    for fragments in stream.faults + [f for _, f in stream.bad_infos]:
+        assert len(node_log.matching(*fragments)) == 1, (fragments, node_log.lines())
+    # The shots are those of the good blocks, and the model is the offline fit on them.
+    good = stream.recording
+    good.pressure[~np.isfinite(good.pressure)] = np.nan
+    shots = provenance_shots(model, good)
+    assert len(shots) == 4
+    for mine, theirs in zip(shots, detect_shots(recording)):
+        assert abs(mine.start - theirs.start) <= 1 and abs(mine.stop - theirs.stop) <= 1
+    offline = identify([ShotSource(good, shots)], structure='oe', orders=(2, 2), delay=1,
+                       denoise=False).model
+    np.testing.assert_allclose(model.b, offline.b, rtol=1e-9)
+    np.testing.assert_allclose(model.a, offline.a, rtol=1e-9)
+    # /diagnostics accounts for every sample received.
+    counts = stream.counts
+    assert status['samples_received'] == str(counts['pressure_samples'])
+    assert status['paired_samples'] == str(counts['output_samples'])
+    for key in ('unpaired_pressure_samples', 'unpaired_acceleration_samples',
+                'mismatched_blocks', 'overlapping_samples', 'gaps', 'invalid_samples'):
+        assert status[key] == str(counts[key]), key
+    assert counts['pressure_samples'] == (counts['output_samples']
+                                          + counts['unpaired_pressure_samples']
+                                          + counts['overlapping_samples'])
+    assert status['malformed_messages'] == str(stream.malformed)
+    assert status['shots_kept'] == '4' and status['shots_rejected'] == '0'
