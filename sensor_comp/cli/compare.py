@@ -6,11 +6,38 @@ import argparse
 import json
 import os
 
-from .sources import load_model, load_shots
+from .identify import add_threshold, load_source
+from .sources import load_model
 from ..core.compare import compare, format_table
+from ..core.identify import ShotSource
+from ..core.model import Model
 from ..errors import SensorCompError
 
-__all__ = ['register', 'run']
+__all__ = ['register', 'run', 'usable_source']
+
+
+def usable_source(path: str, models: dict[str, Model], *, windows=None,
+                  threshold_g: float | None = None) -> tuple[ShotSource, list[str]]:
+    """
+    Load a recording to compare ``models`` (by file name) with; return it and its warnings.
+
+    Shots with a defect (clipped, NaN/Inf, no shock) are left out, one warning each; so is
+    a warning for a peak pressure per acceleration outside the usual range.
+
+    Raises:
+        SensorCompError: If the file does not read, holds no usable shot, its pressure is
+            dead, its units are impossible, or a model belongs to another sample rate.
+
+    """
+    loaded = load_source(path, windows=windows, threshold_g=threshold_g)
+    for name, model in models.items():
+        model.check_rate(loaded.recording.fs, model_name=f'model {name}',
+                         data_name=f'recording {path}')
+    source, warnings = loaded.usable()
+    if not source.shots:
+        raise SensorCompError(f'{path}: no usable shot ({"; ".join(warnings)})')
+    units = source.check_units()
+    return source, warnings + ([units] if units else [])
 
 
 def register(subparsers) -> None:
@@ -32,6 +59,7 @@ def register(subparsers) -> None:
                         help='write the residual (measured − model) per shot')
     parser.add_argument('--window', nargs=2, type=float, action='append',
                         metavar=('START', 'STOP'), help='manual shot window in seconds')
+    add_threshold(parser)
     parser.set_defaults(func=run)
 
 
@@ -47,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
                                   f'recording, which comes last')
     models = [load_model(p) for p in model_paths]
     labels = _labels(model_paths)
-    source = load_shots(recording_path, windows=args.window)
+    source, warnings = usable_source(recording_path, dict(zip(model_paths, models)),
+                                     windows=args.window, threshold_g=args.threshold)
     comparisons = compare(models, source.recording, list(source.shots), labels=labels)
     if args.plot or args.residual_plot:
         from ..core.plots import comparison_figure, comparison_residual_figure
@@ -57,10 +86,12 @@ def run(args: argparse.Namespace) -> int:
             comparison_residual_figure(comparisons, path=args.residual_plot)
     if args.json:
         first = comparisons[0].to_dict()
-        print(json.dumps({**first, 'recording': recording_path,
+        print(json.dumps({**first, 'recording': recording_path, 'warnings': warnings,
                           'models': [dict(c.to_dict(), path=p)
                                      for c, p in zip(comparisons, model_paths)]}, indent=2))
         return 0
+    for line in warnings:
+        print(f'warning: {line}')
     print(f'{recording_path}: {len(source.shots)} shots')
     print(format_table(comparisons))
     for plot in (args.plot, args.residual_plot):

@@ -7,7 +7,8 @@ import json
 import os
 import sys
 
-from .sources import load_model, load_shots, progress_factory
+from .identify import add_threshold, load_source
+from .sources import load_model, progress_factory
 from ..core.model import Model, Source
 from ..errors import SensorCompError
 
@@ -31,10 +32,12 @@ def register(subparsers) -> None:
                         help='only try these effects (repeat; default: the whole catalogue)')
     parser.add_argument('--json', action='store_true',
                         help='print JSON with at least verdict and ranking')
+    add_threshold(parser)
     parser.set_defaults(func=run)
 
 
-def calibration_sources(model: Model, paths: list[str] | None) -> list:
+def calibration_sources(model: Model, paths: list[str] | None, *,
+                        threshold_g: float | None = None) -> list:
     """
     Return the calibration recordings with their shots: ``paths`` or the model's provenance.
 
@@ -43,7 +46,7 @@ def calibration_sources(model: Model, paths: list[str] | None) -> list:
 
     """
     if paths:
-        return [load_shots(p) for p in paths]
+        return [load_source(p, threshold_g=threshold_g) for p in paths]
     sources: list[Source] = [s for s in model.provenance
                              if any(isinstance(shot, dict) and shot.get('role') == 'calibration'
                                     for shot in s.shots)]
@@ -58,14 +61,18 @@ def calibration_sources(model: Model, paths: list[str] | None) -> list:
         if Source.from_file(source.path).sha256 != source.sha256:
             print(f'warning: {source.path} changed since the model was identified (sha256 '
                   f'differs)', file=sys.stderr)
-        loaded.append(load_shots(source.path))
+        loaded.append(load_source(source.path, threshold_g=threshold_g))
     return loaded
 
 
 def run_diagnosis(args: argparse.Namespace, model: Model, validation):
     """Run the diagnosis of ``model`` on ``validation`` with the command's options."""
     from ..core.diagnose import diagnose
-    calibration = calibration_sources(model, args.calibration)
+    threshold = getattr(args, 'threshold', None)
+    calibration = calibration_sources(model, args.calibration, threshold_g=threshold)
+    for source in calibration:
+        model.check_rate(source.recording.fs, model_name=f'model {args.model}',
+                         data_name=f'calibration recording {source.name}')
     return diagnose(calibration, [validation], base=model, candidates=args.candidates,
                     progress=progress_factory(args.quiet or getattr(args, 'json', False)))
 
@@ -73,7 +80,9 @@ def run_diagnosis(args: argparse.Namespace, model: Model, validation):
 def run(args: argparse.Namespace) -> int:
     """Diagnose and print the verdict and ranking; return the exit code."""
     model = load_model(args.model)
-    validation = load_shots(args.bag)
+    validation = load_source(args.bag, threshold_g=args.threshold)
+    model.check_rate(validation.recording.fs, model_name=f'model {args.model}',
+                     data_name=f'recording {args.bag}')
     diagnosis = run_diagnosis(args, model, validation)
     if args.json:
         print(json.dumps(diagnosis.to_dict(), indent=2))

@@ -5,11 +5,33 @@ from __future__ import annotations
 import argparse
 import json
 
-from .sources import load_shots, progress_factory
-from ..core.identify import identify, STRUCTURES
+from .sources import load_recording, load_shots, progress_factory
+from ..core.identify import identify, ShotSource, STRUCTURES
 from ..core.shots import shot_table
 
-__all__ = ['describe_effect', 'describe_model', 'register', 'run']
+__all__ = ['add_threshold', 'describe_effect', 'describe_model', 'load_source', 'register',
+           'run']
+
+
+def add_threshold(parser) -> None:
+    """Add the ``--threshold`` option of shot detection to ``parser``."""
+    parser.add_argument('--threshold', type=float, metavar='G',
+                        help='shot trigger level in g above the median axial acceleration '
+                             '(default: 5 %% of the largest excursion, at least 8 noise σ)')
+
+
+def load_source(path: str, *, windows=None, threshold_g: float | None = None) -> ShotSource:
+    """
+    Read a recording and find its shots: manual ``windows`` or detection at ``threshold_g``.
+
+    Raises:
+        SensorCompError: If the file does not read or no shot is found (naming the
+            threshold used and the largest acceleration seen).
+
+    """
+    if windows or threshold_g is None:
+        return load_shots(path, windows=windows)
+    return ShotSource.detect(load_recording(path), path=path, threshold_g=threshold_g)
 
 
 def register(subparsers) -> None:
@@ -46,14 +68,16 @@ def register(subparsers) -> None:
     parser.add_argument('--effect', action='append', default=[], metavar='ID',
                         help='add a physical effect of the catalogue to the model (repeat for '
                              'several; see sensor-comp diagnose)')
+    add_threshold(parser)
     parser.add_argument('--json', action='store_true', help='print a JSON summary')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Identify and write the model; return the exit code."""
-    calibration = [load_shots(p, windows=args.window) for p in args.calibration]
-    validation = [load_shots(p) for p in args.validate]
+    calibration = [load_source(p, windows=args.window, threshold_g=args.threshold)
+                   for p in args.calibration]
+    validation = [load_source(p, threshold_g=args.threshold) for p in args.validate]
     result = identify(calibration, validation=validation, structure=args.structure,
                       orders=tuple(args.orders) if args.orders else None, delay=args.delay,
                       denoise=not args.no_emd, criterion=args.criterion,
@@ -69,9 +93,10 @@ def run(args: argparse.Namespace) -> int:
                           'validation': [c.to_dict() for c in result.comparisons],
                           'excluded': list(result.excluded)}, indent=2))
         return 0
-    for source in result.calibration:
-        print(f'calibration shots of {source.name}:')
-        print(shot_table(source.shots))
+    for role, sources in (('calibration', calibration), ('validation', validation)):
+        for source in sources:
+            print(f'shots of {source.name} ({role} recording):')
+            print(shot_table(source.shots))
     for line in result.excluded:
         print(f'warning: {line}')
     if result.selection is not None:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from .compare import usable_source
 from .diagnose import run_diagnosis
-from .sources import load_model, load_shots
+from .identify import add_threshold
+from .sources import load_model
 from ..core.compare import compare
 from ..core.report import html_report, write_report
 from ..core.residual import analyse
@@ -32,6 +34,7 @@ def register(subparsers) -> None:
                         help='only try these effects in the diagnosis')
     parser.add_argument('--no-diagnosis', action='store_true',
                         help='leave the diagnosis out (no calibration data needed)')
+    add_threshold(parser)
     parser.set_defaults(func=run)
 
 
@@ -39,7 +42,11 @@ def run(args: argparse.Namespace) -> int:
     """Write the report; return the exit code."""
     model = load_model(args.model)
     after = [load_model(p) for p in args.after]
-    source = load_shots(args.bag)
+    source, warnings = usable_source(args.bag, dict(zip([args.model, *args.after],
+                                                        [model, *after])),
+                                     threshold_g=args.threshold)
+    for line in warnings:
+        print(f'warning: {line}')
     shots = list(source.shots)
     labels = ['model'] + [f'after {i + 1}' if len(after) > 1 else 'after'
                           for i in range(len(after))]
@@ -50,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
                        comparisons=comparisons[:1], analysis=analysis, diagnosis=diagnosis,
                        after=comparisons if after else (),
                        sources=[f'model: {args.model}', f'recording: {args.bag}',
-                                *(f'after: {p}' for p in args.after)])
+                                *(f'after: {p}' for p in args.after),
+                                *(f'warning: {line}' for line in warnings)])
     write_report(args.output, text)
     if not args.quiet:
         verdict = f' (verdict: {diagnosis["verdict"]})' if diagnosis else ''

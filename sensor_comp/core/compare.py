@@ -23,8 +23,10 @@ import math
 
 import numpy as np
 
-from .compensation import CompensationError, LinearModel, peak_residual_percent
+from .compensation import (CompensationError, LinearModel, peak_residual_percent,
+                           UnstableModelError)
 from .ident.metrics import fit_percent
+from .ident.polynomials import max_root_radius
 from .ident.simulate import simulate
 from .shots import segments, Shot, ShotError
 from ..streams import Recording
@@ -142,6 +144,7 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     Raises:
         ShotError: With no shot, a window with missing samples, or labels that do not match.
         CompensationError: When a model's sample rate differs from the recording's.
+        UnstableModelError: When a model is unstable (its simulation diverges).
 
     """
     if hasattr(models, 'a'):
@@ -156,7 +159,13 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     for model, label in zip(models, labels):
         if not math.isclose(model.fs, recording.fs, rel_tol=1e-9):
             raise CompensationError(f'{label}: identified at {model.fs:g} Hz, recording '
-                                    f'sampled at {recording.fs:g} Hz')
+                                    f'sampled at {recording.fs:g} Hz; a model belongs to one '
+                                    f'rate: compare it with recordings at {model.fs:g} Hz')
+        radius = max_root_radius(np.asarray(model.a, dtype=np.float64))
+        if not radius < 1.0:
+            raise UnstableModelError(f'{label}: the model is unstable (a pole at |z| = '
+                                     f'{radius:.6f}): its simulation diverges; identify it '
+                                     f'again (identify never writes an unstable model)')
     measured = [y for _, y in segments(recording, shots, inputs=(), denoise=denoise)]
     times = [np.arange(s.start, s.stop) / recording.fs for s in shots]
     inputs_cache: dict[tuple[str, ...], list[np.ndarray]] = {}

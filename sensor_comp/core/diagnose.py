@@ -29,6 +29,9 @@ consistent with noise (its mean square within the statistical tolerance of the n
 variance, and the residual analysis of :mod:`sensor_comp.core.residual` agreeing when it
 runs), and ``'unexplained'`` when the residual is not noise but no catalogued effect
 explains it.
+
+Shots with a defect (:attr:`~sensor_comp.core.shots.Shot.defects`: clipped, NaN/Inf in the
+window, no shock) are left out of both sets, each with a note.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from scipy import stats
 from .effects import Effect, EFFECTS, EffectError, get_effect, Outcome, Physical
 from .extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
 from .ident import estimate_delay, fit_percent, IdentError
+from .identify import ShotSource
 from .model import Model
 from .progress import ProgressFactory, Silent
 from .shots import split_calibration
@@ -280,18 +284,31 @@ def _peak_percent(windows: Sequence[Window], residuals: Sequence[np.ndarray]) ->
                      for w, r in zip(windows, residuals)))
 
 
-def _sources(calibration, validation):
+def _sources(calibration, validation, notes: list[str]):
     calibration, validation = list(calibration), list(validation)
     if not calibration:
         raise DiagnosisError('no calibration recording given')
+    calibration = [_usable(s, notes) for s in calibration]
+    validation = [_usable(s, notes) for s in validation]
     if validation:
         return calibration, validation
     calib, valid = [], []
     for source in calibration:
+        if len(source.shots) < 2:
+            raise DiagnosisError(f'{source.name}: {len(source.shots)} usable shot(s); without '
+                                 f'a validation recording the diagnosis needs 2 per recording '
+                                 f'(one to fit, one to score on)')
         fit_on, report_on = split_calibration(source.shots)
         calib.append(type(source)(source.recording, tuple(fit_on), source.path))
         valid.append(type(source)(source.recording, tuple(report_on), source.path))
     return calib, valid
+
+
+def _usable(source, notes: list[str]):
+    """Return ``source`` without its defective shots; note each one left out."""
+    kept, left_out = ShotSource(source.recording, tuple(source.shots), source.path).usable()
+    notes.extend(left_out)
+    return kept
 
 
 def _analyses(model: Model, validation) -> tuple:
@@ -337,23 +354,28 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
 
     Raises:
         DiagnosisError: On mixed sample rates, no shots or no pre-trigger.
+        ModelError: When ``base`` belongs to another sample rate than the recordings.
+        ShotError: On a recording whose pressure is constant (a dead channel).
         EffectError: On an unknown candidate id.
         IdentError: When the base model cannot be fitted.
 
     """
     progress = progress or Silent
-    calib, valid = _sources(calibration, validation)
+    notes: list[str] = []
+    calib, valid = _sources(calibration, validation, notes)
     rates = {s.recording.fs for s in calib + valid}
     if len(rates) != 1:
         raise DiagnosisError(f'recordings have different sample rates '
                              f'({", ".join(f"{r:g} Hz" for r in sorted(rates))}); diagnose '
                              f'one rate at a time')
     fs = rates.pop()
+    if base is not None:
+        base.check_rate(fs, model_name='the base model', data_name='the recordings')
     cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
         [s for s in valid if s.shots])
     if not cw or not vw:
-        raise DiagnosisError('the diagnosis needs calibration and validation shots')
-    notes = []
+        raise DiagnosisError('the diagnosis needs calibration and validation shots'
+                             + (f' ({"; ".join(notes)})' if notes else ''))
     if base is not None:
         base_effects = tuple(e['id'] for e in base.effects if e.get('id') in EFFECTS)
         nf, nb, nk = (int(base.fit.get(f'base_{key}', value)) for key, value in (

@@ -19,6 +19,33 @@ so that its result can be trusted:
   :func:`~sensor_comp.core.extended.fit_extended`; the model's inputs, orders and
   ``effects`` entries (physical parameters with standard deviations) describe the
   extension. Without effects the workflow is unchanged.
+
+What the data cannot support is refused or warned about, never silently fitted:
+
+- a shot with a defect (:attr:`~sensor_comp.core.shots.Shot.defects`: clipped, NaN/Inf in
+  its window, no shock, dead pressure) is left out with a line in ``excluded``; a recording
+  whose pressure is constant throughout is refused, as are too few usable shots.
+- **excitation**: the model's dynamics (its dominant resonance ``fn``, or its slowest real
+  pole) can only be identified where the calibration acceleration carries signal above its
+  own noise. The accelerometer's noise is in the regressors but drives no pressure, so a
+  least-squares or output-error fit shrinks the gain at ``fn`` by ``S/(S + N)`` (regression
+  dilution), ``S/N`` the input's signal-to-noise power ratio around ``fn``
+  (±:data:`EXCITATION_BAND`), and the damping ratio comes out about ``(1 + N/S)`` times too
+  large; at 1 MS/s the broadband input noise weighs more and a poorly excited resonance
+  collapses into fast real poles. Below :data:`MIN_EXCITATION` the dynamics are not
+  identified: the explanation warns that they come from noise and names the order the data
+  support (the model order less those poles); below :data:`WEAK_EXCITATION` it warns of the
+  bias. Both are warnings, not errors: a sensor whose resonance lies far above the shocks'
+  band (100 kHz and more is common) is compensated by such a model just as well, only its
+  fn and ζ are not measured. A lag-domain persistent-excitation order does not tell this:
+  the Toeplitz covariance of a 1 ms shock at 1 MS/s has only two eigenvalues above the
+  accelerometer noise, yet such shots identify the resonance to 0.1 %; what matters is the
+  spectrum at ``fn``.
+- **units**: an identified static sensitivity outside
+  :data:`~sensor_comp.core.model.PLAUSIBLE_MPA_PER_G` is refused, one outside
+  :data:`~sensor_comp.core.model.TYPICAL_MPA_PER_G` warned about, with the likely unit
+  mistake (:func:`~sensor_comp.core.model.sensitivity_problem`). A factor within the
+  typical range (g for m/s² on a sensor of 1e-5 MPa/g) cannot be told from the data.
 """
 
 from __future__ import annotations
@@ -27,6 +54,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 import math
 
+import numpy as np
+
 from .compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from .effects import ordered
@@ -34,12 +63,14 @@ from .extended import fit_extended, shot_windows
 from .ident import (DelayEstimate, estimate_delay, fit_armax_els, fit_armax_gls, fit_arx,
                     fit_oe, fit_percent, IdentError, select_structure, Selection,
                     simulate)
-from .model import Model, Source
+from .model import Model, sensitivity_problem, Source
 from .progress import ProgressFactory, Silent
-from .shots import detect_shots, segments, Shot, split_calibration
+from .shots import (dead_channel, detect_shots, mad_sigma, no_shot_message, segments, Shot,
+                    ShotError, split_calibration)
 from ..streams import Recording
 
-__all__ = ['BASE_INPUTS', 'STRUCTURES', 'Identification', 'ShotSource', 'identify']
+__all__ = ['BASE_INPUTS', 'EXCITATION_BAND', 'MIN_EXCITATION', 'STRUCTURES', 'WEAK_EXCITATION',
+           'Identification', 'ShotSource', 'excitation', 'identify']
 
 #: Structures :func:`identify` accepts.
 STRUCTURES = ('auto', 'arx', 'armax', 'gls', 'oe')
@@ -49,6 +80,16 @@ BASE_INPUTS = ('a_z',)
 
 #: Orders of a fixed structure when none are given: a sampled 2nd-order system.
 DEFAULT_ORDERS = (2, 2)
+
+#: Half-width of the band around a resonance whose excitation is measured, relative to
+#: ``fn``: wider than the half-power band of a lightly damped sensor (ζ ≤ 0.1), narrow
+#: enough to stay off the main lobe of a shock's spectrum.
+EXCITATION_BAND = 0.1
+#: Least input signal-to-noise power ratio at the resonance: below it the damping ratio
+#: would come out more than twice too large, the dynamics are not identified (module docs).
+MIN_EXCITATION = 1.0
+#: Below this input signal-to-noise ratio the damping bias (over 10 %) is warned about.
+WEAK_EXCITATION = 10.0
 
 _FITTERS = {
     'arx': lambda segs, na, nb, nk: fit_arx(segs, na=na, nb=nb, nk=nk),
@@ -77,13 +118,68 @@ class ShotSource:
 
     @classmethod
     def detect(cls, recording: Recording, *, path: str | None = None, **options) -> ShotSource:
-        """Detect the shots of ``recording`` (``options`` go to ``detect_shots``)."""
-        return cls(recording, tuple(detect_shots(recording, **options)), path)
+        """
+        Detect the shots of ``recording`` (``options`` go to ``detect_shots``).
+
+        Raises:
+            ShotError: Naming the file, when no shot is found (with the threshold used and
+                the largest acceleration seen) or the acceleration cannot be scanned.
+
+        """
+        where = path or '<memory>'
+        try:
+            shots = detect_shots(recording, **options)
+            if not shots:
+                raise ShotError(no_shot_message(recording, threshold_g=options.get(
+                    'threshold_g'), polarity=options.get('polarity')))
+        except ShotError as exc:
+            raise ShotError(f'{where}: {exc}') from None
+        return cls(recording, tuple(shots), path)
 
     @property
     def name(self) -> str:
         """Return the file name, or ``'<memory>'``."""
         return self.path or '<memory>'
+
+    def usable(self) -> tuple[ShotSource, list[str]]:
+        """
+        Return this source without its defective shots, and one line per shot left out.
+
+        Raises:
+            ShotError: When the recording's pressure is constant throughout (a dead channel).
+
+        """
+        dead = dead_channel(self.recording)
+        if dead is not None:
+            raise ShotError(f'{self.name}: {dead}')
+        kept = tuple(shot for shot in self.shots if shot.usable)
+        excluded = [f'{self.name}: shot {shot.index} left out: {"; ".join(shot.defects)}'
+                    for shot in self.shots if not shot.usable]
+        return ShotSource(self.recording, kept, self.path), excluded
+
+    def check_units(self) -> str | None:
+        """
+        Check the shots' peak pressure per acceleration against pressure sensors' range.
+
+        Returns:
+            A warning naming the likely unit mistake when the median over the usable shots
+            lies outside :data:`~sensor_comp.core.model.TYPICAL_MPA_PER_G`, else None.
+
+        Raises:
+            ShotError: When it lies outside :data:`~sensor_comp.core.model.PLAUSIBLE_MPA_PER_G`
+                (see :func:`~sensor_comp.core.model.sensitivity_problem`).
+
+        """
+        ratios = [abs(s.mpa_per_g) for s in self.shots if s.usable and math.isfinite(s.mpa_per_g)]
+        if not ratios:
+            return None
+        problem = sensitivity_problem(float(np.median(ratios)), what=(
+            f'the peak pressure per peak acceleration of its shots (median over {len(ratios)})'))
+        if problem is None:
+            return None
+        if problem[0]:
+            raise ShotError(f'{self.name}: {problem[1]}')
+        return f'{self.name}: {problem[1]}'
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,21 +214,25 @@ class Identification:
 
 
 def _usable(source: ShotSource, excluded: list[str]) -> ShotSource:
-    kept = []
-    for shot in source.shots:
-        if shot.clipped:
-            excluded.append(f'{source.name}: shot {shot.index} left out: clipped (the '
-                            f'sensor or the recorder saturated)')
-        else:
-            kept.append(shot)
-    return ShotSource(source.recording, tuple(kept), source.path)
+    kept, left_out = source.usable()
+    excluded.extend(left_out)
+    return kept
 
 
-def _split(calibration: Sequence[ShotSource], validation: Sequence[ShotSource]):
+def _split(calibration: Sequence[ShotSource], validation: Sequence[ShotSource],
+           excluded: Sequence[str]):
     if validation:
         return list(calibration), list(validation)
     calib, valid = [], []
     for source in calibration:
+        if len(source.shots) < 2:
+            left_out = sum(line.startswith(f'{source.name}: shot ') for line in excluded)
+            raise ShotError(
+                f'{source.name}: {len(source.shots)} usable shot(s)'
+                + (f' ({left_out} more left out, see above)' if left_out else '')
+                + '; identification needs at least 2 per recording, one to fit and one held '
+                  'out to validate on: record more shots, or give validation recordings '
+                  '(--validate) to fit on every shot of this one')
         fit_on, report_on = split_calibration(source.shots)
         calib.append(ShotSource(source.recording, tuple(fit_on), source.path))
         valid.append(ShotSource(source.recording, tuple(report_on), source.path))
@@ -192,14 +292,20 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
     effects = tuple(e.id for e in ordered(effects))
     progress = progress or Silent
     excluded: list[str] = []
+    explanation_warnings: list[str] = []
     calibration = [_usable(s, excluded) for s in calibration]
     validation = [_usable(s, excluded) for s in validation]
     for role, sources in (('calibration', calibration), ('validation', validation)):
         if sources and not any(s.shots for s in sources):
             names = ', '.join(s.name for s in sources)
-            raise IdentError(f'no usable {role} shot in {names}: check the acceleration '
+            why = f' ({"; ".join(excluded)})' if excluded else ''
+            raise IdentError(f'no usable {role} shot in {names}{why}: check the acceleration '
                              f'channel and the detection threshold')
-    calib, valid = _split(calibration, validation)
+    calib, valid = _split(calibration, validation, excluded)
+    for source in calibration + validation:
+        warning = source.check_units()
+        if warning:
+            explanation_warnings.append(warning)
     fs = _check_rates(calib + valid)
     measured = [seg for s in calib
                 for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
@@ -245,6 +351,7 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
                 else _FITTERS[structure_fitted](fit_segments, na, nb, delay))
     if denoiser is not None:
         explanation += '; fitted to the EMD-denoised pressure'
+    explanation += ''.join(f'; WARNING: {w}' for w in explanation_warnings)
     if not estimate.converged:
         explanation += (f'; WARNING: the {estimate.method} iteration did not converge in '
                         f'{estimate.iterations} iterations: prefer oe or auto')
@@ -272,6 +379,7 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
                                 charge_sensitivity_pC_per_MPa=min(charge) if charge else None,
                                 fit=fit, provenance=provenance, effects=entries)
     draft.check_stable()
+    explanation += _check_excitation(draft, calib)
     comparisons = tuple(compare([draft], s.recording, s.shots, labels=[structure])[0]
                         for s in valid if s.shots)
     valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
@@ -297,6 +405,108 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
                           selection=selection, delay=delay_search,
                           denoising=tuple(denoiser.results) if denoiser else (),
                           excluded=tuple(excluded), explanation=explanation)
+
+
+def excitation(sources: Sequence[ShotSource], f_hz: float | np.ndarray
+               ) -> float | np.ndarray | None:
+    """
+    Return the signal-to-noise power ratio of the axial acceleration of the shots around ``f_hz``.
+
+    The power of every shot window (baseline removed) in the band ``f·(1 ±``
+    :data:`EXCITATION_BAND```)`` over the power the accelerometer noise alone would put there
+    (white, its σ from the window's pre-trigger), minus one; pooled over all windows.
+
+    Returns:
+        ``S/N`` at each frequency (``inf`` for noise-free data), or None when the windows
+        hold too little pre-trigger (16 samples in all) to measure the noise.
+
+    """
+    shots = [(s.recording, shot) for s in sources for shot in s.shots]
+    quiet = [recording.axial[shot.baseline_window] for recording, shot in shots]
+    if sum(q.size for q in quiet) < 16:
+        return None
+    fs = shots[0][0].fs
+    f = np.atleast_1d(np.asarray(f_hz, dtype=np.float64))
+    # Resolve the narrowest band with about 8 bins, nfft >= 8 fs / (2 · band · f), padding
+    # the windows at most 8 times (their own resolution bounds what they can tell).
+    longest = max(shot.n_samples for _, shot in shots)
+    nfft = 1 << math.ceil(math.log2(min(max(longest, 4 * fs / (EXCITATION_BAND * f.min())),
+                                        8 * longest)))
+    power = np.zeros(nfft // 2 + 1)
+    noise = 0.0
+    for (recording, shot), q in zip(shots, quiet):
+        u = recording.axial[shot.window] - shot.baseline_acceleration[2]
+        power += np.abs(np.fft.rfft(u, nfft)) ** 2
+        noise += u.size * mad_sigma(q) ** 2
+    grid = np.fft.rfftfreq(nfft, 1 / fs)
+    total = np.concatenate(([0.0], np.cumsum(power)))
+    hi = np.clip(np.searchsorted(grid, f * (1 + EXCITATION_BAND), side='right'), 1, grid.size)
+    lo = np.minimum(np.searchsorted(grid, f * (1 - EXCITATION_BAND)), hi - 1)
+    band = (total[hi] - total[lo]) / (hi - lo)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ratio = np.where(noise > 0, band / noise - 1, np.inf)
+    return float(ratio[0]) if np.ndim(f_hz) == 0 else ratio
+
+
+def _dynamics(model: Model) -> tuple[str, float] | None:
+    """
+    Return the dynamics the model claims, ``(description, frequency in Hz)``, or None.
+
+    The dominant resonance (see :meth:`Model.continuous`), else the slowest positive real
+    pole; faster extra poles are numerical detail of the discretisation.
+    """
+    view = model.continuous()
+    if view.natural_frequency_hz is not None:
+        fn = view.natural_frequency_hz
+        return f'resonance at {fn / 1e3:.3g} kHz (ζ = {view.damping_ratio:.3g})', fn
+    if not view.time_constants_s:
+        return None
+    tau = view.time_constants_s[0]
+    corner = 1 / (2 * math.pi * tau)
+    return f'time constant of {1e6 * tau:.3g} µs (corner {corner / 1e3:.3g} kHz)', corner
+
+
+def _supported_order(model: Model, calib: Sequence[ShotSource]) -> int:
+    """Return how many of the model's poles lie where the input is excited above noise."""
+    poles = np.roots(model.a) if model.a.size > 1 else np.empty(0)
+    physical = poles[(np.abs(poles.imag) > 1e-12) | (poles.real > 0)]
+    f = np.abs(np.log(physical.astype(complex))) * model.fs / (2 * math.pi)
+    f = f[f < model.fs / 2 / (1 + EXCITATION_BAND)]
+    return int(np.count_nonzero(excitation(calib, f) >= MIN_EXCITATION)) if f.size else 0
+
+
+def _check_excitation(model: Model, calib: Sequence[ShotSource]) -> str:
+    """Return a warning when the calibration acceleration does not excite the model's dynamics."""
+    dynamics = _dynamics(model)
+    if dynamics is None:
+        return ''
+    what, f = dynamics
+    if f >= model.fs / 2 / (1 + EXCITATION_BAND):
+        return ''
+    snr = excitation(calib, f)
+    if snr is None:
+        return '; excitation not checked: no pre-trigger to measure the accelerometer noise'
+    if snr >= WEAK_EXCITATION:
+        return ''
+    if snr >= MIN_EXCITATION:
+        return (f'; WARNING: the calibration acceleration excites the {what} only {snr:.2g} '
+                f'times above its noise power: the accelerometer noise biases the model '
+                f'towards more damping (ζ about {100 / snr:.0f} % too large); add shorter, '
+                f'harder shots')
+    grid = np.geomspace(f / 10, model.fs / 2 / (1 + EXCITATION_BAND), 200)
+    excited = grid[excitation(calib, grid) >= MIN_EXCITATION]
+    reach = (f'the shots carry signal above that noise up to about '
+             f'{excited.max() / 1e3:.3g} kHz' if excited.size
+             else 'the shots carry no signal above that noise')
+    order = _supported_order(model, calib)
+    supported = f'order {order}' + (' (the static sensitivity only)' if order == 0 else '')
+    return (f'; WARNING: the calibration acceleration does not excite the model\'s {what}: its '
+            f'signal power there is {max(snr, 0.0):.2g} times its noise power (at least '
+            f'{MIN_EXCITATION:g} needed), so these dynamics come from the accelerometer noise, '
+            f'not from the sensor; {reach}. The data support {supported}, not na = '
+            f'{model.orders["na"]}: the model compensates shocks like these but its physics '
+            f'(fn, ζ) is not measured. Record shorter, harder shots (a shock of width T '
+            f'carries signal to a few times 1/T) to identify it')
 
 
 def _provenance(sources: Sequence[ShotSource], role: str) -> tuple[Source, ...]:

@@ -19,6 +19,13 @@ The file is JSON with a versioned schema (:data:`SCHEMA`)::
 
 ``continuous`` (natural frequency, damping, static sensitivity) is derived from the
 polynomials and written for readers; :func:`load` recomputes it instead of trusting it.
+
+Every input name must be one :mod:`sensor_comp.core.inputs` can compute and every effect id
+one of the catalogue (:data:`sensor_comp.core.effects.EFFECTS`): a file from a newer version
+naming something this one does not know is refused, never half-applied.
+
+Plausible sensitivities (:data:`PLAUSIBLE_MPA_PER_G`) catch recordings in the wrong unit;
+see :func:`sensitivity_problem`.
 """
 
 from __future__ import annotations
@@ -39,12 +46,15 @@ from .. import __version__
 from ..errors import SensorCompError
 from ..files import write_text_atomically
 from ..streams import G0
+from .effects import EFFECTS
 from .ident.estimate import Estimate, STRUCTURES
 from .ident.least_squares import delayed_numerator
 from .ident.polynomials import max_root_radius
+from .inputs import InputError, parse_channel
 
-__all__ = ['SCHEMA', 'ContinuousView', 'Model', 'ModelError', 'Source', 'frequency_response',
-           'load', 'step_response']
+__all__ = ['PLAUSIBLE_MPA_PER_G', 'SCHEMA', 'TYPICAL_MPA_PER_G', 'ContinuousView', 'Model',
+           'ModelError', 'Source', 'frequency_response', 'load', 'sensitivity_problem',
+           'step_response']
 
 #: Schema identifier written to and required in model files.
 SCHEMA = 'sensor_comp.model/1'
@@ -53,8 +63,82 @@ _REQUIRED = ('schema', 'fs', 'structure', 'orders', 'inputs', 'numerators', 'den
              'created', 'sensor_comp_version')
 
 
+#: Acceleration sensitivities of piezoelectric pressure sensors in MPa/g as datasheets give
+#: them: 1e-5 to 1e-3 bar/g (1e-6 to 1e-4 MPa/g) from the vendors, 1.4e-4 MPa/g for the seed
+#: paper's sensor, whose Table 2 gives peak pressure over peak acceleration of 0.9e-4 to
+#: 1.8e-4 MPa/g. A shot's peak ratio exceeds the static sensitivity by the sensor's ringing
+#: (up to twice for a shock shorter than the resonance period), hence the upper end.
+TYPICAL_MPA_PER_G = (1e-6, 4e-4)
+#: The range any such sensor can show, in MPa/g. Above: the sensitivity is the inertia of
+#: the diaphragm and crystal stack over the diaphragm area, ρ·t·g; a 5 mm quartz stack
+#: (2650 kg/m³) gives 130 Pa/g = 1.3e-4 MPa/g, so 1e-3 MPa/g would take a stack eight times
+#: heavier than any sensor has; twice that for ringing. Below: a decade under the best
+#: acceleration-compensated sensors (their datasheets bound it at 1e-5 bar/g = 1e-6 MPa/g).
+#: A pressure in kPa or MPa where Pa is expected moves a sensitivity 10^3 or 10^6 down.
+PLAUSIBLE_MPA_PER_G = (1e-7, 2e-3)
+
+#: Unit mistakes that scale an identified sensitivity, as (mistake, factor to the truth).
+_UNIT_MISTAKES = (
+    ('the pressure is recorded in kPa instead of Pa', 1e3),
+    ('the pressure is recorded in MPa instead of Pa', 1e6),
+    ('the pressure is recorded in bar instead of Pa', 1e5),
+    ('the pressure is recorded in psi instead of Pa', 6894.757293168),
+    ('the pressure is recorded in Pa but labelled kPa (scaled up 10^3)', 1e-3),
+    ('the pressure is recorded in Pa but labelled MPa (scaled up 10^6)', 1e-6),
+    ('the acceleration is recorded in g instead of m/s²', 1 / G0),
+    ('the acceleration is recorded in m/s² but labelled g', G0),
+)
+
+
 class ModelError(SensorCompError, ValueError):
     """A model is malformed, unstable, or its file cannot be read."""
+
+
+def sensitivity_problem(mpa_per_g: float, *, what: str = 'the static sensitivity'
+                        ) -> tuple[bool, str] | None:
+    """
+    Return ``(fatal, why)`` when a static acceleration sensitivity looks like a unit mistake.
+
+    ``mpa_per_g`` is a sensitivity as shots show it (peak pressure over peak acceleration)
+    or as a model's static gain. Outside :data:`PLAUSIBLE_MPA_PER_G` no pressure sensor has
+    it (``fatal``); outside :data:`TYPICAL_MPA_PER_G` only an unusual one does (a warning: a
+    kPa reading taken for Pa moves the seed paper's 1.4e-4 MPa/g to 1.4e-7, still
+    plausible). The message names the unit mistakes that would bring the value into the
+    typical range, and the fix.
+
+    Args:
+        mpa_per_g: The sensitivity.
+        what: What it is, to begin the message.
+
+    Returns:
+        None for a typical sensitivity.
+
+    """
+    size = abs(mpa_per_g)
+    if TYPICAL_MPA_PER_G[0] <= size <= TYPICAL_MPA_PER_G[1]:
+        return None
+    if size == 0 or not math.isfinite(size):
+        return True, (f'{what} is {mpa_per_g:g} MPa/g: the pressure does not follow the '
+                      f'acceleration; check the pressure channel and its mapping')
+    low, high = PLAUSIBLE_MPA_PER_G
+    fatal = not low <= size <= high
+    bound, where = ((low, 'below') if size < low else (high, 'above')) if fatal else (
+        (TYPICAL_MPA_PER_G[0], 'below') if size < TYPICAL_MPA_PER_G[0]
+        else (TYPICAL_MPA_PER_G[1], 'above'))
+    decades = abs(math.log10(size / bound))
+    guesses = [f'{mistake} (then {size * factor:.2g} MPa/g)'
+               for mistake, factor in _UNIT_MISTAKES
+               if TYPICAL_MPA_PER_G[0] <= size * factor <= TYPICAL_MPA_PER_G[1]]
+    guess = ('; or '.join(guesses) if guesses else
+             'no single unit mistake explains it: check the channel mapping and the units')
+    span = (f'the range any piezoelectric pressure sensor can show ({low:g} to {high:g} MPa/g)'
+            if fatal else f'the usual range ({TYPICAL_MPA_PER_G[0]:g} to '
+                          f'{TYPICAL_MPA_PER_G[1]:g} MPa/g)')
+    return fatal, (f'{what} {size:.3g} MPa/g is {decades:.1f} decades {where} '
+                   f'{span}. Likely {guess}. Recordings must hold pressure in Pa and '
+                   f'acceleration in m/s²: convert them (sensor-comp import converts CSV '
+                   f'columns named with their unit, e.g. pressure_MPa, accel_z_g) and '
+                   f'identify again')
 
 
 @dataclass(frozen=True)
@@ -209,6 +293,12 @@ class Model:
         if not inputs or not all(isinstance(n, str) and n for n in inputs) \
                 or len(set(inputs)) != len(inputs):
             raise ModelError(f'model inputs must be distinct non-empty names, got {inputs!r}')
+        for name in inputs:
+            try:
+                parse_channel(name)
+            except InputError as exc:
+                raise ModelError(f'{exc}; this sensor_comp {__version__} cannot compute it '
+                                 f'(a model from a newer version?)') from None
         b = np.array(self.b, dtype=np.float64)
         b = b[np.newaxis] if b.ndim == 1 else b
         if b.ndim != 2 or b.shape[0] != len(inputs) or b.shape[1] == 0:
@@ -338,6 +428,20 @@ class Model:
                              f'simulated or used for compensation. Re-identify with output error '
                              f'(fit_oe), which keeps the poles inside the unit circle')
 
+    def check_rate(self, fs: float, *, model_name: str = 'the model',
+                   data_name: str = 'the recording') -> None:
+        """
+        Raise unless ``fs`` is the model's sample rate (its polynomials belong to one rate).
+
+        Raises:
+            ModelError: Naming both rates and both sources.
+
+        """
+        if not math.isclose(self.fs, fs, rel_tol=1e-9):
+            raise ModelError(f'{model_name} was identified at {self.fs:g} Hz but {data_name} '
+                             f'is sampled at {fs:g} Hz: a discrete model belongs to one rate; '
+                             f'identify a model on recordings at {fs:g} Hz')
+
     def continuous(self) -> ContinuousView:
         """
         Return the continuous-time view of the input-0 path (see :class:`ContinuousView`).
@@ -445,6 +549,10 @@ def _check_effects(effects) -> tuple[dict, ...]:
         if not isinstance(effect, Mapping) or not isinstance(effect.get('id'), str):
             raise ModelError(f'effect {index} must be an object with a string "id", got '
                              f'{effect!r}')
+        if effect['id'] not in EFFECTS:
+            raise ModelError(f'effect {index} has the unknown id {effect["id"]!r}; this '
+                             f'sensor_comp {__version__} knows {", ".join(EFFECTS)} (a model '
+                             f'from a newer version?)')
         out.append(dict(effect))
     return tuple(out)
 

@@ -27,6 +27,32 @@ their windows, the windows meet half-way between the end of one pulse and the on
 next, and both shots carry a note saying so. The baseline (mean of the pre-trigger, up to
 a guard of a tenth of the pulse width before the onset) is removed from pressure and
 acceleration inside each window.
+
+A shot that cannot be fitted or compared carries its reasons in :attr:`Shot.defects` (and
+the table's mode column says so); :func:`~sensor_comp.core.identify.identify`, ``compare``
+and the diagnosis leave such shots out with a warning naming the reason:
+
+- non-finite samples (a stream gap becomes NaN; a NaN or Inf in the data) anywhere in the
+  window, named by channel, count and first sample. Outside the windows they do not matter:
+  detection ignores them.
+- clipping: the acceleration or the pressure sits flat at its extreme, at an ADC rail or an
+  amplifier limit. The flat top is told from a smooth crest by its length. A half-sine
+  crest of amplitude ``A`` and base width ``T`` (``T`` = 1.5 × the crest's half-amplitude
+  width, measured per channel) stays within ``r`` of its top for
+  ``(2T/π)·arccos(1 − r/A)`` samples; a run of samples within a band ``δ`` of the extreme
+  that lasts :data:`CLIP_MARGIN` times that (and at least 3 samples, 2 % of ``T``), mostly
+  inside the band, is a flat top. Two bands are tried: ``δ = 0`` (an ADC rail repeats one
+  code exactly, however noisy the signal; a smooth crest holds its top code only within
+  ``r = 2q``, ``q`` the quantisation step seen in the window: an 8-bit scope holds it for a
+  few samples on any crest), and ``δ = max(q, CLIP_NOISE_Z σ)`` (an amplifier limit with
+  the channel's pre-trigger noise ``σ`` on top; noise raises the extreme by about 3σ, so a
+  smooth crest's noisy samples stay within ``r = δ + q + 3σ``).
+- no shock: a manual window whose axial acceleration stays within :data:`NOISE_FACTOR`
+  noise σ of its baseline.
+- a dead channel: the pressure constant throughout the window.
+
+A recording whose axial acceleration is constant throughout (a dead or disconnected
+accelerometer) is refused outright: there is nothing to trigger on.
 """
 
 from __future__ import annotations
@@ -43,6 +69,8 @@ from ..streams import G0, Recording
 
 __all__ = [
     'BASELINE_GUARD',
+    'CLIP_MARGIN',
+    'CLIP_NOISE_Z',
     'DEFAULT_HOLDOFF_MS',
     'DEFAULT_HYSTERESIS',
     'DEFAULT_POST_MS',
@@ -51,8 +79,10 @@ __all__ = [
     'NOISE_FACTOR',
     'Shot',
     'ShotError',
+    'dead_channel',
     'detect_shots',
     'mad_sigma',
+    'no_shot_message',
     'segments',
     'shot_table',
     'shots_from_windows',
@@ -73,10 +103,17 @@ DEFAULT_HYSTERESIS = 0.5
 DEFAULT_HOLDOFF_MS = 1.0
 #: Samples within this fraction of the pulse width before the onset stay out of the baseline.
 BASELINE_GUARD = 0.1
-# A run of samples at the window's extreme this long (at least 3 samples, 2 % of the pulse
-# width) is clipping; a smooth sampled peak repeats its top value for far fewer samples.
+#: Half-width of the band below a clipped extreme, in noise σ (see the module docs).
+CLIP_NOISE_Z = 4.0
+#: A flat top is this many times longer than a smooth half-sine crest could stay in the band.
+CLIP_MARGIN = 1.5
+# ... and at least 3 samples and 2 % of the crest's base width long.
 _CLIP_RUN_MIN = 3
 _CLIP_RUN_FRACTION = 0.02
+# A flat top holds at least this fraction of in-band samples between its first and last one
+# (two separate crests near the extreme do not).
+_CLIP_FILL = 0.5
+_CHANNELS = ('pressure', 'acceleration x', 'acceleration y', 'axial acceleration (z)')
 
 
 class ShotError(SensorCompError, ValueError):
@@ -103,12 +140,14 @@ class Shot:
         charge_pc: ``peak_pressure_mpa`` × the charge sensitivity in pC, or None when the
             recording's metadata does not give it.
         mpa_per_g: ``peak_pressure_mpa / peak_g``.
-        clipped: A run of samples sits at a constant extreme of the acceleration or the
-            pressure (saturated amplifier or ADC).
+        clipped: The acceleration or the pressure sits flat at its extreme (saturated
+            amplifier or ADC; see the module docs).
         baseline_stop: One past the last pre-trigger sample used for the baseline.
         baseline_pa: Pre-trigger mean pressure in Pa.
         baseline_acceleration: Pre-trigger mean acceleration (x, y, z) in m/s².
         notes: Anything a user should know: shortened windows, merged crossings, gaps.
+        defects: Why the shot must not be fitted or compared (clipped, non-finite samples,
+            no shock, a dead pressure channel), one sentence each; empty for a usable shot.
 
     """
 
@@ -129,6 +168,17 @@ class Shot:
     baseline_pa: float
     baseline_acceleration: tuple[float, float, float]
     notes: tuple[str, ...] = ()
+    defects: tuple[str, ...] = ()
+
+    @property
+    def usable(self) -> bool:
+        """Return whether the shot can be fitted and compared (it has no defect)."""
+        return not self.defects
+
+    @property
+    def mode(self) -> str:
+        """Return ``'normal'``, ``'clipped'`` or ``'excluded'`` (another defect)."""
+        return 'clipped' if self.clipped else 'excluded' if self.defects else 'normal'
 
     @property
     def window(self) -> slice:
@@ -170,7 +220,7 @@ class Shot:
             'charge_pc': self.charge_pc, 'mpa_per_g': self.mpa_per_g,
             'clipped': self.clipped, 'baseline_pa': self.baseline_pa,
             'baseline_acceleration': list(self.baseline_acceleration),
-            'notes': list(self.notes),
+            'notes': list(self.notes), 'defects': list(self.defects),
         }
 
 
@@ -218,22 +268,70 @@ def _pulse_timing(s: np.ndarray, peak: int) -> tuple[float, float, list[str]]:
     return onset, onset + base, notes
 
 
-def _longest_run(mask: np.ndarray) -> int:
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    return int(np.max(edges[1::2] - edges[::2])) if edges.size else 0
+def _quantum(x: np.ndarray) -> float:
+    """Return the smallest step between distinct values of ``x`` (its quantisation)."""
+    steps = np.diff(np.unique(x))
+    return float(steps.min()) if steps.size else 0.0
 
 
-def _clipped(x: np.ndarray, baseline: float, min_run: int) -> bool:
-    """Return whether ``x`` sits at a constant extreme far from its baseline."""
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return False
-    excursion = np.max(np.abs(x - baseline))
-    for extreme in (np.max(x), np.min(x)):
-        if abs(extreme - baseline) > 0.5 * excursion and \
-                _longest_run(x == extreme) >= min_run:
-            return True
-    return False
+def _flat_top(x: np.ndarray, sigma: float) -> tuple[float, int] | None:
+    """
+    Return ``(level, samples)`` of the flat top of ``x`` (baseline removed), or None.
+
+    See the module docs for the test; ``sigma`` is the channel's noise.
+    """
+    finite = np.isfinite(x)
+    if not finite.any():
+        return None
+    q = _quantum(x[finite])
+    peaks = {sign: float(np.max(sign * x[finite])) for sign in (1, -1)}
+    for sign, amplitude in peaks.items():
+        if not (amplitude > max(q, CLIP_NOISE_Z * sigma)
+                and amplitude >= 0.5 * max(peaks.values())):
+            continue
+        y = np.where(finite, sign * x, -np.inf)
+        # An ADC rail repeats one code, however noisy the signal (a smooth crest holds its
+        # top code only while it stays within a step or two); an amplifier limit followed
+        # by noise stays within the noise band.
+        for delta, reach in ((0.0, 2 * q), (max(q, CLIP_NOISE_Z * sigma),
+                                            max(q, CLIP_NOISE_Z * sigma) + q + 3 * sigma)):
+            band = np.flatnonzero(y >= amplitude - delta)
+            first, last = int(band[0]), int(band[-1])
+            span = last - first + 1
+            if band.size < _CLIP_FILL * span:
+                continue
+            # The crest's base width: 1.5 × its half-amplitude width (a half-sine's).
+            low = np.flatnonzero(y[:first] < amplitude / 2)
+            high = np.flatnonzero(y[last:] < amplitude / 2)
+            base = 1.5 * (last + (high[0] if high.size else y.size - last)
+                          - (low[-1] if low.size else -1) - 1)
+            smooth = 2 * base / math.pi * math.acos(1 - min(1.0, reach / amplitude))
+            if span >= max(_CLIP_RUN_MIN, _CLIP_RUN_FRACTION * base, CLIP_MARGIN * smooth):
+                return sign * float(np.median(y[band])), span
+    return None
+
+
+def _noise(x: np.ndarray, base: slice) -> float:
+    """Return the noise σ of ``x`` from its pre-trigger, or from the whole window if short."""
+    quiet = x[base]
+    quiet = quiet[np.isfinite(quiet)]
+    return mad_sigma(quiet if quiet.size >= 16 else x)
+
+
+def _non_finite(recording: Recording, window: slice) -> list[str]:
+    """Describe the NaN/Inf samples of every channel inside ``window``."""
+    out = []
+    rows = np.vstack([recording.pressure[np.newaxis], recording.acceleration])
+    for name, row in zip(_CHANNELS, rows[:, window]):
+        bad = np.flatnonzero(~np.isfinite(row))
+        if bad.size:
+            first = window.start + int(bad[0])
+            kinds = '/'.join(kind for kind, test in (('NaN', np.isnan), ('Inf', np.isinf))
+                             if test(row[bad]).any())
+            out.append(f'{name} holds {bad.size} non-finite sample(s) ({kinds}: a stream gap '
+                       f'or bad data), the first at sample {first} '
+                       f'({first / recording.fs:.6f} s)')
+    return out
 
 
 def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: float,
@@ -249,10 +347,7 @@ def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: 
     elif baseline_stop - start < width:
         notes.append(f'short pre-trigger: baseline from {baseline_stop - start} samples')
     window = slice(start, stop)
-    missing = int(np.count_nonzero(np.isnan(recording.pressure[window])) +
-                  np.count_nonzero(np.isnan(recording.acceleration[:, window]).any(axis=0)))
-    if missing:
-        notes.append(f'window holds {missing} missing samples (stream gap)')
+    defects = _non_finite(recording, window)
     base = slice(start, baseline_stop)
     with np.errstate(invalid='ignore'):
         baseline_pa = float(np.nanmean(recording.pressure[base])) \
@@ -261,14 +356,33 @@ def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: 
                                  for row in recording.acceleration[:, base]])
     peak_g = float((recording.axial[peak] - baseline_acc[2]) / G0)
     pressure = recording.pressure[onset_i:stop] - baseline_pa
-    peak_pressure = float(pressure[np.nanargmax(np.abs(pressure))] / 1e6) \
-        if np.any(np.isfinite(pressure)) else math.nan
+    finite = np.isfinite(pressure)
+    peak_pressure = float(pressure[np.nanargmax(np.where(finite, np.abs(pressure), np.nan))]
+                          / 1e6) if finite.any() else math.nan
     sensitivity = recording.charge_sensitivity
-    min_run = max(_CLIP_RUN_MIN, math.ceil(_CLIP_RUN_FRACTION * width))
-    clipped = (_clipped(recording.axial[window], baseline_acc[2], min_run) or
-               _clipped(recording.pressure[window], baseline_pa, min_run))
-    if clipped:
-        notes.append('clipped: a run of samples sits at a constant extreme')
+    local = slice(0, baseline_stop - start)
+    axial = recording.axial[window] - baseline_acc[2]
+    p = recording.pressure[window] - baseline_pa
+    clipped = False
+    for name, x, unit, scale, offset in (
+            ('axial acceleration', axial, 'g', G0, baseline_acc[2]),
+            ('pressure', p, 'MPa', 1e6, baseline_pa)):
+        top = _flat_top(x, _noise(x, local))
+        if top is not None:
+            clipped = True
+            level, count = top
+            defects.append(f'clipped: the {name} sits flat at {(level + offset) / scale:.5g} '
+                           f'{unit} for {count} samples ({1e3 * count / fs:.3g} ms): the '
+                           f'sensor, its amplifier or the ADC saturated')
+    sigma = _noise(axial, local)
+    if not defects and not np.nanmax(np.abs(axial)) > NOISE_FACTOR * sigma:
+        defects.append(f'no shock: the axial acceleration stays within '
+                       f'{np.nanmax(np.abs(axial)) / G0:.3g} g of its baseline, '
+                       f'{NOISE_FACTOR:g} noise σ ({NOISE_FACTOR * sigma / G0:.3g} g) being '
+                       f'the least a shot must reach')
+    if np.all(p == p[0]) and not defects:
+        defects.append(f'the pressure is constant at {p[0] + baseline_pa:g} Pa throughout the '
+                       f'window: a dead, disconnected or overloaded pressure channel')
     return Shot(index=index, fs=fs, start=start, stop=stop, onset=onset_i, end=end_i,
                 peak=peak, peak_g=peak_g, width_ms=1e3 * width / fs,
                 peak_pressure_mpa=peak_pressure,
@@ -276,7 +390,32 @@ def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: 
                 mpa_per_g=peak_pressure / peak_g if peak_g else math.nan, clipped=clipped,
                 baseline_stop=baseline_stop, baseline_pa=baseline_pa,
                 baseline_acceleration=tuple(float(v) for v in baseline_acc),
-                notes=tuple(notes))
+                notes=tuple(notes), defects=tuple(defects))
+
+
+def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
+    """
+    Return why the recording's axial acceleration (or its pressure) is dead, or None.
+
+    A channel is dead when every finite sample has one value (a disconnected sensor, an
+    amplifier in reset or overload, a channel mapped to nothing).
+
+    Args:
+        recording: The recording.
+        pressure: Check the pressure too.
+
+    """
+    channels = [('axial acceleration (row z)', recording.axial, 'm/s²')]
+    if pressure:
+        channels.insert(0, ('pressure', recording.pressure, 'Pa'))
+    for name, row, unit in channels:
+        finite = row[np.isfinite(row)]
+        if finite.size > 1 and finite.min() == finite.max():
+            return (f'the {name} is constant at {finite[0]:g} {unit} over all '
+                    f'{recording.n_samples} samples: the sensor is dead or disconnected, its '
+                    f'amplifier is in reset or overload, or the channel is mapped wrong; check '
+                    f'the wiring and the recorded channels')
+    return None
 
 
 def _check_ms(**values: float) -> None:
@@ -302,6 +441,56 @@ def _events(s: np.ndarray, on: float, off: float) -> list[list[int]]:
         position = stop
 
 
+@dataclass(frozen=True)
+class _Trigger:
+    """The detection signal and its level: ``s`` in g, baseline removed, pulses positive."""
+
+    s: np.ndarray
+    threshold_g: float
+    largest_g: float
+    sigma_g: float
+    automatic: bool
+
+
+def _trigger(recording: Recording, threshold_g: float | None,
+             polarity: int | None) -> _Trigger:
+    if threshold_g is not None and not threshold_g > 0:
+        raise ShotError(f'threshold must be a positive number of g, got {threshold_g!r}')
+    s = recording.axial / G0
+    s = np.where(np.isfinite(s), s, np.nan)  # an Inf is bad data, not a shock
+    dead = dead_channel(recording, pressure=False)
+    if dead is not None:
+        raise ShotError(dead)
+    s = s - np.nanmedian(s) if np.isfinite(s).any() else s
+    s = s * _polarity(s, polarity, 'recording')
+    largest = float(np.nanmax(s))
+    sigma = mad_sigma(s)
+    automatic = threshold_g is None
+    if automatic:
+        threshold_g = max(DEFAULT_THRESHOLD_FRACTION * largest, NOISE_FACTOR * sigma)
+    return _Trigger(s, threshold_g, largest, sigma, automatic)
+
+
+def no_shot_message(recording: Recording, *, threshold_g: float | None = None,
+                    polarity: int | None = None) -> str:
+    """
+    Return why :func:`detect_shots` finds nothing, with the numbers and what to try.
+
+    Raises:
+        ShotError: As :func:`detect_shots` does on a recording it cannot scan.
+
+    """
+    trigger = _trigger(recording, threshold_g, polarity)
+    how = (f'the automatic threshold, the larger of '
+           f'{100 * DEFAULT_THRESHOLD_FRACTION:g} % of the largest excursion and '
+           f'{NOISE_FACTOR:g} noise σ' if trigger.automatic else 'the threshold given')
+    return (f'no shot found: the axial acceleration never reaches {trigger.threshold_g:.4g} g '
+            f'above its median ({how}); its largest excursion is {trigger.largest_g:.4g} g '
+            f'and its noise σ {trigger.sigma_g:.3g} g. Give a lower --threshold G (one below '
+            f'{NOISE_FACTOR:g} σ = {NOISE_FACTOR * trigger.sigma_g:.3g} g may trigger on '
+            f'noise) or the shot windows with --window START STOP in seconds')
+
+
 def detect_shots(recording: Recording, *, threshold_g: float | None = None,
                  hysteresis: float = DEFAULT_HYSTERESIS, pre_ms: float = DEFAULT_PRE_MS,
                  post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
@@ -322,25 +511,22 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
             excursion.
 
     Returns:
-        The shots in time order (empty when nothing reaches the threshold).
+        The shots in time order (empty when nothing reaches the threshold:
+        :func:`no_shot_message` says why). NaN and Inf samples never trigger; a shot whose
+        window holds one has it in its :attr:`Shot.defects`.
 
     Raises:
-        ShotError: On bad options or a recording without finite acceleration.
+        ShotError: On bad options, or a recording whose axial acceleration is constant or
+            holds no finite sample.
 
     """
     _check_ms(pre_ms=pre_ms, post_ms=post_ms, holdoff_ms=holdoff_ms)
     if not 0 < hysteresis <= 1:
         raise ShotError(f'hysteresis must lie in (0, 1], got {hysteresis!r}')
-    if threshold_g is not None and not threshold_g > 0:
-        raise ShotError(f'threshold must be a positive number of g, got {threshold_g!r}')
     fs, n = recording.fs, recording.n_samples
-    s = recording.axial / G0
-    s = s - np.nanmedian(s) if n else s
-    s = s * _polarity(s, polarity, 'recording')
-    largest = float(np.nanmax(s))
-    if threshold_g is None:
-        threshold_g = max(DEFAULT_THRESHOLD_FRACTION * largest, NOISE_FACTOR * mad_sigma(s))
-    if not largest >= threshold_g:
+    trigger = _trigger(recording, threshold_g, polarity)
+    s, threshold_g = trigger.s, trigger.threshold_g
+    if not trigger.largest_g >= threshold_g:
         return []
     events = _events(s, threshold_g, hysteresis * threshold_g)
     holdoff = holdoff_ms * fs / 1e3
@@ -421,6 +607,7 @@ def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, fl
             raise ShotError(f'{where} overlaps the previous window or is out of time order')
         previous_stop = stop
         s = recording.axial[start:stop] / G0
+        s = np.where(np.isfinite(s), s, np.nan)
         s = (s - np.nanmedian(s)) * _polarity(s - np.nanmedian(s), polarity, where)
         peak = int(np.nanargmax(s))
         onset, end, notes = _pulse_timing(s, peak)
@@ -450,7 +637,7 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
         ``(u, y)`` per shot: inputs ``(len(inputs), n)`` and pressure ``(n,)`` in Pa.
 
     Raises:
-        ShotError: When a window holds missing (NaN) samples or lies outside the recording.
+        ShotError: When a window holds a NaN or Inf sample or lies outside the recording.
 
     """
     out = []
@@ -461,11 +648,10 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
         acc = recording.acceleration[:, shot.window] - \
             np.asarray(shot.baseline_acceleration)[:, np.newaxis]
         y = recording.pressure[shot.window] - shot.baseline_pa
-        bad = np.flatnonzero(~(np.isfinite(y) & np.isfinite(acc).all(axis=0)))
-        if bad.size:
-            raise ShotError(f'shot {shot.index}: missing sample at '
-                            f'{(shot.start + bad[0]) / recording.fs:.6f} s in its window; '
-                            f'give windows that avoid the gap (shots_from_windows)')
+        if not (np.isfinite(y).all() and np.isfinite(acc).all()):
+            raise ShotError(f'shot {shot.index}: {"; ".join(_non_finite(recording, shot.window))}'
+                            f'; leave the shot out or give windows that avoid the gap '
+                            f'(--window START STOP)')
         u = input_channels(inputs, acc, {}, fs=recording.fs)
         out.append((u, y if denoise is None else np.asarray(denoise(y), dtype=np.float64)))
     return out
@@ -516,7 +702,8 @@ def shot_table(shots: Sequence[Shot]) -> str:
 
     Columns: shot index, peak acceleration (g), pulse width (ms), output charge (pC, '-'
     without a charge sensitivity), peak pressure (MPa), pressure per g (MPa/g) and the
-    sensor mode ('normal' or 'clipped'); notes follow the table.
+    sensor mode (:attr:`Shot.mode`: 'normal', 'clipped' or 'excluded'); notes and defects
+    follow the table.
     """
     header = (f'{"No.":>4} {"Accel. (g)":>11} {"Width (ms)":>11} {"Charge (pC)":>12} '
               f'{"Pressure (MPa)":>15} {"MPa/g":>10} {"Window (ms)":>12}  Mode')
@@ -526,7 +713,7 @@ def shot_table(shots: Sequence[Shot]) -> str:
         charge = '-' if shot.charge_pc is None else f'{shot.charge_pc:.2f}'
         lines.append(f'{shot.index:>4} {shot.peak_g:>11.1f} {shot.width_ms:>11.3f} '
                      f'{charge:>12} {shot.peak_pressure_mpa:>15.4f} {shot.mpa_per_g:>10.3e} '
-                     f'{1e3 * shot.n_samples / shot.fs:>12.1f}  '
-                     f'{"clipped" if shot.clipped else "normal"}')
+                     f'{1e3 * shot.n_samples / shot.fs:>12.1f}  {shot.mode}')
         notes.extend(f'shot {shot.index}: {note}' for note in shot.notes)
+        notes.extend(f'shot {shot.index}: not usable: {defect}' for defect in shot.defects)
     return '\n'.join(lines + ([''] + notes if notes else [])) + '\n'

@@ -111,7 +111,8 @@ def test_round_trip(tmp_path):
     est = fit_oe(segs, nf=2, nb=2, nk=1)
     m = Model.from_estimate(est, fs=200e3, inputs=('a_z', 'a_x'),
                             charge_sensitivity_pC_per_MPa=98.5, fit={'valid_fit': 97.5},
-                            provenance=[source], effects=[{'id': 'lateral', 'axis': 'x'}])
+                            provenance=[source],
+                            effects=[{'id': 'transverse_sensitivity', 'axis': 'x'}])
     path = tmp_path / 'model.json'
     m.save(path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ['model.json', 'shots.mcap']

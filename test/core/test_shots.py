@@ -173,9 +173,13 @@ def test_segments_refuse_missing_samples():
     pressure = rec.pressure.copy()
     pressure[shots[1].peak] = np.nan
     gapped = Recording(fs=FS, t0_ns=0, pressure=pressure, acceleration=rec.acceleration)
-    with pytest.raises(ShotError, match='shot 1: missing sample'):
+    index = shots[1].peak
+    with pytest.raises(ShotError, match=rf'shot 1: pressure holds 1 non-finite sample\(s\) '
+                                        rf'\(NaN.*sample {index} \({index / FS:.6f} s\)'):
         segments(gapped, shots)
-    assert any('missing' in note for note in detect_shots(gapped)[1].notes)
+    found = detect_shots(gapped)
+    assert [s.usable for s in found] == [True, False, True, True]
+    assert f'first at sample {index}' in found[1].defects[0]
 
 
 def test_segments_apply_denoise_to_pressure_only():
