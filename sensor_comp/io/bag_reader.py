@@ -585,24 +585,15 @@ class BagReader:
             return  # a cut inside the chunk's header: no message survived
         data = body[pos + 8:pos + 8 + length]
         times = (start, end)
+        if cut and len(data) == length:
+            cut = False  # all of it is there (the record's length was wrong): check it whole
         if cut:
             self._partial_chunk = times
         elif len(data) != length:
             self._damage(offset, times, 'is damaged (its records overrun it)')
             return
         try:
-            if compression == '':
-                records = data
-            elif compression == 'zstd':
-                records = (zstandard.ZstdDecompressor().decompressobj().decompress(data) if cut
-                           else zstandard.ZstdDecompressor().decompress(data,
-                                                                        max_output_size=size))
-            elif compression == 'lz4':
-                records = (lz4.frame.LZ4FrameDecompressor().decompress(data) if cut
-                           else lz4.frame.decompress(data))
-            else:
-                raise self._fail(f'chunk at byte {offset} uses compression {compression!r}; '
-                                 f'supported: zstd, lz4, none')
+            records = self._decompress(compression, data, size, cut, offset)
         except (zstandard.ZstdError, RuntimeError) as exc:
             if not cut:
                 self._damage(offset, times, f'does not decompress ({exc})')
@@ -620,6 +611,26 @@ class BagReader:
         except _Cut:
             if not cut:
                 self._damage(offset, times, 'holds an incomplete record')
+
+    def _decompress(self, compression: str, data, size: int, cut: bool, offset: int):
+        """Return a chunk's records; of a cut chunk, as much as decompresses."""
+        if compression == '':
+            return data
+        if compression == 'zstd':
+            if cut:
+                return zstandard.ZstdDecompressor().decompressobj().decompress(data)
+            declared = zstandard.frame_content_size(data)
+            if declared < 0:  # unknown: decompress as a stream, never trusting ``size``
+                return zstandard.ZstdDecompressor().decompressobj().decompress(data)
+            if declared != size:
+                raise zstandard.ZstdError(f'its frame holds {declared} bytes, its header '
+                                          f'says {size}')
+            return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+        if compression == 'lz4':
+            return (lz4.frame.LZ4FrameDecompressor().decompress(data) if cut
+                    else lz4.frame.decompress(data))
+        raise self._fail(f'chunk at byte {offset} uses compression {compression!r}; '
+                         f'supported: zstd, lz4, none')
 
     def _scan(self) -> dict[int, int]:
         """Register schemas and channels and count messages by reading the data section."""

@@ -125,7 +125,9 @@ class CdrWriter:
             CdrError: If ``data`` does not hold ``count * itemsize`` bytes.
 
         """
-        view = memoryview(data).cast('B')
+        view = memoryview(data)
+        if view.nbytes:  # an empty array cannot be cast (numpy gives it zero strides)
+            view = view.cast('B')
         if view.nbytes != count * itemsize:
             raise CdrError(f'sequence of {count} elements of {itemsize} bytes needs '
                            f'{count * itemsize} bytes, got {view.nbytes}')

@@ -170,7 +170,7 @@ def _rig(*, infos=None, accel=None, pressure=None) -> list[tuple[str, int, bytes
 RIG_TOPICS = {INFO: (DIAGNOSTIC_ARRAY, True), ACC: (IMAGE, False), RAW: (IMAGE, False)}
 
 
-def write_bag(path: Path, messages, *, topics=None, compression: str = 'none',
+def write_bag(path: Path, messages, *, topics=None, compression: str = 'zstd',
               chunk_size: int = 4096, profile: str = 'ros2', message_encoding: str = 'cdr',
               schema_encoding: str = 'ros2msg') -> None:
     """Write ``(topic, time, data)`` messages in the rosbag2 layout with the mcap library."""
@@ -264,7 +264,7 @@ def build(folder: Path = HERE) -> None:
               schema_encoding='jsonschema')
 
     damaged = folder / 'damaged_chunk.mcap'
-    write_bag(damaged, _rig())
+    write_bag(damaged, _rig(), compression='none')
     data = bytearray(damaged.read_bytes())
     second = _chunk_offsets(bytes(data))[1]
     data[second + 200] ^= 0xFF  # inside the chunk's records, covered by its CRC
