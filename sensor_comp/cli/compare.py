@@ -10,7 +10,7 @@ from .identify import add_threshold, load_source
 from .sources import load_model
 from ..core.compare import compare, format_table
 from ..core.identify import ShotSource
-from ..core.model import Model
+from ..core.model import Model, ModelError
 from ..errors import SensorCompError
 
 __all__ = ['register', 'run', 'usable_source']
@@ -26,9 +26,15 @@ def usable_source(path: str, models: dict[str, Model], *, windows=None,
 
     Raises:
         SensorCompError: If the file does not read, holds no usable shot, its pressure is
-            dead, its units are impossible, or a model belongs to another sample rate.
+            dead, its units are impossible, or a model is unstable or belongs to another
+            sample rate.
 
     """
+    for name, model in models.items():
+        try:
+            model.check_stable()
+        except ModelError as exc:
+            raise ModelError(f'model {name}: {exc}') from None
     loaded = load_source(path, windows=windows, threshold_g=threshold_g)
     for name, model in models.items():
         model.check_rate(loaded.recording.fs, model_name=f'model {name}',

@@ -9,6 +9,7 @@ import numpy as np
 
 from .identify import describe_model
 from .sources import load_model
+from ..core.ident.polynomials import max_root_radius
 from ..core.model import frequency_response, step_response
 
 __all__ = ['register', 'run']
@@ -58,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
         for name, row, std in zip(model.inputs, model.b, _rows(model.b_std, model.b.shape)):
             print(f'  B[{name}] = {_poly(row, std)}')
         print(f'  A = {_poly(model.a, model.a_std)}')
+        radius = max_root_radius(model.a)
+        if not radius < 1:
+            print(f'  WARNING: unstable: a pole lies at |z| = {radius:.6f}; compare and '
+                  f'compensation refuse this model (identify never writes one)')
         for key in ('validation_fit_percent', 'validation_peak_residual_percent',
                     'calibration_fit_percent', 'selection'):
             if key in model.fit:
@@ -86,7 +91,7 @@ def _poly(values, std) -> str:
 def _document(model, response, step) -> dict:
     f, h = response
     t, y = step
-    return {'model': model.to_json(),
+    return {'model': model.to_json(), 'stable': bool(max_root_radius(model.a) < 1),
             'frequency_response': {'f_hz': f.tolist(),
                                    'magnitude_Pa_per_input_unit': np.abs(h).tolist(),
                                    'phase_deg': np.degrees(np.unwrap(np.angle(h))).tolist(),
