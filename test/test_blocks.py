@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sensor_comp.blocks import assemble, iter_blocks
+from sensor_comp.blocks import assemble, BlockSequence, iter_blocks
 from sensor_comp.streams import Gap, Stream, StreamError, StreamInfo
 
 T0 = 1_700_000_000_000_000_123
@@ -136,3 +136,26 @@ def test_wrong_channel_count_and_empty_input_are_errors():
 def test_bad_width_fails_at_the_call(width):
     with pytest.raises(StreamError, match='block width'):
         iter_blocks(make_stream(n=10), width=width)
+
+
+def test_block_sequence_checks_blocks_one_at_a_time_like_assemble():
+    stream = make_stream(n=500, fs=1000.0)
+    blocks = list(iter_blocks(stream, width=100))
+    sequence = BlockSequence(stream.info, name='/rig/acceleration')
+    # Block 2 is lost: the next one reports the 100 samples missing before it.
+    missing = [sequence.add(stamp, block) for stamp, block in blocks[:2] + blocks[3:]]
+    assert missing == [0, 0, 100, 0]
+    assert sequence.add(blocks[4][0] + 10 ** 9, np.zeros((2, 0))) == 0  # empty: ignored
+    assert sequence.previous == (blocks[4][0], 100)
+    with pytest.raises(StreamError, match=rf"stream '/rig/acceleration': block at stamp "
+                                          rf"{blocks[1][0]} ns.*out of order"):
+        sequence.add(*blocks[1])
+    with pytest.raises(StreamError, match=r"'/rig/acceleration'.*shape \(1, 100\)"):
+        sequence.add(blocks[4][0] + 10 ** 8, np.zeros((1, 100)))
+
+
+def test_assemble_names_the_stream_as_asked():
+    stream = make_stream(n=300)
+    blocks = list(iter_blocks(stream, width=100))
+    with pytest.raises(StreamError, match="stream '/rig/acceleration': .*overlaps"):
+        assemble(stream.info, blocks + blocks[2:], name='/rig/acceleration')

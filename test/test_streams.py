@@ -43,12 +43,21 @@ def test_from_streams_joins_on_common_span():
 
 def test_from_streams_rejects_different_rates_and_fractional_offsets():
     accel = _stream('acceleration', 3, t0_ns=0, n=100)
-    with pytest.raises(StreamError, match='sample rates differ'):
+    with pytest.raises(StreamError, match="sample rates differ: 'acceleration' at .*"
+                                          "'pressure/raw' at 500000 Hz"):
         Recording.from_streams(accel, _stream('pressure/raw', 1, 0, 100, fs=500e3))
-    with pytest.raises(StreamError, match='not on one grid'):
+    fs = accel.fs
+    with pytest.raises(StreamError, match=f"'pressure/raw' starts at 500 ns and 'acceleration' "
+                                          f"at 0 ns, {500e-9 * fs:.3f} samples apart.*not on "
+                                          f"one grid"):
         Recording.from_streams(accel, _stream('pressure/raw', 1, 500, 100))
-    with pytest.raises(StreamError, match='do not overlap'):
+    end = round(100 * 1e9 / fs)
+    with pytest.raises(StreamError, match=f"'acceleration' \\(0 to {end} ns\\) and "
+                                          f"'pressure/raw' \\(200000 to .* ns\\) do not "
+                                          f"overlap"):
         Recording.from_streams(accel, _stream('pressure/raw', 1, 200_000, 100))
+    with pytest.raises(StreamError, match="'acceleration' must have 3 channels.*has 1 \\(p\\)"):
+        Recording.from_streams(_stream('acceleration', 1, 0, 100), accel)
 
 
 def test_recording_slice_and_streams_round_trip():

@@ -24,7 +24,9 @@ from sensor_comp.cli.main import main
 from sensor_comp.core.identify import ShotSource
 from sensor_comp.core.model import Model
 from sensor_comp.io import bag_reader
-from sensor_comp.io.bag_writer import write_streams
+from sensor_comp.io.bag_reader import BagReader, read_streams
+from sensor_comp.io.bag_writer import BagWriter, write_streams
+from sensor_comp.io.messages import decode_block
 from sensor_comp.streams import Gap, Stream
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -217,3 +219,47 @@ def test_a_bag_cut_in_its_summary_or_without_extension_is_read_like_the_original
     assert main(['info', str(cut)]) == 0
     out = capsys.readouterr().out
     assert 'summary' in out and f'sensor-comp repair {cut}' in out
+
+
+def test_a_lost_acceleration_block_leaves_a_reported_gap_in_the_compensation(
+        validation, model_files, tmp_path, capsys):
+    acceleration, raw = '/rig/acceleration', '/rig/pressure/raw'
+    bag = tmp_path / 'lost_block.mcap'
+    dropped = None
+    with BagReader(validation.path) as reader, BagWriter(bag) as writer:
+        for name, info in reader.topics.items():
+            writer.add_topic(name, info.msgtype, latched=info.latched)
+        seen = 0
+        for msg in reader.messages():
+            if msg.topic == acceleration:
+                seen += 1
+                if seen == 20:
+                    dropped = decode_block(msg.data)
+                    continue
+            writer.write(msg.topic, msg.data, log_time_ns=msg.log_time_ns,
+                         publish_time_ns=msg.publish_time_ns)
+    stamp, _, block = dropped
+    width = block.shape[1]
+    out = tmp_path / 'out.mcap'
+    assert main(['compensate', model_files['true'], str(bag), '-o', str(out), '--json']) == 0
+    counts = json.loads(capsys.readouterr().out)
+    assert counts['unpaired_pressure_samples'] == width
+    assert counts['first_unpaired'] == {raw: {'stamp_ns': stamp, 'samples': width},
+                                        acceleration: None}
+    assert counts['output_samples'] == counts['pressure_samples'] - width
+    compensated = read_streams(out)['pressure/compensated']
+    assert compensated.gaps == (Gap(19 * width, width),)
+    assert main(['compensate', model_files['true'], str(bag), '-o', str(out)]) == 0
+    out_text = capsys.readouterr().out
+    assert (f'warning: {width} unpaired pressure samples found no partner block (the first: '
+            f'{raw} block at stamp {stamp} ns, {width} samples)') in out_text
+
+
+def test_a_rosbag2_sqlite_file_is_named_as_such(tmp_path, corpus_model, capsys):
+    db3 = tmp_path / 'run_0.db3'
+    db3.write_bytes((CORPUS / 'rosbag2_sqlite' / 'rosbag2_sqlite_0.db3').read_bytes())
+    for command in ('info', 'identify', 'compare'):
+        assert main(command_line(command, str(db3), corpus_model, tmp_path)) == 1
+        err = capsys.readouterr().err
+        assert err.count('\n') == 1 and str(db3) in err and 'rosbag2 .db3 bag' in err
+        assert 'ros2 bag convert' in err

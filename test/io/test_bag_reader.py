@@ -1,6 +1,7 @@
 """BagReader on damaged, cut-short, summary-less and foreign files; read_streams semantics."""
 
 import struct
+import warnings
 
 from mcap.reader import make_reader
 from mcap.stream_reader import breakup_chunk, StreamReader
@@ -9,7 +10,9 @@ import numpy as np
 import pytest
 
 from sensor_comp.blocks import iter_blocks
-from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
+from sensor_comp.io.bag_reader import (AttachmentRecord, BagReader, MetadataRecord,
+                                       RawMessage, read_recording, read_stream_infos,
+                                       read_streams, TruncatedBagError)
 from sensor_comp.io.bag_writer import BagWriter, write_recording, write_streams
 from sensor_comp.io.messages import (DIAGNOSTIC_ARRAY, encode_block, encode_stream_info,
                                      encode_string, IMAGE, STRING)
@@ -365,3 +368,150 @@ def test_closing_with_an_unfinished_iterator(tmp_path, make_recording):
     first = next(iterator)
     bag.close()
     assert first.topic == '/rig/stream_info'
+
+
+def test_a_damaged_summary_is_ignored_for_the_data_section(tmp_path):
+    path = tmp_path / 'full.mcap'
+    _, written = block_bag(path, compression='zstd')
+    data = bytearray(path.read_bytes())
+    summary_start = int.from_bytes(data[-28:-20], 'little')
+    data[summary_start + 40] ^= 0x01  # e.g. a topic name in the summary's channel record
+    path.write_bytes(bytes(data))
+    bag, msgs = read_all(path)
+    assert not bag.has_summary and not bag.truncated and 'summary is damaged' in bag.warning
+    assert msgs == written
+    assert bag.topics['/rig/pressure/raw'].message_count == len(written) - 1
+
+
+def test_skip_damaged_reads_around_a_damaged_chunk(tmp_path):
+    path = tmp_path / 'full.mcap'
+    _, written = block_bag(path, compression='lz4')
+    layout = chunk_layout(path)
+    data = bytearray(path.read_bytes())
+    data[(layout[3][0] + layout[3][1]) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with BagReader(path, skip_damaged=True) as bag:
+        msgs = [(m.topic, m.log_time_ns, m.data) for m in bag.messages()]
+        (damage,) = bag.damaged
+    assert damage.offset == layout[3][0] and f'chunk at byte {layout[3][0]}' in damage.reason
+    lost = [m for m in written if m not in msgs]
+    assert len(lost) == len(layout[3][2]) and [m for m in written if m in msgs] == msgs
+    assert all(damage.start_ns <= m[1] <= damage.end_ns for m in lost)
+
+
+def test_a_wrong_record_length_with_a_good_summary_is_damage_not_a_cut(tmp_path):
+    path = tmp_path / 'full.mcap'
+    block_bag(path)
+    layout = chunk_layout(path)
+    data = bytearray(path.read_bytes())
+    start = layout[2][0]
+    data[start + 1:start + 9] = (10 ** 9).to_bytes(8, 'little')  # the chunk's record length
+    path.write_bytes(bytes(data))
+    with BagReader(path) as bag:
+        assert bag.has_summary
+        with pytest.raises(BagError, match=f'record at byte {start} is damaged.*repair'):
+            list(bag.messages())
+
+
+def test_a_zstd_chunk_whose_size_field_lies_is_damaged(tmp_path):
+    path = tmp_path / 'full.mcap'
+    block_bag(path, compression='zstd')
+    layout = chunk_layout(path)
+    data = bytearray(path.read_bytes())
+    size_field = layout[1][0] + 9 + 16  # record head, then start and end times
+    data[size_field:size_field + 8] = (2 ** 63).to_bytes(8, 'little')
+    path.write_bytes(bytes(data))
+    with BagReader(path) as bag:
+        with pytest.raises(BagError, match='does not decompress.*frame holds'):
+            list(bag.messages())
+
+
+def test_truncation_policy_of_read_streams(tmp_path):
+    path = tmp_path / 'full.mcap'
+    block_bag(path)
+    layout = chunk_layout(path)
+    cut_data = cut(path, (layout[3][0] + layout[3][1]) // 2, tmp_path)
+    with pytest.raises(TruncatedBagError, match=f'cut short.*sensor-comp repair {cut_data}'):
+        read_streams(cut_data, on_truncated='raise')
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        assert read_streams(cut_data, on_truncated='ignore')['pressure/raw'].n_samples > 0
+    cut_summary = cut(path, path.stat().st_size - 10, tmp_path)  # nothing lost: read
+    assert read_streams(cut_summary, on_truncated='raise')['pressure/raw'].n_samples == 6000
+    with pytest.raises(BagError, match="on_truncated must be 'warn', 'ignore' or 'raise'"):
+        read_streams(path, on_truncated='stop')
+
+
+def test_rosbag2_directories(tmp_path, make_recording):
+    folder = tmp_path / 'rosbag2_run'
+    folder.mkdir()
+    write_recording(folder / 'rosbag2_run_0.mcap', make_recording(100))
+    (folder / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n'
+        '  relative_file_paths:\n    - rosbag2_run_0.mcap\n  duration:\n'
+        '    nanoseconds: 1\n')
+    for given in (folder, folder / 'metadata.yaml', folder / 'rosbag2_run_0.mcap'):
+        assert read_recording(given).n_samples == 100
+    (folder / 'other.mcap').write_bytes(b'')  # metadata.yaml says which file is the bag
+    assert read_recording(folder).n_samples == 100
+    (folder / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  storage_identifier: sqlite3\n'
+        '  relative_file_paths:\n  - run_0.db3\n')
+    with pytest.raises(BagError, match="'sqlite3' storage \\(run_0.db3\\).*ros2 bag convert"):
+        BagReader(folder)
+    (folder / 'metadata.yaml').unlink()
+    with pytest.raises(BagError, match='split into 2 files \\(other.mcap, rosbag2_run_0.mcap'):
+        BagReader(folder)
+    sqlite = tmp_path / 'old'
+    sqlite.mkdir()
+    (sqlite / 'old_0.db3').write_bytes(b'SQLite format 3\x00')
+    with pytest.raises(BagError, match='SQLite bag \\(old_0.db3\\), no .mcap file'):
+        BagReader(sqlite)
+
+
+def test_topics_of_the_wrong_type_and_an_empty_stream_info(tmp_path):
+    block = encode_block(np.zeros((1, 10)), stamp_ns=0, frame_id='')
+    info = encode_stream_info([INFO], stamp_ns=0)
+    path = tmp_path / 'text.mcap'
+    write_raw(path, {'/rig/stream_info': (DIAGNOSTIC_ARRAY, True),
+                     '/rig/pressure/raw': (STRING, False)},
+              [('/rig/stream_info', 0, info), ('/rig/pressure/raw', 0, encode_string('1'))])
+    for names in (None, ['pressure/raw']):
+        with pytest.raises(BagError, match=f'/rig/pressure/raw carries {STRING}, but a block '
+                                           f'stream must be {IMAGE}'):
+            read_streams(path, names=names)
+    path = tmp_path / 'info_as_text.mcap'
+    write_raw(path, {'/rig/stream_info': (STRING, True), '/rig/pressure/raw': (IMAGE, False)},
+              [('/rig/stream_info', 0, encode_string('1 kHz')), ('/rig/pressure/raw', 0, block)])
+    with pytest.raises(BagError, match=f'/rig/stream_info carries {STRING}, not '
+                                       f'{DIAGNOSTIC_ARRAY}'):
+        read_streams(path)
+    path = tmp_path / 'silent.mcap'
+    write_raw(path, {'/rig/stream_info': (DIAGNOSTIC_ARRAY, True),
+                     '/rig/pressure/raw': (IMAGE, False)}, [('/rig/pressure/raw', 0, block)])
+    with BagReader(path) as bag:
+        with pytest.raises(BagError, match='/rig/stream_info holds no message'):
+            read_stream_infos(bag, namespace='/rig')
+
+
+def test_records_yield_metadata_and_attachments_with_the_messages(tmp_path):
+    path = tmp_path / 'x.mcap'
+    with BagWriter(path) as bag:
+        bag.add_topic('/log', STRING)
+        bag.write('/log', encode_string('a'), log_time_ns=1, sequence=41)
+        bag.add_metadata('run', {'operator': 'me'})
+        bag.add_attachment('notes.txt', b'hello', media_type='text/plain', log_time_ns=2)
+        bag.write('/log', encode_string('b'), log_time_ns=3)
+    with BagReader(path) as bag:
+        records = list(bag.records())
+        messages = list(bag.messages())
+    assert messages == [RawMessage('/log', STRING, 1, 1, encode_string('a'), 41),
+                        RawMessage('/log', STRING, 3, 3, encode_string('b'), 0)]
+    # In file order: the writer puts them before the chunk that is still open.
+    assert records == [MetadataRecord('run', {'operator': 'me'}),
+                       AttachmentRecord(2, 0, 'notes.txt', 'text/plain', b'hello'), *messages]
+
+
+def test_cannot_open_says_what_to_check(tmp_path):
+    with pytest.raises(BagError, match='nope.mcap: No such file or directory; check the path'):
+        BagReader(tmp_path / 'nope.mcap')

@@ -90,6 +90,13 @@ def test_reader_errors_name_what_was_being_read():
         CdrReader(ENCAPSULATION_LE + b'\x01\x00').uint32()
 
 
+def test_an_empty_array_is_an_empty_sequence():
+    w = CdrWriter()
+    w.primitive_sequence(np.zeros((2, 0)), itemsize=8, count=0)  # zero strides: no cast
+    assert w.getvalue() == ENCAPSULATION_LE + bytes(4)
+    assert CdrReader(w.getvalue()).primitive_sequence('<f8').shape == (0,)
+
+
 def test_writer_rejects_values_that_do_not_fit():
     w = CdrWriter()
     with pytest.raises(CdrError, match='uint32'):

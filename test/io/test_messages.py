@@ -58,6 +58,11 @@ def test_block_decoding_rejects_truncated_and_foreign_bytes(image_cdr):
         decode_block(encode_string('hello'))
 
 
+def test_an_empty_block_encodes_and_decodes():
+    stamp, frame, back = decode_block(encode_block(np.zeros((3, 0)), stamp_ns=5, frame_id='f'))
+    assert (stamp, frame, back.shape) == (5, 'f', (3, 0))
+
+
 def test_block_encoding_rejects_bad_shapes_and_stamps():
     with pytest.raises(MessageError, match='shape'):
         encode_block(np.zeros(5), stamp_ns=0, frame_id='')
