@@ -61,7 +61,8 @@ from ..streams import G0, Recording
 __all__ = ['ACCEL_UNITS', 'CsvError', 'PRESSURE_UNITS', 'TIME_UNITS', 'read_csv']
 
 #: Pressure units of ``pressure_<unit>`` columns, case-insensitive, as factors to Pa.
-PRESSURE_UNITS = {'Pa': 1.0, 'kPa': 1e3, 'MPa': 1e6, 'bar': 1e5, 'psi': 6894.757293168}
+PRESSURE_UNITS = {'Pa': 1.0, 'hPa': 1e2, 'kPa': 1e3, 'MPa': 1e6, 'mbar': 1e2, 'bar': 1e5,
+                  'psi': 6894.757293168}
 
 #: Acceleration units of ``accel_<axis>_<unit>`` columns, case-insensitive, as factors to m/s².
 ACCEL_UNITS = {'g': G0, 'm_s2': 1.0, 'm/s2': 1.0, 'm/s^2': 1.0, 'm_s^2': 1.0}
@@ -83,6 +84,8 @@ _META = re.compile(r'#\s*([A-Za-z_][\w.\- ]*?)\s*:\s*(.*?)\s*')
 _NUMBER = re.compile(r'[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf|infinity|nan)',
                      re.IGNORECASE)
 _CHARGE = 'charge_sensitivity_pC_per_MPa'
+#: Electrical units a raw channel may be exported in, instead of a physical one.
+_ELECTRICAL = ('v', 'mv', 'uv', '\u00b5v', 'pc', 'nc', 'ma', 'a', 'counts', 'lsb', 'adc')
 
 #: Rows parsed per fast ``np.loadtxt`` call; a failing chunk is re-read line by line.
 _CHUNK = 1 << 16
@@ -347,6 +350,9 @@ def _classify(path, line: int, position: int, name: str) -> _Column | None:
     canonical = {key.lower(): key for key in units}.get(unit.lower())
     if canonical is None:
         said = f'unknown {what} unit {unit!r}' if unit else f'no {what} unit'
+        if unit.lower() in _ELECTRICAL:
+            said += (f' (a raw electrical reading: convert it to {what} with the sensor\'s and '
+                     f'amplifier\'s scale, e.g. MPa/V or g/V, before importing)')
         raise CsvError(path, f'{label}: {said}; known units (any case): '
                              f'{", ".join(units)}, written as e.g. '
                              f'{_REQUIRED.get(quantity, "accel_x_g")!r}',
@@ -413,7 +419,11 @@ def _parse_slow(table: _Table, chunk: list[str], start: int) -> np.ndarray:
             if _NUMBER.fullmatch(number) is None:
                 hint = ('the cell is empty: fill it or delete the row' if not text else
                         'quoted numbers are not supported; remove the quotes'
-                        if text[0] in '"\'' else 'fix the cell or delete the row')
+                        if text[0] in '"\'' else
+                        f'the line repeats the header (line {header_line}): the file holds '
+                        f'several exports one after the other; split it into one file each'
+                        if line.strip() == table.lines[table.header].strip() else
+                        'fix the cell or delete the row')
                 raise table.error(f'{text!r} is not a number; {hint}', row=row,
                                   column=column)
             block[row - start, j] = float(number)

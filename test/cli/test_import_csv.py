@@ -117,3 +117,18 @@ def test_quiet_prints_nothing_and_rewrites_an_existing_bag(tmp_path, capsys):
     assert back.n_samples == 50 and back.fs == 50e3
     assert back.metadata['lateral_channels'] == 'absent'
     np.testing.assert_array_equal(back.acceleration[:2], 0.0)
+
+
+CORPUS = sorted(p.name for p in DATA.iterdir()
+                if not p.name.startswith('valid_') and p.name != 'README.md')
+
+
+@pytest.mark.parametrize('name', CORPUS)
+def test_every_malformed_file_is_one_error_line_and_no_bag(name, tmp_path, capsys):
+    from sensor_comp.cli.main import main
+    output = tmp_path / 'out.mcap'
+    assert main(['import', str(DATA / name), '-o', str(output)]) == 1
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f'sensor-comp: error: {DATA / name}')
+    assert captured.err.count('\n') == 1 and 'Traceback' not in captured.err
+    assert captured.out == '' and list(tmp_path.iterdir()) == []

@@ -2,6 +2,7 @@
 
 import math
 from pathlib import Path
+import re
 import time
 
 from hypothesis import assume, given, HealthCheck, settings, strategies as st
@@ -16,7 +17,8 @@ from sensor_comp.streams import Recording
 DATA = Path(__file__).resolve().parents[1] / 'data' / 'csv'
 
 #: SI definitions, written out independently of the module under test.
-PA_PER = {'Pa': 1.0, 'kPa': 1e3, 'MPa': 1e6, 'bar': 1e5, 'psi': 6894.757293168}
+PA_PER = {'Pa': 1.0, 'hPa': 1e2, 'kPa': 1e3, 'MPa': 1e6, 'mbar': 1e2, 'bar': 1e5,
+          'psi': 6894.757293168}
 MS2_PER = {'g': 9.80665, 'm_s2': 1.0}
 
 
@@ -244,7 +246,9 @@ ERRORS = [  # file, line, column, words the message must contain
     ('missing_accel_z.csv', 2, None, ['no accel_z', "'accel_x_g'"]),
     ('duplicate_pressure.csv', 3, 'Pressure_bar', ["'pressure_kPa'", "'Pressure_bar'",
                                                    'delete or rename']),
-    ('unknown_unit.csv', 1, 'pressure_mbar', ["'mbar'", 'Pa, kPa, MPa, bar, psi']),
+    ('unknown_unit.csv', 1, 'pressure_torr', ["'torr'", 'Pa, hPa, kPa, MPa, mbar, bar, psi']),
+    ('unknown_time_unit.csv', 1, 'time_min', ["unknown time unit 'min'", 's, ms, us']),
+    ('unit_volts.csv', 2, 'pressure_V', ["unit 'V'", 'raw electrical reading', 'MPa/V']),
     ('unknown_axis.csv', 1, 'accel_w_g', ["axis 'w'"]),
     ('header_only.csv', 2, None, ['0 data row', 'at least 2']),
     ('one_row.csv', 3, None, ['1 data row', 'at least 2']),
@@ -256,6 +260,11 @@ ERRORS = [  # file, line, column, words the message must contain
     ('nan_cell.csv', 8, 'accel_z_g', ["'NaN'", 'not a finite number']),
     ('inf_cell.csv', 3, 'pressure_kPa', ["'-inf'", 'not a finite number']),
     ('non_monotonic.csv', 6, 'time_s', ["'0.000003' is not after '0.000003' on line 5"]),
+    ('time_backwards.csv', 3, 'time_s', ["'0.000002' is not after '0.000003' on line 2",
+                                         'sort the rows']),
+    ('repeated_header.csv', 6, 'time_s', ['repeats the header (line 2)', 'split it']),
+    ('binary.csv', None, None, ['NUL bytes', 'binary file']),
+    ('bad_utf16.csv', None, None, ['not valid UTF-16', 'UTF-8']),
     ('missing_sample.csv', 9, 'time_s', ["'0.000005' (line 8) to '0.000007'",
                                          '1 sample(s) missing', '--time-tolerance']),
     ('jitter.csv', 7, 'time_s', ['jitter', '1.03e-06 s', 'sample interval is 1e-06 s']),
@@ -281,9 +290,12 @@ def test_malformed_file_names_line_column_and_remedy(name, line, column, words):
         assert word in message
 
 
-def test_every_corpus_file_is_covered():
-    names = {path.name for path in DATA.iterdir() if not path.name.startswith('valid_')}
+def test_every_corpus_file_is_covered_and_listed_in_the_readme():
+    names = {path.name for path in DATA.iterdir()
+             if not path.name.startswith('valid_') and path.name != 'README.md'}
     assert names == {e[0] for e in ERRORS}
+    listed = set(re.findall(r'^\| `([^`]+)` \|', (DATA / 'README.md').read_text(), re.MULTILINE))
+    assert listed == names
 
 
 def test_rows_that_agree_with_each_other_but_not_with_the_header(tmp_path):
@@ -464,6 +476,35 @@ def test_mutated_files_parse_or_raise_csv_error(tmp_path_factory, text):
         assert error.line is None or 1 <= error.line <= text.count('\n') + 1
         return
     assert isinstance(rec, Recording)
+    assert rec.n_samples >= 2 and math.isfinite(rec.fs) and rec.fs > 0 and rec.t0_ns >= 0
+    assert np.isfinite(rec.pressure).all() and np.isfinite(rec.acceleration).all()
+
+
+#: Pieces of CSV exports for arbitrary texts that get past the header now and then.
+_PIECES = st.sampled_from(['time_s', 'time_us', 'pressure_kPa', 'pressure_Pa', 'accel_z_g',
+                           'accel_x_m_s2', ',', ';', '\t', '\n', '\r\n', '#', ': ', '0',
+                           '1', '-2.5', '1e-6', '0,5', '.', 'e', 'nan', 'inf', '"', ' ',
+                           '\x00', '\ufeff', 'µ'])
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.one_of(
+    st.binary(max_size=300),
+    st.text(max_size=300).map(str.encode),
+    st.lists(_PIECES, max_size=80).map(lambda parts: ''.join(parts).encode()),
+    st.tuples(st.sampled_from(['utf-8', 'utf-16', 'latin-1']),
+              st.lists(_PIECES, max_size=60)).map(
+        lambda e: ('time_s,pressure_kPa,accel_z_g\n' + ''.join(e[1])).encode(
+            e[0], errors='replace'))))
+def test_arbitrary_bytes_parse_or_raise_csv_error(tmp_path_factory, data):
+    path = tmp_path_factory.mktemp('arbitrary') / 'data.csv'
+    path.write_bytes(data)
+    try:
+        rec = read_csv(path)
+    except CsvError as error:
+        assert str(error).startswith(str(path))
+        assert error.line is None or error.line >= 1
+        return
     assert rec.n_samples >= 2 and math.isfinite(rec.fs) and rec.fs > 0 and rec.t0_ns >= 0
     assert np.isfinite(rec.pressure).all() and np.isfinite(rec.acceleration).all()
 
