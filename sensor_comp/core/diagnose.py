@@ -370,7 +370,7 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
                              f'one rate at a time')
     fs = rates.pop()
     if base is not None:
-        base.check_rate(fs, model_name='the base model', data_name='the recordings')
+        base.check_rate(fs, model_name='the base model', data_name='every recording given')
     cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
         [s for s in valid if s.shots])
     if not cw or not vw:

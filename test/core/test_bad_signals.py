@@ -346,3 +346,28 @@ def test_sensitivity_ranges():
     for value in (1.4e-10, 1.4e-1, 0.0, math.nan):
         assert sensitivity_problem(value)[0] is True
     assert 'no single unit mistake' in sensitivity_problem(1e-18)[1]
+
+
+def test_diagnose_leaves_defective_shots_out_with_a_note_and_checks_the_rate(tmp_path):
+    from sensor_comp.core.diagnose import diagnose
+    from sensor_comp.core.model import ModelError
+    rec = rig().recording
+    shots = detect_shots(rec)
+    pressure = rec.pressure.copy()
+    pressure[shots[2].peak] = np.nan
+    bad = damaged(rec, pressure=pressure)
+    calibration = ShotSource(bad, tuple(detect_shots(bad)), named(tmp_path, 'nan.mcap'))
+    validation = ShotSource.detect(rig(seed=2).recording)
+    result = diagnose([calibration], [validation], candidates=['nonlinear_sensitivity'],
+                      residual_analysis=False)
+    assert result.notes[0] == f'{calibration.path}: shot 2 left out: pressure holds 1 ' \
+        f'non-finite sample(s) (NaN: a stream gap or bad data), the first at sample ' \
+        f'{shots[2].peak} ({shots[2].peak / FS:.6f} s)'
+    # Without the exclusion the NaN would have stopped the fit (segments refuses it).
+    assert result.verdict in ('adequate', 'missing_effect', 'unexplained')
+    model = fit(rec).model
+    fast = type(model)(**{**model.__dict__, 'fs': 1e6})
+    with pytest.raises(ModelError, match=r'the base model was identified at 1e\+06 Hz but every '
+                                         r'recording given is sampled at 200000 Hz'):
+        diagnose([calibration], [validation], base=fast, candidates=[],
+                 residual_analysis=False)
