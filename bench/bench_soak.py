@@ -108,6 +108,10 @@ _PUBLISHED = re.compile(r'published (\d+) blocks \((\d+) samples\) per topic')
 # After the acquisition stopped without logging its count: the consumers are drained when no
 # count moved for this long (a node busy fitting may publish no diagnostics for seconds).
 _QUIET_S = 20.0
+# Counters of both nodes' /diagnostics (core.streaming accounting) that must stay 0.
+_LOSSES = ('unpaired_pressure_samples', 'unpaired_acceleration_samples', 'mismatched_blocks',
+           'overlapping_samples', 'gaps', 'missing_samples', 'invalid_samples',
+           'malformed_messages')
 _REFIT_RUN_S = 120.0
 
 
@@ -314,6 +318,7 @@ class _Soak:
         self.out = out
         self.bag = out / 'soak.mcap'
         self.nodes: dict[str, NodeProcess] = {}
+        self.parameters: dict[str, dict] = {}
         self.usage = {name: _Usage() for name in (*NODES, 'soak')}
         self.verifier = _Verifier()
         self.verified: set[Path] = set()
@@ -326,18 +331,20 @@ class _Soak:
 
     # Start -------------------------------------------------------------------------------
 
+    def _start(self, name: str, params: dict) -> NodeProcess:
+        params.update({key: value for node, key, value in self.args.set if node == name})
+        self.parameters[name] = params
+        self.nodes[name] = NodeProcess(name, params, log=self.out / f'{name}.log')
+        return self.nodes[name]
+
     def start(self) -> None:
         a = self.args
         model = self.out / 'start_model.json'
         write_model_file(model, FS)
-        log = self.out.joinpath
-        self.nodes['recorder'] = NodeProcess('recorder', {
-            'output': str(self.bag), 'max_bag_duration': a.split}, log=log('recorder.log'))
-        self.nodes['identification'] = NodeProcess('identification', {
-            'structure': 'oe', 'min_shots': 4, 'max_shots': 10, 'refit_shots': a.refit_shots},
-            log=log('identification.log'))
-        self.nodes['compensation'] = NodeProcess('compensation', {'model_file': str(model)},
-                                                 log=log('compensation.log'))
+        self._start('recorder', {'output': str(self.bag), 'max_bag_duration': a.split})
+        self._start('identification', {'structure': 'oe', 'min_shots': 4, 'max_shots': 10,
+                                       'refit_shots': a.refit_shots})
+        self._start('compensation', {'model_file': str(model)})
         self.nodes['recorder'].wait_for_log('recording every topic under /rig')
         self.nodes['identification'].wait_for_log('identifying')
         self.nodes['compensation'].wait_for_log('compensating')
@@ -346,10 +353,10 @@ class _Soak:
         self.nodes['recorder'].wait_for_log(*(f'recording {NAMESPACE}/{t} (' for t in (
             'pressure/compensated', 'pressure/induced', 'model', 'stream_info')))
         self.diagnostics = _Diagnostics()
-        self.nodes['acquisition'] = NodeProcess('acquisition', {
+        self._start('acquisition', {
             'source': 'sim', 'sim_fs': FS, 'sim_spacing': a.shot_period, 'loop': True,
             'pacing': a.pacing, 'block_size': a.block_size, 'wait_for_subscribers': 3,
-            'wait_timeout': 60.0, 'ack_timeout': 60.0}, log=log('acquisition.log'))
+            'wait_timeout': 60.0, 'ack_timeout': 60.0})
         self.nodes['acquisition'].wait_for_log('publishing', timeout=_STARTUP_S)
         self.began = log_time(self.nodes['acquisition'].output(), 'publishing')
 
@@ -538,17 +545,14 @@ def _check(soak: _Soak, end: dict, report: dict) -> list[str]:
     for key in ('pressure_samples', 'acceleration_samples', 'output_samples'):
         if int(comp.get(key, -1)) != samples:
             failures.append(f'compensation {key} {comp.get(key)} != {samples} published')
-    for key in ('unpaired_pressure_samples', 'unpaired_acceleration_samples',
-                'mismatched_blocks', 'gaps', 'unprocessed_pressure_samples',
-                'unprocessed_acceleration_samples', 'malformed_messages',
+    for key in (*_LOSSES, 'unprocessed_pressure_samples', 'unprocessed_acceleration_samples',
                 'unpublished_blocks', 'models_refused'):
         if comp.get(key, '0') != '0':
             failures.append(f'compensation {key} = {comp[key]}')
     if int(ident.get('samples_received', -1)) != samples:
         failures.append(f'identification received {ident.get("samples_received")} of '
                         f'{samples} samples')
-    for key in ('gaps', 'dropped_samples', 'unpaired_samples', 'malformed_messages',
-                'held_dropped'):
+    for key in (*_LOSSES, 'held_dropped'):
         if ident.get(key, '0') != '0':
             failures.append(f'identification {key} = {ident[key]}')
     fits = int(ident.get('fits', 0))
@@ -628,6 +632,7 @@ def _report(soak: _Soak, end: dict) -> dict:
                   'verify_s': sum(f['verify_s'] for f in files), 'kept': a.keep,
                   'directory': str(soak.out)},
         'load_average': os.getloadavg(), 'cores': os.cpu_count(),
+        'parameters': soak.parameters,
     }
 
 
@@ -694,6 +699,23 @@ def _print(report: dict, failures: list[str]) -> None:
         print(f'\nok: every sample accounted for{memory}')
 
 
+def _override(text: str) -> tuple[str, str, object]:
+    """Parse ``NODE.PARAM=VALUE`` (VALUE: true/false, an integer, a number or text)."""
+    match = re.fullmatch(r'(\w+)\.(\w+)=(.*)', text)
+    if not match or match[1] not in NODES:
+        raise argparse.ArgumentTypeError(f'{text!r} is not NODE.PARAM=VALUE with NODE one of '
+                                         f'{", ".join(NODES)}')
+    node, name, value = match.groups()
+    if value in ('true', 'false'):
+        return node, name, value == 'true'
+    for kind in (int, float):
+        try:
+            return node, name, kind(value)
+        except ValueError:
+            pass
+    return node, name, value
+
+
 def main(argv=None) -> int:
     """Run the soak; print the tables; return 1 if a check failed."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
@@ -724,6 +746,9 @@ def main(argv=None) -> int:
                                                  'temporary one, removed unless --keep)')
     parser.add_argument('--keep', action='store_true', help='keep the verified bag files')
     parser.add_argument('--json', type=Path, help='write the figures to this JSON file')
+    parser.add_argument('--set', metavar='NODE.PARAM=VALUE', action='append', default=[],
+                        type=_override, help='override a node parameter, e.g. '
+                        'identification.diagnose=false (repeatable)')
     args = parser.parse_args(argv)
     args.duration = args.duration or (QUICK_DURATION_S if args.quick else DURATION_S)
     args.split = args.split or (QUICK_SPLIT_S if args.quick else SPLIT_S)
