@@ -327,8 +327,10 @@ def test_every_fault_is_logged_and_skipped_and_the_model_is_the_offline_fit(
         for count, (topic, data) in enumerate(stream.events, 1):
             blocks[topic].publish(data)
             wait(lambda: node.received == count, what=f'block message {count}')
-        wait(lambda: node.model is not None and statuses and
-             statuses[-1].get('fits') == '1', what='the model')
+        # A status published after the last block was handled holds the final counts.
+        wait(lambda: node.model is not None and statuses and statuses[-1].get('fits') == '1'
+             and statuses[-1]['samples_received'] == str(stream.counts['pressure_samples']),
+             what='the model and the final status')
     finally:
         stop()
     status = statuses[-1]
