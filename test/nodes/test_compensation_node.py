@@ -189,7 +189,7 @@ def test_models_are_swapped_between_blocks_and_bad_ones_refused(context, model, 
     outputs = []
     node._publish = outputs.append  # the compensated blocks, unencoded
     pairs = list(zip(iter_blocks(accel, width=WIDTH), iter_blocks(press, width=WIDTH)))
-    half = len(pairs) // 2
+    half = len(pairs) // 2  # sample 21 000: in the middle of the third shot's pulse
 
     def feed(chunk):
         for (stamp, a), (_, p) in chunk:
@@ -228,6 +228,10 @@ def test_models_are_swapped_between_blocks_and_bad_ones_refused(context, model, 
     _assert_equal_samples(induced[:cut], first)
     # As if the new model had run from the start: no start-up transient, no sample lost.
     _assert_equal_samples(induced[cut:], second)
+    # The new model started from rest instead would be off by a good part of the shot.
+    assert 20_541 < cut < 21_083  # the pulse (offline detection)
+    cold = CompensationFilter.from_model(swapped).induced(recording.acceleration[:, cut:])
+    assert np.max(np.abs(cold - second)) > 0.1 * np.max(np.abs(second))
 
 
 def test_held_blocks_are_bounded_and_the_dropped_ones_counted(context, model, recording,
