@@ -396,6 +396,7 @@ def test_every_fault_is_logged_and_skipped_and_the_good_blocks_compensated_as_of
     assert status['held_blocks'] == status['unpublished_blocks'] == '0'
 
 
+@pytest.mark.slow
 def test_a_killed_compensation_process_restarts_on_the_latched_model(
         make_node, node_process, model, recording, spin, wait):
     probe = make_node('probe')
