@@ -1,12 +1,15 @@
 """
 Read rosbag2-layout MCAP bags, including bags without summary and bags cut short.
 
-:class:`BagReader` reads any ROS 2 MCAP file (ours, ``rosbags``', rosbag2's): it takes topics,
-types and counts from the summary when the file has a complete one, and otherwise scans the
-data section. A file whose writer was killed has no footer: the scan keeps every complete
-record before the cut (complete chunks, and the complete messages at the start of the chunk
-being written when the cut happened), sets :attr:`BagReader.truncated` and explains in
-:attr:`BagReader.warning` what was lost.
+:class:`BagReader` reads any ROS 2 MCAP file (ours, ``rosbags``', rosbag2's; a rosbag2 bag
+directory through its ``metadata.yaml``): it takes topics, types and counts from the summary
+when the file has a complete one with a correct CRC, and otherwise scans the data section. A
+file whose writer was killed has no footer: the scan keeps every complete record before the
+cut (complete chunks, and the complete messages at the start of the chunk being written when
+the cut happened), sets :attr:`BagReader.truncated` and explains in :attr:`BagReader.warning`
+what was lost. Damage is never read past silently: a chunk whose CRC, size or compression
+does not check out raises :class:`BagError`, or is skipped and listed with ``skip_damaged``
+(what :mod:`sensor_comp.io.repair` does).
 
 :func:`read_streams` turns the ``64FC1`` Image blocks of a bag back into
 :class:`~sensor_comp.streams.Stream` objects, using the rate, channels and units announced on
@@ -157,13 +160,24 @@ class _Cut(Exception):
         self.offset = offset
 
 
+def _open_hint(error: OSError) -> str:
+    if error.errno == errno.ENOENT:
+        return 'check the path'
+    if error.errno == errno.EACCES:
+        return 'check its permissions (ls -l) or read it as its owner'
+    return 'check that it is a readable file'
+
+
 def _listing(paths) -> str:
     return ', '.join(p.name for p in paths)
 
 
 def _rosbag2_files(folder: Path, metadata: Path) -> list[Path]:
     """Return the files a rosbag2 ``metadata.yaml`` lists, checking storage and presence."""
-    text = metadata.read_text(errors='replace')
+    try:
+        text = metadata.read_text(errors='replace')
+    except OSError as exc:
+        raise BagError(f'cannot read {metadata}: {exc.strerror}; {_open_hint(exc)}') from None
     storage = _STORAGE.search(text)
     files = _FILES.search(text)
     names = ([line.strip()[1:].strip().strip('"\'') for line in files.group(2).splitlines()
@@ -251,14 +265,6 @@ def _records(buf, start: int, end: int) -> Iterator[tuple[int, memoryview, int]]
         pos = body_end
 
 
-def _open_hint(error: OSError) -> str:
-    if error.errno == errno.ENOENT:
-        return 'check the path'
-    if error.errno == errno.EACCES:
-        return 'check its permissions (ls -l) or read it as its owner'
-    return 'check that it is a readable file'
-
-
 class BagReader:
     """
     Read the topics and messages of a ROS 2 MCAP bag.
@@ -313,8 +319,6 @@ class BagReader:
                     raise BagError(f'{self.path} is empty (0 bytes): its writer never wrote '
                                    f'to it, there is nothing to read')
                 self._map = mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ)
-        except IsADirectoryError:
-            raise BagError(f'{self.path} is a directory; pass an MCAP bag') from None
         except OSError as exc:
             raise BagError(f'cannot open bag {self.path}: {exc.strerror}; '
                            f'{_open_hint(exc)}') from None

@@ -39,8 +39,8 @@ class RepairReport:
         source: The file read.
         output: The bag written.
         source_bytes: Size of the source in bytes.
-        state: ``'finalised'`` (complete with a summary), ``'no summary'`` (complete, the
-            writer did not write a summary), ``'unfinalised'`` (data complete, summary cut
+        state: ``'finalised'`` (complete with a summary), ``'no summary'`` (complete, but
+            no summary with message counts), ``'unfinalised'`` (data complete, summary cut
             short), ``'cut'`` (cut short in the data section) or ``'damaged'`` (damaged
             chunks or summary).
         warning: The reader's description of the cut or damage, ``''`` if none.
@@ -93,7 +93,8 @@ class RepairReport:
         """Return the report as lines of text: state, recovered per topic, what was lost."""
         states = {
             'finalised': 'complete and finalised: nothing to recover, copied as it is',
-            'no summary': 'complete, without summary: nothing was lost',
+            'no summary': 'complete, without a summary with message counts (read by '
+                          'scanning): nothing was lost',
             'unfinalised': 'its data are complete but its summary is cut short (the writer '
                            'died while finalising): nothing was lost',
             'cut': f'cut short at byte {self.source_bytes} (the writer did not finish)',
