@@ -30,7 +30,8 @@ Parameters (read once at start; invalid values stop the node with a message nami
 - ``loop`` (bool, default false): start over at the end; stamps keep running on, so the
   streams stay contiguous.
 - ``stamp_origin`` (``now`` or ``source``; default ``now``): stamp the first sample with the
-  wall-clock time at start, or keep the source's own ``t0``.
+  wall-clock time when publishing starts (after the wait for subscribers, so stamps follow
+  the pacing), or keep the source's own ``t0``.
 - ``wait_for_subscribers`` (int, default 0) and ``wait_timeout`` (s, default 10.0): wait
   for this many matched subscriptions on each topic (``stream_info`` too: a fast run may
   end before a late subscriber gets it) before the first block.
@@ -76,7 +77,10 @@ class Acquisition(Node):
     Publish a recording as block streams (see the module documentation for parameters).
 
     Call :meth:`run`; it returns when the recording has been published (never with
-    ``loop``) or ``stop`` is set. The node needs no spinning while it runs.
+    ``loop``) or ``stop`` is set, in both cases after the subscribers acknowledged the
+    blocks sent (at most ``ack_timeout``) and a log line with the count. A stop never
+    splits a pair: the pressure block of an acceleration block sent goes out too. The node
+    needs no spinning while it runs.
 
     Args:
         node_name: Name of the node.
@@ -191,18 +195,30 @@ class Acquisition(Node):
         """
         stop = stop or threading.Event()
         accel, press = self.recording.streams()
-        t0 = time.time_ns() if self._restamp else self.recording.t0_ns
-        accel = replace(accel, t0_ns=t0)
-        info = encode_stream_info([accel.info, press.info], stamp_ns=t0)
+        origin = time.time_ns() if self._restamp else self.recording.t0_ns
+        info = encode_stream_info([accel.info, press.info], stamp_ns=origin)
         if not publish_raw(self._info, info, stop):
             return
         publishers = [*self._blocks.values(), self._info]
         if not wait_for_subscribers(self, publishers, self.wait_for_subscribers,
                                     timeout=self.wait_timeout, stop=stop):
             return
-        n, fs, frame = self.recording.n_samples, self.recording.fs, self.recording.frame_id
+        # The first sample is acquired now, when pacing starts, not before the wait.
+        t0 = time.time_ns() if self._restamp else self.recording.t0_ns
+        n, fs = self.recording.n_samples, self.recording.fs
         self.get_logger().info(f'publishing {n} samples at {fs:g} Hz in blocks of '
                                f'{self.block_size} ({self._describe_pacing()})')
+        self._publish_blocks(replace(accel, t0_ns=t0), press, stop)
+        # After a stop too: the blocks already sent reach every subscriber before the
+        # process exits, and a looping acquisition (which only ends this way) says how much
+        # it published.
+        finish_publishing(self, publishers, timeout=self.ack_timeout)
+        self.get_logger().info(f'published {self.blocks_published} blocks '
+                               f'({self.samples_published} samples) per topic')
+
+    def _publish_blocks(self, accel, press, stop: threading.Event) -> None:
+        """Publish the block pairs, paced, until the end (never with ``loop``) or a stop."""
+        n, fs, frame = self.recording.n_samples, self.recording.fs, self.recording.frame_id
         start = time.monotonic()
         passes = 0
         while not stop.is_set():
@@ -215,19 +231,17 @@ class Acquisition(Node):
                     acquired = offset + index * self.block_size + a.shape[-1]
                     if not sleep_until(start + acquired / fs / self.speed, stop):
                         return
-                for topic, block in ((ACCELERATION, a), (PRESSURE_RAW, p)):
-                    if not publish_raw(self._blocks[topic],
-                                       encode_block(block, stamp_ns=stamp, frame_id=frame),
-                                       stop):
-                        return
+                if not publish_raw(self._blocks[ACCELERATION],
+                                   encode_block(a, stamp_ns=stamp, frame_id=frame), stop):
+                    return
+                # Never half a pair: once the acceleration block is out, so is its partner.
+                publish_raw(self._blocks[PRESSURE_RAW],
+                            encode_block(p, stamp_ns=stamp, frame_id=frame), threading.Event())
                 self.blocks_published += 1
                 self.samples_published += a.shape[-1]
             passes += 1
             if not self.loop:
-                break
-        finish_publishing(self, publishers, timeout=self.ack_timeout)
-        self.get_logger().info(f'published {self.blocks_published} blocks '
-                               f'({self.samples_published} samples) per topic')
+                return
 
     def _describe_pacing(self) -> str:
         if self.speed is None:

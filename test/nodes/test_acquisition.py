@@ -2,6 +2,7 @@
 
 from pathlib import Path
 import signal
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -13,6 +14,7 @@ from sensor_comp.io.bag_reader import BagReader, read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.csv_import import read_csv
 from sensor_comp.io.messages import decode_block, decode_stream_info, IMAGE
+from sensor_comp.nodes import acquisition
 from sensor_comp.nodes._common import BLOCK_QOS, LATCHED_QOS, message_class
 from sensor_comp.nodes.acquisition import Acquisition
 from sensor_comp.sim import random_shots, RigConfig, simulate
@@ -208,3 +210,64 @@ def test_acquisition_process_stops_on_sigterm(node_process):
     node.wait_for_log('publishing')
     assert node.stop(signal.SIGTERM) == 0
     assert 'Traceback' not in node.output()
+
+
+def test_a_stop_never_splits_a_pair_and_the_count_is_logged(context, make_node, monkeypatch,
+                                                            make_acquisition, spin, wait,
+                                                            node_log):
+    got = {'acceleration': [], 'pressure/raw': []}
+    listener = make_node('listener')
+    for topic in got:
+        listener.create_subscription(message_class(IMAGE), topic,
+                                     lambda data, t=topic: got[t].append(decode_block(data)[0]),
+                                     BLOCK_QOS, raw=True)
+    listener.create_subscription(DiagnosticArray, 'stream_info', len, LATCHED_QOS, raw=True)
+    stop_spinning = spin(listener)
+    node = make_acquisition(**SIM, block_size=500, pacing='fast', loop=True,
+                            wait_for_subscribers=1)
+    real, calls = acquisition.publish_raw, []
+
+    def publish(publisher, data, stop):
+        # The stop comes right after the 7th acceleration block, and then every publish
+        # fails the way a full keep-all history does: only publish_raw's stop ends it.
+        if stop.is_set():
+            return False
+        calls.append(publisher.topic_name)
+        sent = real(publisher, data, stop)
+        if calls.count('/rig/acceleration') == 7 and publisher.topic_name.endswith('tion'):
+            stopping.set()
+        return sent
+
+    monkeypatch.setattr(acquisition, 'publish_raw', publish)
+    stopping = threading.Event()
+    node.run(stopping)
+    wait(lambda: len(got['pressure/raw']) >= 7, what='the last pressure block')
+    time.sleep(0.2)  # nothing more may come
+    stop_spinning()
+    node.destroy_node()
+    assert node.blocks_published == 7
+    assert got['acceleration'] == got['pressure/raw'] and len(got['acceleration']) == 7
+    assert node_log.matching(f'published 7 blocks ({7 * 500} samples) per topic')
+
+
+def test_the_first_stamp_is_taken_after_the_wait_for_subscribers(context, make_node, in_thread,
+                                                                 make_acquisition, spin, wait):
+    stamps = []
+    node = make_acquisition(**SIM, block_size=1000, pacing='realtime', wait_for_subscribers=1)
+    _, join = in_thread(node.run)
+    time.sleep(1.0)  # the acquisition waits for its subscriber meanwhile
+    listener = make_node('listener')
+    before = time.time_ns()
+    listener.create_subscription(message_class(IMAGE), 'pressure/raw',
+                                 lambda data: stamps.append(decode_block(data)[0]), BLOCK_QOS,
+                                 raw=True)
+    listener.create_subscription(message_class(IMAGE), 'acceleration', len, BLOCK_QOS,
+                                 raw=True)
+    listener.create_subscription(DiagnosticArray, 'stream_info', len, LATCHED_QOS, raw=True)
+    stop_spinning = spin(listener)
+    wait(lambda: stamps, what='the first block')
+    join(stop_first=False)
+    stop_spinning()
+    node.destroy_node()
+    # Before the fix the first stamp was the start of the wait, a second before the reader.
+    assert stamps[0] >= before
