@@ -34,17 +34,19 @@ What the data cannot support is refused or warned about, never silently fitted:
   large; at 1 MS/s the broadband input noise weighs more and a poorly excited resonance
   collapses into fast real poles. Below :data:`MIN_EXCITATION` the dynamics are not
   identified: the explanation warns that they come from noise and names the order the data
-  support (the model order less those poles); below :data:`WEAK_EXCITATION` it warns of the
-  bias. Both are warnings, not errors: a sensor whose resonance lies far above the shocks'
-  band (100 kHz and more is common) is compensated by such a model just as well, only its
-  fn and ζ are not measured. A lag-domain persistent-excitation order does not tell this:
-  the Toeplitz covariance of a 1 ms shock at 1 MS/s has only two eigenvalues above the
-  accelerometer noise, yet such shots identify the resonance to 0.1 %; what matters is the
-  spectrum at ``fn``.
-- **units**: an identified static sensitivity outside
-  :data:`~sensor_comp.core.model.PLAUSIBLE_MPA_PER_G` is refused, one outside
-  :data:`~sensor_comp.core.model.TYPICAL_MPA_PER_G` warned about, with the likely unit
-  mistake (:func:`~sensor_comp.core.model.sensitivity_problem`). A factor within the
+  support (how many of the model's poles lie where the input is excited); below
+  :data:`WEAK_EXCITATION` it warns of the bias. Both are warnings, not errors: a sensor
+  whose resonance lies far above the shocks' band (100 kHz and more is common) is
+  compensated by such a model just as well, only its fn and ζ are not measured. A
+  lag-domain persistent-excitation order does not tell this: the Toeplitz covariance of a
+  1 ms shock at 1 MS/s has only two eigenvalues above the accelerometer noise, yet such
+  shots identify the resonance to 0.1 %; what matters is the spectrum at ``fn``.
+- **units**: the shots' peak pressure per peak acceleration (median, the MPa/g column of
+  the shot table) outside :data:`~sensor_comp.core.model.PLAUSIBLE_MPA_PER_G` is refused,
+  outside :data:`~sensor_comp.core.model.TYPICAL_MPA_PER_G` warned about, with the likely
+  unit mistake (:func:`~sensor_comp.core.model.sensitivity_problem`). The shots, not the
+  model's static gain, are used: a model without a hidden effect (an amplifier high-pass)
+  can have an absurd gain at DC on data in the right units. A factor that stays within the
   typical range (g for m/s² on a sensor of 1e-5 MPa/g) cannot be told from the data.
 """
 

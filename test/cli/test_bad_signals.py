@@ -73,7 +73,7 @@ def test_identify_warns_of_a_shot_with_a_nan_and_fits_the_others(nan_bag, valida
 
 
 def test_compare_and_report_leave_the_shot_out_with_a_warning(nan_bag, model_files, tmp_path,
-                                                             capsys):
+                                                              capsys):
     path, index, sample = nan_bag
     assert main(['compare', model_files['true'], path]) == 0
     out = capsys.readouterr().out
@@ -86,8 +86,8 @@ def test_compare_and_report_leave_the_shot_out_with_a_warning(nan_bag, model_fil
     assert f'sample {sample}' in report.read_text()
 
 
-def test_identify_warns_of_a_clipped_shot_and_shows_it_in_the_table(calibration, validation,
-                                                                     tmp_path, capsys):
+def test_identify_warns_of_a_clipped_shot_and_shows_it_in_the_table(
+        calibration, validation, tmp_path, capsys):
     sim = calibration.sim
     level = 0.95 * sim.induced.max()  # only the 2185 g shot (its peak is 10 % above 1963 g's)
     path = bag(tmp_path, sim.recording, 'clipped.mcap',
@@ -149,8 +149,8 @@ def test_a_dead_channel_is_named(channel, calibration, model_files, tmp_path, ca
         error(capsys, argv, [path, *words, f'{rec.n_samples} samples'], [out])
 
 
-def test_pressure_in_mpa_labelled_pa_is_refused_with_the_factor(calibration, model_files,
-                                                                 tmp_path, capsys):
+def test_pressure_in_mpa_labelled_pa_is_refused_with_the_factor(
+        calibration, model_files, tmp_path, capsys):
     rec = calibration.sim.recording
     rows = '\n'.join(f'{k / rec.fs:.6f},{p / 1e6:.9g},{a:.9g}'
                      for k, (p, a) in enumerate(zip(rec.pressure, rec.acceleration[2])))

@@ -333,8 +333,8 @@ def test_a_factor_within_reach_of_a_real_sensor_is_a_warning(what, scale, words)
     bad = (damaged(rec, pressure=rec.pressure * scale) if what == 'pressure'
            else damaged(rec, acceleration=rec.acceleration * scale))
     ident = fit(bad)
-    assert f'WARNING: <memory>: the peak pressure per peak acceleration of its shots ' \
-           f'(median over 4)' in ident.explanation
+    assert 'WARNING: <memory>: the peak pressure per peak acceleration of its shots ' \
+           '(median over 4)' in ident.explanation
     assert words in ident.explanation
 
 

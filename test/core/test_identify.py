@@ -25,6 +25,7 @@ from scipy import signal
 
 from sensor_comp.core.ident import fit_percent, IdentError
 from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.shots import ShotError
 from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.sim import random_shots, RigConfig, simulate, TABLE2
@@ -246,10 +247,12 @@ def test_a_recording_without_shots_is_refused_naming_it(role):
     _, source = rig(1e6)
     rng = np.random.default_rng(0)
     n = 50_000
-    quiet = ShotSource.detect(Recording(fs=1e6, t0_ns=0, pressure=rng.standard_normal(n),
-                                        acceleration=rng.standard_normal((3, n))),
-                              path='quiet.mcap', **DETECT)
-    assert quiet.shots == ()  # noise alone stays below the 8 σ threshold
+    noise = Recording(fs=1e6, t0_ns=0, pressure=rng.standard_normal(n),
+                      acceleration=rng.standard_normal((3, n)))
+    # Noise alone stays below the 8 σ threshold.
+    with pytest.raises(ShotError, match='^quiet.mcap: no shot found'):
+        ShotSource.detect(noise, path='quiet.mcap', **DETECT)
+    quiet = ShotSource(noise, (), 'quiet.mcap')
     calibration, validation = ([quiet], []) if role == 'calibration' else ([source], [quiet])
     # The documented error for "no usable shots" names the file and what to check.
     with pytest.raises(IdentError, match=f'no usable {role} shot.*quiet.mcap'):
