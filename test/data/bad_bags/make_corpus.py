@@ -365,7 +365,8 @@ file, the topic, the stamp or sample and what to do, exit code 1 and no tracebac
 error contains every fragment (`{{path}}` is the path given on the command line).
 
 Regenerate them with `python test/data/bad_bags/make_corpus.py` (from the repository root,
-with `AMENT_PREFIX_PATH` set); the test checks that this gives the committed bytes. Each bag
+with `AMENT_PREFIX_PATH` set); the test checks that this gives the committed bytes, so
+regenerate after upgrading `zstandard` or the ROS message packages (schema texts). Each bag
 holds a 40 ms recording at 10 kS/s in blocks of 40 samples (acceleration `(3, w)` m/s²,
 raw pressure `(1, w)` Pa, latched `stream_info`) unless the entry says otherwise.
 
