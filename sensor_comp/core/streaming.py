@@ -11,11 +11,19 @@ pairs follow each other, and accounts for every sample:
 - a pair that starts before the previous one ended (out of order, overlapping, sent twice)
   is dropped and its samples counted as ``overlapping``;
 - a pair whose two blocks differ in width is dropped (``mismatched``), and a block whose
-  partner never comes is given up as ``unpaired`` once a later pair is complete, when more
-  than ``max_pending`` blocks wait, or at :meth:`~BlockPairer.flush`.
+  partner never comes is given up as ``unpaired`` once it can no longer come: when the
+  other topic has delivered a later stamp (each topic arrives in order; the two topics
+  are delivered independently, and under load one ran seconds of data ahead of the
+  other), or at :meth:`~BlockPairer.flush` (end of stream). A partner that is merely late
+  still pairs, however many blocks wait for it. The safety net against a topic that
+  stopped for good is ``max_wait``: a block is given up when its own topic has run more
+  than that many seconds of data ahead of it (10 s: 80 MB of pressure or 240 MB of
+  acceleration waiting at 1 MS/s, about what the DDS queue of a node that far behind holds).
 
 Each of these events is one log line naming the topic, the stamp and the reason (when a
-``log`` function is given), so a live node says what it skipped and why.
+``log`` function is given), so a live node says what it skipped and why. Consecutive
+unpaired blocks of one topic are one event: the first is logged at once, and a line with
+the count follows when the run ends (a dead publisher gives two lines, not one per block).
 :class:`BlockCompensator` runs the streaming
 :class:`~sensor_comp.core.compensation.CompensationFilter` over the pairs in time order:
 a stamp gap restarts the filter from rest (the samples that would carry its state are
@@ -31,6 +39,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+import heapq
 import math
 
 import numpy as np
@@ -39,10 +48,12 @@ from .compensation import CompensationError, CompensationFilter
 from ..streams import ACCELERATION, Gap, PRESSURE_RAW
 
 __all__ = ['BlockCompensator', 'BlockError', 'BlockPair', 'BlockPairer', 'CompensatedBlock',
-           'MAX_HISTORY', 'NonFiniteRuns', 'StreamCounters']
+           'MAX_HISTORY', 'MAX_WAIT_S', 'NonFiniteRuns', 'StreamCounters']
 
 #: Most acceleration samples a :class:`BlockCompensator` keeps for a model change (24 MB).
 MAX_HISTORY = 1 << 20
+#: Default of ``max_wait``: seconds of data a block waits for its partner at most.
+MAX_WAIT_S = 10.0
 
 
 class BlockError(CompensationError):
@@ -159,9 +170,11 @@ class BlockPairer:
     Args:
         fs: Sample rate in Hz (to know where the next pair should start; half a sample of
             stamp error is tolerated).
-        max_pending: Blocks waiting for a partner, per topic, before the oldest is given
-            up as unpaired.
-        log: Called with one line per event (gap, overlap, mismatch, unpaired block).
+        max_wait: Seconds of data a block waits for its partner at most: once its own
+            topic has delivered a stamp that much later, it is given up as unpaired (a
+            safety net; see the module documentation).
+        log: Called with one line per event (gap, overlap, mismatch, run of unpaired
+            blocks).
         gap_note: What a stamp gap does to the consumer, appended to its log line.
         names: How the log lines name the pressure and the acceleration topics.
 
@@ -171,19 +184,28 @@ class BlockPairer:
 
     """
 
-    def __init__(self, *, fs: float, max_pending: int = 64,
+    def __init__(self, *, fs: float, max_wait: float = MAX_WAIT_S,
                  log: Callable[[str], None] | None = None, gap_note: str = '',
                  names: tuple[str, str] = (PRESSURE_RAW, ACCELERATION)):
+        if not max_wait > 0:
+            raise ValueError(f'max_wait must be a positive number of seconds, got {max_wait!r}')
         self.fs = float(fs)
-        self.max_pending = int(max_pending)
+        self.max_wait = float(max_wait)
+        self._max_wait_ns = round(self.max_wait * 1e9)
         self.counters = StreamCounters()
         self._log = log or _quiet
         self._gap_note = gap_note
         self._names = {PRESSURE_RAW: names[0], ACCELERATION: names[1]}
         self.pair_name = f'{names[0]} + {names[1]}'
         self._pending: dict[str, dict[int, np.ndarray]] = {PRESSURE_RAW: {}, ACCELERATION: {}}
+        # The waiting stamps as heaps (entries of blocks paired since are skipped when
+        # popped): finding the old ones stays cheap with thousands of blocks waiting.
+        self._stamps: dict[str, list[int]] = {PRESSURE_RAW: [], ACCELERATION: []}
         self._next_stamp: int | None = None
         self._last_stamp: int | None = None
+        # Per topic, the open run of consecutive unpaired blocks:
+        # [first stamp, stamp where the next block would start, blocks, samples].
+        self._runs: dict[str, list[int] | None] = {PRESSURE_RAW: None, ACCELERATION: None}
 
     def add_pressure(self, stamp_ns: int, block: np.ndarray) -> list[BlockPair]:
         """
@@ -229,6 +251,9 @@ class BlockPairer:
         for topic, pending in self._pending.items():
             for stamp in sorted(pending):
                 self._give_up(topic, stamp, 'the stream ended')
+            self._stamps[topic].clear()
+        for topic in self._runs:
+            self._end_run(topic)
 
     def _add(self, topic: str, stamp: int, block: np.ndarray) -> list[BlockPair]:
         other = ACCELERATION if topic == PRESSURE_RAW else PRESSURE_RAW
@@ -236,34 +261,67 @@ class BlockPairer:
         if stamp in mine:  # a repeated block: the first copy can no longer pair
             self._give_up(topic, stamp, 'a block of the same stamp came again')
         mine[stamp] = block
+        heapq.heappush(self._stamps[topic], stamp)
         out = []
-        if stamp in theirs:
-            # Blocks older than a completed pair can no longer pair: give them up.
-            for name, pending in self._pending.items():
-                for old in sorted(s for s in pending if s < stamp):
-                    self._give_up(name, old, f'the pair at stamp {stamp} ns came first')
+        paired = stamp in theirs
+        # This topic has reached ``stamp``: the other topic's blocks waiting for an older
+        # one can no longer pair, and neither can this topic's older blocks once the pair
+        # is complete (the other topic has reached ``stamp`` too).
+        why = (f'the pair at stamp {stamp} ns came first' if paired else
+               f'the {self._names[topic]} block at stamp {stamp} ns came first')
+        for name in (other, topic) if paired else (other,):
+            for old in self._older(name, stamp):
+                self._give_up(name, old, why)
+        if paired:
             pair = self._pair(stamp, self._pending[PRESSURE_RAW].pop(stamp),
                               self._pending[ACCELERATION].pop(stamp))
             if pair is not None:
                 out.append(pair)
-        for name, pending in self._pending.items():
-            while len(pending) > self.max_pending:
-                self._give_up(name, min(pending), f'more than {self.max_pending} blocks '
-                                                  f'were waiting')
+        for old in self._older(topic, stamp - self._max_wait_ns):
+            self._give_up(topic, old, f'none came within {self.max_wait:g} s of data')
+        return out
+
+    def _older(self, topic: str, stamp: int) -> list[int]:
+        """Return the stamps of ``topic``'s waiting blocks before ``stamp``, oldest first."""
+        heap, pending, out = self._stamps[topic], self._pending[topic], []
+        while heap and heap[0] < stamp:
+            old = heapq.heappop(heap)
+            if old in pending and (not out or out[-1] != old):
+                out.append(old)
         return out
 
     def _give_up(self, topic: str, stamp: int, why: str) -> None:
         width = self._pending[topic].pop(stamp).shape[-1]
         if topic == PRESSURE_RAW:
             self.counters.unpaired_pressure += width
-            other = ACCELERATION
         else:
             self.counters.unpaired_acceleration += width
-            other = PRESSURE_RAW
+        run = self._runs[topic]
+        end = stamp + round(width * 1e9 / self.fs)
+        if run is not None and abs(stamp - run[1]) * self.fs < 0.5e9:
+            run[1:] = [end, run[2] + 1, run[3] + width]  # the run goes on: no new line
+            return
+        self._end_run(topic)
+        self._runs[topic] = [stamp, end, 1, width]
         self._log(f'{self._names[topic]} block at stamp {stamp} ns ({width} samples) got no '
-                  f'{self._names[other]} block ({why}): counted as unpaired')
+                  f'{self._names[self._other(topic)]} block ({why}): counted as unpaired')
+
+    @staticmethod
+    def _other(topic: str) -> str:
+        return ACCELERATION if topic == PRESSURE_RAW else PRESSURE_RAW
+
+    def _end_run(self, topic: str) -> None:
+        """Close the run of unpaired blocks of ``topic``, with a line if it had several."""
+        run, self._runs[topic] = self._runs[topic], None
+        if run is not None and run[2] > 1:
+            self._log(f'{self._names[topic]}: {run[2]} consecutive blocks ({run[3]} samples) '
+                      f'from stamp {run[0]} ns on got no '
+                      f'{self._names[self._other(topic)]} block: counted as unpaired')
 
     def _pair(self, stamp: int, pressure: np.ndarray, acceleration: np.ndarray):
+        for topic, run in self._runs.items():
+            if run is not None and (stamp - run[1]) * self.fs > -0.5e9:
+                self._end_run(topic)  # the stream pairs again past the run
         width = pressure.size
         if width != acceleration.shape[1]:
             self.counters.mismatched += 1
@@ -338,8 +396,8 @@ class BlockCompensator:
     Args:
         compensation: The filter to run (its state continues across pairs).
         fs: Sample rate in Hz (to know where the next block should start).
-        max_pending: Blocks waiting for a partner, per topic, before the oldest is given
-            up as unpaired.
+        max_wait: Seconds of data a block waits for its partner at most (see
+            :class:`BlockPairer`).
         log: Called with one line per event (see :class:`BlockPairer`, plus runs of
             non-finite samples).
         names: How the log lines name the pressure and the acceleration topics.
@@ -350,11 +408,11 @@ class BlockCompensator:
 
     """
 
-    def __init__(self, compensation: CompensationFilter, *, fs: float, max_pending: int = 64,
-                 log: Callable[[str], None] | None = None,
+    def __init__(self, compensation: CompensationFilter, *, fs: float,
+                 max_wait: float = MAX_WAIT_S, log: Callable[[str], None] | None = None,
                  names: tuple[str, str] = (PRESSURE_RAW, ACCELERATION)):
         self.compensation = compensation
-        self.pairer = BlockPairer(fs=fs, max_pending=max_pending, log=log, names=names,
+        self.pairer = BlockPairer(fs=fs, max_wait=max_wait, log=log, names=names,
                                   gap_note='the compensation filter restarts from rest')
         self.counters = self.pairer.counters
         self._invalid = NonFiniteRuns(log, where=self.pairer.pair_name,

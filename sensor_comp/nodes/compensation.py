@@ -36,9 +36,13 @@ Parameters (read once at start):
   first one, exactly as if the model had been there from the start. Dropped blocks are
   counted as unprocessed on ``/diagnostics``. Memory: 32 bytes per sample of block width
   per held pair (a 10 000-sample pair is 320 kB).
-- ``max_unpaired_blocks`` (default 1000): blocks of one topic waiting for their partner
-  before the oldest is given up as unpaired. The two topics are delivered independently:
-  under load one ran 40 blocks ahead of the other here, so keep this well above that.
+- ``max_pairing_wait`` (s of data, default 10.0): the two topics are delivered
+  independently, and under load one ran seconds of data ahead of the other; a block waits
+  for its partner until the other topic has delivered a later stamp (its partner can no
+  longer come) or the node stops, however many blocks that takes. This is the safety net
+  against a topic that stopped: a block is given up as unpaired once its own topic has run
+  this much data ahead of it. Memory: at 1 MS/s, 10 s is 80 MB of pressure or 240 MB of
+  acceleration waiting.
 - ``diagnostics_period`` (s, default 1.0), ``ack_timeout`` (s, default 10.0: at exit, how
   long to wait for subscribers to acknowledge the last blocks).
 
@@ -88,7 +92,7 @@ from rclpy.node import Node
 
 from ..core.compensation import CompensationError, CompensationFilter, STATE_TOLERANCE
 from ..core.model import load, Model, ModelError
-from ..core.streaming import BlockCompensator, CompensatedBlock, StreamCounters
+from ..core.streaming import BlockCompensator, CompensatedBlock, MAX_WAIT_S, StreamCounters
 from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, decode_string, DIAGNOSTIC_ARRAY,
                            encode_block, encode_stream_info, IMAGE, MessageError, STRING)
@@ -163,15 +167,16 @@ class Compensation(Node):
         model_file = declare(self, 'model_file', '', 'model file to start with')
         self.max_pending_blocks = declare(self, 'max_pending_blocks', 1000,
                                           'blocks per topic held until a model is in use')
-        self.max_unpaired_blocks = declare(self, 'max_unpaired_blocks', 1000,
-                                           'blocks waiting for their partner, per topic')
+        self.max_pairing_wait = declare(self, 'max_pairing_wait', MAX_WAIT_S,
+                                        'seconds of data a block waits for its partner '
+                                        'at most (a safety net)')
         period = declare(self, 'diagnostics_period', 1.0, 'seconds between diagnostics')
         self.ack_timeout = declare(self, 'ack_timeout', 10.0,
                                    'seconds to wait for the last acknowledgements at exit')
         check(self, 'max_pending_blocks', self.max_pending_blocks,
               self.max_pending_blocks >= 0, 'a number of blocks >= 0')
-        check(self, 'max_unpaired_blocks', self.max_unpaired_blocks,
-              self.max_unpaired_blocks >= 1, 'a number of blocks >= 1')
+        check(self, 'max_pairing_wait', self.max_pairing_wait,
+              self.max_pairing_wait > 0, 'a positive number of seconds')
         check(self, 'diagnostics_period', period, period > 0, 'a positive number of seconds')
         check(self, 'ack_timeout', self.ack_timeout, self.ack_timeout >= 0,
               'a number of seconds >= 0')
@@ -342,7 +347,7 @@ class Compensation(Node):
         self.model, self._model_source = model, source
         if self.compensator is None:
             self.compensator = BlockCompensator(
-                compensation, fs=self._fs, max_pending=self.max_unpaired_blocks,
+                compensation, fs=self._fs, max_wait=self.max_pairing_wait,
                 log=self.get_logger().warning,
                 names=(self.resolve_topic_name(PRESSURE_RAW),
                        self.resolve_topic_name(ACCELERATION)))

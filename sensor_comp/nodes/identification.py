@@ -131,9 +131,6 @@ STATUS_NAME = 'sensor_comp: identification'
 MODEL = 'model'
 # Fewest shots identify() can split into a calibration and a validation set.
 _MIN_FIT_SHOTS = 2
-# Blocks of one topic waiting for their partner before they count as unpaired (the topics
-# are delivered independently; one ran 40 blocks ahead of the other under load).
-_MAX_UNPAIRED = 1000
 # What a stamp gap and a non-finite sample do here (for the log lines).
 _GAP_NOTE = 'filled with NaN; a shot window holding it is left out'
 _NON_FINITE_NOTE = ('taken as a stream gap (NaN); a shot window holding them is left out')
@@ -479,7 +476,7 @@ class Identification(Node):
                                 frame_id=pressure.frame_id, metadata=dict(pressure.metadata),
                                 **self._window_ms)
         self._pairer = BlockPairer(
-            fs=pressure.fs, max_pending=_MAX_UNPAIRED, log=self.get_logger().warning,
+            fs=pressure.fs, log=self.get_logger().warning,
             gap_note=_GAP_NOTE, names=(self.resolve_topic_name(PRESSURE_RAW),
                                        self.resolve_topic_name(ACCELERATION)))
         self._non_finite = NonFiniteRuns(self.get_logger().warning,

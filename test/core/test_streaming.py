@@ -204,7 +204,9 @@ def test_unpaired_blocks_are_counted_by_samples_at_flush(run):
     blocks = feed(compensator, run, events)
     counters = compensator.counters
     assert len(blocks) == 2 and counters.output_samples == 1200
-    assert counters.unpaired_pressure == counters.unpaired_acceleration == 0  # still waiting
+    # The acceleration stream passed the pressure block's stamp: its partner cannot come.
+    # The acceleration block still waits: the pressure stream has not reached its stamp.
+    assert counters.unpaired_pressure == 100 and counters.unpaired_acceleration == 0
     compensator.flush()
     assert counters.unpaired_pressure == 100
     assert counters.unpaired_acceleration == 500
@@ -212,10 +214,12 @@ def test_unpaired_blocks_are_counted_by_samples_at_flush(run):
     assert not counters.pending_ok
 
 
-def test_blocks_waiting_too_long_are_given_up_oldest_first(run):
-    compensator = BlockCompensator(make_filter(), fs=FS, max_pending=4)
+def test_blocks_waiting_longer_than_max_wait_are_given_up_oldest_first(run):
+    # The safety net: 100-sample blocks, max_wait 350 samples of data.
+    compensator = BlockCompensator(make_filter(), fs=FS, max_wait=350 / FS)
     feed(compensator, run, [('p', 100 * i, 100 * i + 100) for i in range(7)])
     counters = compensator.counters
+    # Blocks 0-2 start more than 350 samples before the newest (600).
     assert counters.unpaired_pressure == 300 and counters.output_samples == 0
     # The newest four still pair.
     blocks = feed(compensator, run, [('a', 100 * i, 100 * i + 100) for i in range(3, 7)])
@@ -224,6 +228,48 @@ def test_blocks_waiting_too_long_are_given_up_oldest_first(run):
     compensator.flush()
     assert counters.unpaired_pressure == 300 and counters.unpaired_acceleration == 0
     assert_accounted(counters)
+
+
+@pytest.mark.parametrize('late', ['a', 'p'])
+def test_a_partner_stream_late_by_thousands_of_blocks_still_pairs_everything(run, late):
+    # 2 000 blocks of 2 samples: one topic arrives whole before the other (old bound: 1000
+    # blocks waiting, and then everything was given up as unpaired).
+    lines = []
+    compensator = BlockCompensator(make_filter(), fs=FS, log=lines.append)
+    bounds = [(i, i + 2) for i in range(0, 4000, 2)]
+    early = 'p' if late == 'a' else 'a'
+    blocks = feed(compensator, run, [(early, i, j) for i, j in bounds]
+                  + [(late, i, j) for i, j in bounds])
+    compensator.flush()
+    counters = compensator.counters
+    assert lines == []
+    assert counters.output_samples == 4000 and len(blocks) == 2000
+    assert counters.unpaired_pressure == counters.unpaired_acceleration == 0
+    assert_close(joined(blocks)[0], whole(run, 0, 4000)[0])
+
+
+def test_truly_missing_blocks_are_counted_exactly_and_a_run_is_two_lines(run):
+    lines = []
+    compensator = BlockCompensator(make_filter(), fs=FS, log=lines.append)
+    bounds = [(i, i + 2) for i in range(0, 4000, 2)]
+    lost = {700} | set(range(1200, 1500))  # acceleration blocks that never come
+    feed(compensator, run, [('p', i, j) for i, j in bounds]
+         + [('a', i, j) for k, (i, j) in enumerate(bounds) if k not in lost])
+    counters = compensator.counters
+    # Each is given up as soon as the next acceleration block passed its stamp.
+    assert counters.unpaired_pressure == 2 * len(lost) and counters.unpaired_acceleration == 0
+    compensator.flush()
+    assert counters.output_samples == 4000 - 2 * len(lost)
+    assert counters.gaps == [Gap(1400, 2), Gap(2398, 600)]
+    assert_accounted(counters)
+    unpaired = [line for line in lines if 'unpaired' in line]
+    assert unpaired == [
+        f'pressure/raw block at stamp {stamp(1400)} ns (2 samples) got no acceleration block '
+        f'(the pair at stamp {stamp(1402)} ns came first): counted as unpaired',
+        f'pressure/raw block at stamp {stamp(2400)} ns (2 samples) got no acceleration block '
+        f'(the pair at stamp {stamp(3000)} ns came first): counted as unpaired',
+        f'pressure/raw: 300 consecutive blocks (600 samples) from stamp {stamp(2400)} ns on '
+        f'got no acceleration block: counted as unpaired']
 
 
 def test_pairs_of_different_widths_are_counted_and_not_compensated(run):
@@ -323,7 +369,7 @@ def test_every_pressure_sample_is_output_or_counted_unpaired(run, seed):
             # Its acceleration comes after the next pairs: too late to pair.
             timeline.append((len(timeline) + 6.5, ('a', i, j)))
     events = [event for _, event in sorted(timeline)]
-    compensator = BlockCompensator(make_filter(), fs=FS, max_pending=8)
+    compensator = BlockCompensator(make_filter(), fs=FS)
     blocks = feed(compensator, run, events)
     compensator.flush()
     counters = compensator.counters

@@ -470,8 +470,8 @@ def _faulty_stream(recording: Recording, *, width: int = 1000) -> FaultyStream:
         elif k == 36:  # and an acceleration block
             block('acceleration', start - width, start, at=stamp(start - width) + 7)
             out.faults.append((f'/rig/acceleration block at stamp {stamp(start - width) + 7} ns '
-                               f'({width} samples) got no /rig/pressure/raw block (the pair at '
-                               f'stamp {stamp(start)} ns came first)',))
+                               f'({width} samples) got no /rig/pressure/raw block (the '
+                               f'/rig/pressure/raw block at stamp {stamp(start)} ns came first)',))
         if k == 9:  # lost: a stamp gap
             out.lost.append((start, stop))
             out.faults.append((f'/rig/pressure/raw + /rig/acceleration: stamp gap, {width} '

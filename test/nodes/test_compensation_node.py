@@ -289,7 +289,7 @@ def test_a_model_file_is_used_once_stream_info_gives_the_rate(context, make_node
 @pytest.mark.parametrize('values, name', [
     ({'model_file': '/no/such/model.json'}, 'model_file'),
     ({'max_pending_blocks': -1}, 'max_pending_blocks'),
-    ({'max_unpaired_blocks': 0}, 'max_unpaired_blocks'),
+    ({'max_pairing_wait': 0.0}, 'max_pairing_wait'),
     ({'diagnostics_period': 0.0}, 'diagnostics_period'),
 ])
 def test_compensation_rejects_bad_parameters(context, params, values, name):
