@@ -79,19 +79,26 @@ and a later change of rate ignored. Once ``stream_info`` has come, ``samples_rec
 paired_samples + unpaired_pressure_samples + overlapping_samples`` (blocks still waiting
 for their partner aside).
 
-Threads: identification (EMD, the output-error fit) runs in one worker thread of the node,
-so the callbacks that receive blocks return at once and never wait for a fit; a fit works
-on a snapshot of the kept windows. The ``~/fit`` service waits for its fit in the service
-callback, which has a callback group of its own: with a ``MultiThreadedExecutor`` (what
-:func:`main` and :mod:`sensor_comp.nodes.pipeline` use) the blocks keep coming in on the
-other thread meanwhile; with a single-threaded executor they queue in DDS (keep-all,
-nothing lost) until the answer is sent.
+Threads and processes: identification (EMD, the output-error fit) and the diagnosis run in
+a worker **process** (:mod:`sensor_comp.nodes._fit_worker`: one spawned process, started
+at the first fit, ~1-2 s of imports), fed with a snapshot of the kept windows; a thread
+of the node waits for it and publishes the result. So the callbacks that receive blocks
+return at once, never wait for a fit, and never compete with it for the GIL (in a thread,
+a fit starved reception: 0.3-0.5 s behind per second of fit in the soak). A worker that
+dies (killed, out of memory) fails the fit it was running with a logged error; the next
+fit starts a new worker. Destroying the node stops the worker, a running fit included.
+The ``~/fit`` service waits for its fit in the service callback, which has a callback
+group of its own: with a ``MultiThreadedExecutor`` (what :func:`main` and
+:mod:`sensor_comp.nodes.pipeline` use) the blocks keep coming in on the other thread
+meanwhile; with a single-threaded executor they queue in DDS (keep-all, nothing lost)
+until the answer is sent.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError as FutureTimeout
+from concurrent.futures.process import BrokenProcessPool, ProcessPoolExecutor
 from dataclasses import dataclass, replace
 import hashlib
 import inspect
@@ -108,8 +115,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from ..core.diagnose import diagnose
-from ..core.identify import identify, ShotSource, STRUCTURES
+from ..core.identify import identify, STRUCTURES
 from ..core.model import Model, Source
 from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
                           mad_sigma, NOISE_FACTOR, Shot, ShotError)
@@ -122,6 +128,7 @@ from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTIC
                       diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
                       merge_stream_infos, message_class, publish_raw, run_main, spin_until,
                       subscribe_blocks, take_queued)
+from ._fit_worker import diagnose_fit, fit_shots, start_pool
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
@@ -365,6 +372,8 @@ class Identification(Node):
         self._last_error: str | None = None
         self._stop = threading.Event()
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='identification')
+        self._pool: ProcessPoolExecutor | None = None  # the fit process, from the first fit
+        self._pool_lock = threading.Lock()
         self._block_subscriptions, self._takers = subscribe_blocks(
             self, (PRESSURE_RAW, ACCELERATION), self._on_block, self._take_queued)
         self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
@@ -605,18 +614,23 @@ class Identification(Node):
         if self.effects:
             options['effects'] = tuple(self.effects)
         try:
-            result = identify([ShotSource(recording, shots)], **options)
-            roles = {shot.index: role for role, sources in (
-                ('calibration', result.calibration), ('validation', result.validation))
-                for source in sources for shot in source.shots}
-            model = replace(result.model, provenance=(self._provenance(windows, roles),))
-        except SensorCompError as exc:
+            fitted = self._in_process(fit_shots, recording, shots, options)
+        except BrokenProcessPool:
+            if self._stop.is_set():
+                return _Outcome(False, 'the node stopped during the fit')
+            fitted = None
+            error = ('the fit worker process died (killed? out of memory?); the next fit '
+                     'starts a new one')
+        else:
+            error = fitted.error
+        if error is not None:
             with self._lock:
                 self.fits += 1
-                self._last_error = str(exc)
-            self.get_logger().error(f'fit on {len(windows)} shots failed: {exc}')
+                self._last_error = error
+            self.get_logger().error(f'fit on {len(windows)} shots failed: {error}')
             self.publish_diagnostics()
-            return _Outcome(False, f'fit on {len(windows)} shots failed: {exc}')
+            return _Outcome(False, f'fit on {len(windows)} shots failed: {error}')
+        model = replace(fitted.model, provenance=(self._provenance(windows, fitted.roles),))
         seconds = time.monotonic() - began
         summary = f'{_summary(model)} ({seconds:.2f} s)'
         with self._lock:  # before publishing: whoever gets the model finds it here too
@@ -631,23 +645,59 @@ class Identification(Node):
         self.get_logger().info(f'model: {summary}')
         self.publish_diagnostics()
         if self.diagnose:
-            self._diagnose(result, model)
+            self._diagnose(fitted, model)
         return _Outcome(True, summary, model)
 
-    def _diagnose(self, result, model: Model) -> None:
+    def _in_process(self, function, *args):
+        """
+        Run ``function(*args)`` in the fit process and return its result.
+
+        A worker found dead before the call (it died while idle) is replaced at once.
+
+        Raises:
+            BrokenProcessPool: If the worker died during the call (the next call starts a
+                new one), or the node is being destroyed.
+
+        """
+        with self._pool_lock:
+            if self._stop.is_set():
+                raise BrokenProcessPool('the node is being destroyed')
+            if self._pool is None:
+                self._pool = start_pool()
+            try:
+                future = self._pool.submit(function, *args)
+            except BrokenProcessPool:
+                self.get_logger().error('the fit worker process had died (killed? out of '
+                                        'memory?); starting a new one')
+                self._pool.shutdown(wait=False)
+                self._pool = start_pool()
+                future = self._pool.submit(function, *args)
+            pool = self._pool
+        try:
+            return future.result()
+        except BrokenProcessPool:
+            with self._pool_lock:
+                if self._pool is pool:
+                    self._pool = None
+            pool.shutdown(wait=False)
+            raise
+
+    def _diagnose(self, fitted, model: Model) -> None:
         # After the model is out: the diagnosis (seconds) never delays compensation.
         try:
-            found = diagnose(result.calibration, result.validation, base=model)
-        except SensorCompError as exc:
-            verdict = {'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)}
+            found = self._in_process(diagnose_fit, fitted.calibration, fitted.validation,
+                                     model)
+        except BrokenProcessPool:
+            if self._stop.is_set():
+                return
+            verdict = {'diagnosis_verdict': 'failed',
+                       'diagnosis_error': 'the fit worker process died'}
+            self.get_logger().error('diagnosis failed: the fit worker process died (killed? '
+                                    'out of memory?); the next fit starts a new one')
         else:
-            verdict = {'diagnosis_verdict': found.verdict}
-            if found.ranking:
-                top = found.ranking[0]
-                verdict.update({'diagnosis_top_effect': top.effect,
-                                'diagnosis_top_score': top.score,
-                                'diagnosis_top_significant': top.significant})
-            self.get_logger().info(f'diagnosis: {found.explanation}')
+            verdict = found.verdict
+            if found.explanation:
+                self.get_logger().info(f'diagnosis: {found.explanation}')
         with self._lock:
             if self.model is model:
                 self.verdict = verdict
@@ -751,8 +801,16 @@ class Identification(Node):
                                               message=message, values=values))
 
     def destroy_node(self) -> None:
-        """Stop the worker (a running fit finishes, queued ones are dropped), then destroy."""
-        self._stop.set()
+        """Stop the fit process (a running fit too, queued ones are dropped), then destroy."""
+        with self._pool_lock:
+            self._stop.set()
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            # A fit can take minutes: a stop must not wait for it. The pool has no public
+            # way to end a running call; its worker processes are in ``_processes``.
+            for process in list((getattr(pool, '_processes', None) or {}).values()):
+                process.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
         self._worker.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 

@@ -1,6 +1,9 @@
 """The identification node: live shots from a replayed bag, the same model as offline."""
 
+from concurrent.futures import ThreadPoolExecutor
 import json
+import os
+import signal
 import threading
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -18,6 +21,7 @@ from sensor_comp.core.shots import detect_shots, ShotError
 from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
+from sensor_comp.nodes import _fit_worker as fit_worker
 from sensor_comp.nodes import identification as identification_module
 from sensor_comp.nodes._common import BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
 from sensor_comp.nodes.compensation import model_from_text
@@ -191,7 +195,11 @@ def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkey
         assert release.wait(20.0)
         return identify(*args, **kwargs)
 
-    monkeypatch.setattr(identification_module, 'identify', slow_identify)
+    # The fit held in this process, where the test can hold it: a thread stands in for
+    # the worker process.
+    monkeypatch.setattr(fit_worker, 'identify', slow_identify)
+    monkeypatch.setattr(identification_module, 'start_pool',
+                        lambda: ThreadPoolExecutor(max_workers=1))
     node = Identification(context=context, parameter_overrides=params(**FIT, min_shots=2))
     stop = spin(node)
     try:
@@ -208,6 +216,53 @@ def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkey
         release.set()
         stop()
     node.destroy_node()
+
+
+def _worker_pids(node) -> list[int]:
+    return list(node._pool._processes)
+
+
+def test_fits_run_in_a_worker_process_that_is_replaced_when_it_dies(
+        context, calibration_bag, monkeypatch, params, node_log):
+    def in_this_process(*args, **kwargs):
+        raise AssertionError('the fit ran in the node process')
+
+    monkeypatch.setattr(fit_worker, 'identify', in_this_process)
+    rec = read_recording(calibration_bag)
+    accel, press = rec.streams()
+    node = Identification(context=context, parameter_overrides=params(
+        **FIT, min_shots=5, max_shots=5, diagnose=False))
+    node._on_stream_info(encode_stream_info([accel.info, press.info], stamp_ns=T0_NS))
+    for (stamp, a), (_, p) in zip(iter_blocks(accel, width=1000), iter_blocks(press, width=1000)):
+        node._handle('acceleration', encode_block(a, stamp_ns=stamp, frame_id='s'))
+        node._handle('pressure/raw', encode_block(p, stamp_ns=stamp, frame_id='s'))
+    try:
+        assert len(node.windows) == 4 and node.fits == 0  # below min_shots: no automatic fit
+        first = node.fit().result(60)
+        assert first.success, first.message
+        [pid] = _worker_pids(node)
+        assert pid != os.getpid()
+        # Killed while idle: the next fit notices and starts a new worker at once.
+        os.kill(pid, signal.SIGKILL)
+        node._pool._processes[pid].join(10)
+        second = node.fit().result(60)
+        assert second.success, second.message
+        np.testing.assert_array_equal(second.model.b, first.model.b)
+        assert len(node_log.matching('the fit worker process had died')) == 1
+        [pid] = _worker_pids(node)
+        # Killed during a fit: that fit fails with a logged error, the next one works.
+        during = node.fit()
+        os.kill(pid, signal.SIGKILL)
+        failed = during.result(60)
+        assert not failed.success and 'worker process died' in failed.message
+        assert len(node_log.matching('failed: the fit worker process died')) == 1
+        third = node.fit().result(60)
+        assert third.success, third.message
+        assert _worker_pids(node) != [pid] and node.fits == 4
+        np.testing.assert_array_equal(third.model.a, first.model.a)
+    finally:
+        node.destroy_node()
+    assert node._pool is None
 
 
 def test_identification_process_writes_the_model(node_process, calibration_bag, tmp_path,
