@@ -44,7 +44,8 @@ Checks (exit code 1 and one line per failed check):
   pairs/s, exceeds it. A consumer that falls behind for good fails it
   too: its DDS reader queue grows (32 MB per second of backlog). Checked only when the
   window after the warm-up is 4 minutes or more; shorter runs report the slope.
-- Every node exits with code 0; the identification found every shot sent (all but the last
+- The acquisition kept its pacing (real-time factor at least 0.98 × ``--pacing``); every
+  node exits with code 0; the identification found every shot sent (all but the last
   two at most) and, in runs of 2 minutes or more, fitted again (at least 2 fits).
 
 Figures: CPU per process (% of one core while publishing), wall time vs rig time
@@ -113,6 +114,9 @@ _LOSSES = ('unpaired_pressure_samples', 'unpaired_acceleration_samples', 'mismat
            'overlapping_samples', 'gaps', 'missing_samples', 'invalid_samples',
            'malformed_messages')
 _REFIT_RUN_S = 120.0
+# Smallest real-time factor (rig s / wall s, relative to the pacing) that counts as keeping
+# pace: a few blocks late at the stop in a short run.
+_MIN_PACE = 0.98
 
 
 # Monitoring ------------------------------------------------------------------------------
@@ -527,6 +531,11 @@ def _check(soak: _Soak, end: dict, report: dict) -> list[str]:
     """Return the failed checks (empty: the soak passed)."""
     failures = list(soak.failures)
     blocks, samples, _ = _reference(soak, end)
+    if report['real_time_factor'] < _MIN_PACE * soak.args.pacing:
+        failures.append(f'the acquisition published {report["rig_s"]:.1f} s of rig time in '
+                        f'{report["wall_s"]:.1f} s: it could not keep the pacing '
+                        f'{soak.args.pacing:g} (real-time factor '
+                        f'{report["real_time_factor"]:.3f})')
     ident, comp = end['diagnostics']['identification'], end['diagnostics']['compensation']
     for name, code in end['exit_codes'].items():
         if code != 0:
