@@ -38,6 +38,10 @@ Modifiers, applied in the order written (all are linear and time-invariant):
 
 Stateful stages (derivative, peak detector, modifiers) carry their state in ``state``;
 a non-finite sample gives a non-finite output and restarts the stage from rest after it.
+So does a stage output that overflows (a corrupted block of values near 1e308): that
+sample is NaN and the stage restarts from rest after it, as the compensation filter does
+(:mod:`sensor_comp.core.compensation`); a carried state of Inf would otherwise make the
+stage NaN until the next non-finite input.
 Parameter values are written with ``repr`` precision, so names round-trip exactly.
 """
 
@@ -204,17 +208,33 @@ def _runs(x: np.ndarray, state: MutableMapping[str, object], key: str, stage) ->
     finite = np.isfinite(x)
     if finite.all():
         if x.size:
-            y, state[key] = stage(x, state.get(key))
+            y, state[key] = _without_overflow(stage, x, state.get(key))
             return y
         return x.copy()
     out = np.full(x.shape, np.nan)
     edges = np.flatnonzero(np.diff(np.concatenate(([False], finite, [False])).astype(int)))
     for start, stop in zip(edges[::2], edges[1::2]):
         previous = state.get(key) if start == 0 else None
-        out[start:stop], state[key] = stage(x[start:stop], previous)
+        out[start:stop], state[key] = _without_overflow(stage, x[start:stop], previous)
     if not finite[-1]:
         state.pop(key, None)  # restart from rest after the gap
     return out
+
+
+def _without_overflow(stage, x: np.ndarray, previous):
+    """Apply ``stage`` to finite ``x``; an overflowed output is NaN and restarts from rest."""
+    y, new = stage(x, previous)
+    start = 0
+    while True:
+        bad = np.flatnonzero(~np.isfinite(y[start:]))
+        if not bad.size:
+            return y, new
+        k = start + int(bad[0])
+        y[k] = np.nan
+        start = k + 1
+        if start == x.size:
+            return y, None  # from rest at the next block
+        y[start:], new = stage(x[start:], None)
 
 
 def _fir(taps: np.ndarray):

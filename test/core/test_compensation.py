@@ -187,6 +187,27 @@ def test_non_finite_and_overflowing_samples_never_poison_the_state():
     assert np.allclose(blocks, whole, rtol=1e-9, atol=0, equal_nan=True)
 
 
+@pytest.mark.parametrize('name', ['a_z@mode=20.0,0.02', 'a_z@mode=20.0,0.02@highpass_ms=0.5'])
+def test_an_input_stage_whose_own_state_overflows_restarts_from_rest(name):
+    # A corrupted burst of finite values near 1e307 at the mode's frequency: its resonance
+    # (gain 1/(2 zeta) = 25) overflows. That sample is NaN and the stage restarts from rest
+    # after it, as the main filter does; before, the Inf in the carried state made every
+    # later sample NaN.
+    fs = 1e6
+    a = np.random.default_rng(3).normal(size=(3, 1200))
+    a[2, 100:400] = 1e307 * np.sin(2 * np.pi * 20e3 / fs * np.arange(300))
+    state = {}
+    out = np.concatenate([input_channels([name], a[:, i:i + 300], state, fs=fs)[0]
+                          for i in range(0, 1200, 300)])
+    bad = np.flatnonzero(~np.isfinite(out))
+    assert bad.size and np.all(np.isnan(out[bad])) and bad.max() < 400
+    # After the last overflow: the stage run from rest on the samples after it.
+    restart = bad.max() + 1
+    expected = input_channels([name], a[:, restart:], {}, fs=fs)[0]
+    np.testing.assert_allclose(out[restart:], expected, rtol=1e-9, atol=0)
+    assert np.all(np.isfinite(out[400:]))
+
+
 def test_a_non_finite_raw_sample_gives_one_nan_compensated_sample():
     acc = acceleration(1000)
     raw = np.random.default_rng(3).standard_normal(1000) * 1e4
