@@ -6,8 +6,8 @@ import argparse
 import json
 import os
 
-from .identify import add_threshold, load_source
-from .sources import load_model
+from .identify import add_threshold
+from .sources import load_model, load_shots
 from ..core.compare import compare, format_table
 from ..core.identify import ShotSource
 from ..core.model import Model, ModelError
@@ -35,7 +35,7 @@ def usable_source(path: str, models: dict[str, Model], *, windows=None,
             model.check_stable()
         except ModelError as exc:
             raise ModelError(f'model {name}: {exc}') from None
-    loaded = load_source(path, windows=windows, threshold_g=threshold_g)
+    loaded = load_shots(path, windows=windows, threshold_g=threshold_g)
     for name, model in models.items():
         model.check_rate(loaded.recording.fs, model_name=f'model {name}',
                          data_name=f'recording {path}')

@@ -12,6 +12,7 @@ import numpy as np
 from .sources import load_model
 from ..blocks import BlockSequence
 from ..core.compensation import CompensationFilter
+from ..core.model import ModelError
 from ..core.streaming import BlockCompensator
 from ..errors import SensorCompError
 from ..io.bag_reader import (BagReader, block_topics, find_namespace, read_stream_infos,
@@ -225,6 +226,10 @@ def _output_info(raw: StreamInfo, stamp_ns: int) -> bytes:
 def run(args: argparse.Namespace) -> int:
     """Compensate the bag; return the exit code."""
     model = load_model(args.model)
+    try:
+        model.check_stable()
+    except ModelError as exc:
+        raise ModelError(f'model {args.model}: {exc}') from None
     counts = compensate_bag(model, args.input, args.output, namespace=args.namespace)
     if args.json:
         print(json.dumps(counts, indent=2))
@@ -243,6 +248,10 @@ def run(args: argparse.Namespace) -> int:
                       f'(the first: {topic} block at stamp {first["stamp_ns"]} ns, '
                       f'{first["samples"]} samples); they are not compensated and '
                       f'pressure/compensated has a gap there')
+        if counts.get('invalid_samples'):
+            print(f'warning: {counts["invalid_samples"]} NaN/Inf samples (or an overflowing '
+                  f'filter) gave NaN compensated samples; the filter restarted from rest after '
+                  f'each run of them')
         if counts['gaps']:
             print(f'warning: {len(counts["gaps"])} stamp gaps; the filter restarted from rest '
                   f'after each')

@@ -7,8 +7,8 @@ import json
 import os
 import sys
 
-from .identify import add_threshold, load_source
-from .sources import load_model, progress_factory
+from .identify import add_threshold
+from .sources import load_model, load_shots, progress_factory
 from ..core.model import Model, Source
 from ..errors import SensorCompError
 
@@ -46,7 +46,7 @@ def calibration_sources(model: Model, paths: list[str] | None, *,
 
     """
     if paths:
-        return [load_source(p, threshold_g=threshold_g) for p in paths]
+        return [load_shots(p, threshold_g=threshold_g) for p in paths]
     sources: list[Source] = [s for s in model.provenance
                              if any(isinstance(shot, dict) and shot.get('role') == 'calibration'
                                     for shot in s.shots)]
@@ -61,7 +61,7 @@ def calibration_sources(model: Model, paths: list[str] | None, *,
         if Source.from_file(source.path).sha256 != source.sha256:
             print(f'warning: {source.path} changed since the model was identified (sha256 '
                   f'differs)', file=sys.stderr)
-        loaded.append(load_source(source.path, threshold_g=threshold_g))
+        loaded.append(load_shots(source.path, threshold_g=threshold_g))
     return loaded
 
 
@@ -80,7 +80,7 @@ def run_diagnosis(args: argparse.Namespace, model: Model, validation):
 def run(args: argparse.Namespace) -> int:
     """Diagnose and print the verdict and ranking; return the exit code."""
     model = load_model(args.model)
-    validation = load_source(args.bag, threshold_g=args.threshold)
+    validation = load_shots(args.bag, threshold_g=args.threshold)
     model.check_rate(validation.recording.fs, model_name=f'model {args.model}',
                      data_name=f'recording {args.bag}')
     diagnosis = run_diagnosis(args, model, validation)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 
-from .sources import load_recording, load_shots, progress_factory
-from ..core.identify import identify, ShotSource, STRUCTURES
+from .sources import load_shots, progress_factory
+from ..core.identify import identify, STRUCTURES
 from ..core.shots import shot_table
 
-__all__ = ['add_threshold', 'describe_effect', 'describe_model', 'load_source', 'register',
+__all__ = ['add_threshold', 'describe_effect', 'describe_model', 'register',
            'run']
 
 
@@ -18,20 +18,6 @@ def add_threshold(parser) -> None:
     parser.add_argument('--threshold', type=float, metavar='G',
                         help='shot trigger level in g above the median axial acceleration '
                              '(default: 5 %% of the largest excursion, at least 8 noise σ)')
-
-
-def load_source(path: str, *, windows=None, threshold_g: float | None = None) -> ShotSource:
-    """
-    Read a recording and find its shots: manual ``windows`` or detection at ``threshold_g``.
-
-    Raises:
-        SensorCompError: If the file does not read or no shot is found (naming the
-            threshold used and the largest acceleration seen).
-
-    """
-    if windows or threshold_g is None:
-        return load_shots(path, windows=windows)
-    return ShotSource.detect(load_recording(path), path=path, threshold_g=threshold_g)
 
 
 def register(subparsers) -> None:
@@ -75,9 +61,9 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Identify and write the model; return the exit code."""
-    calibration = [load_source(p, windows=args.window, threshold_g=args.threshold)
+    calibration = [load_shots(p, windows=args.window, threshold_g=args.threshold)
                    for p in args.calibration]
-    validation = [load_source(p, threshold_g=args.threshold) for p in args.validate]
+    validation = [load_shots(p, threshold_g=args.threshold) for p in args.validate]
     result = identify(calibration, validation=validation, structure=args.structure,
                       orders=tuple(args.orders) if args.orders else None, delay=args.delay,
                       denoise=not args.no_emd, criterion=args.criterion,

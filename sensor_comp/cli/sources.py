@@ -48,25 +48,26 @@ def _looks_like_a_bag(path: str) -> bool:
         return False
 
 
-def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None) -> ShotSource:
+def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
+               threshold_g: float | None = None) -> ShotSource:
     """
     Read a recording and find its shots (or use the manual ``windows`` in seconds).
 
+    Args:
+        path: The bag or CSV file.
+        windows: Manual shot windows ``(start, stop)`` in s; detection when None or empty.
+        threshold_g: Trigger level of the detection in g; automatic when None.
+
     Raises:
-        SensorCompError: If the file does not read or holds no shot.
+        SensorCompError: If the file does not read or holds no shot (naming the threshold
+            used and the largest acceleration seen).
 
     """
     from ..core.shots import shots_from_windows
     recording = load_recording(path)
     if windows:
-        source = ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
-    else:
-        source = ShotSource.detect(recording, path=path)
-    if not source.shots:
-        raise SensorCompError(f'{path}: no shot found on the axial acceleration (largest '
-                              f'|a_z| {abs(recording.axial).max() / 9.80665:.3g} g); give '
-                              f'--window START STOP in seconds')
-    return source
+        return ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
+    return ShotSource.detect(recording, path=path, threshold_g=threshold_g)
 
 
 def load_model(path: str) -> Model:
