@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--only', metavar='NAME', action='append', type=_name,
                         help=f'run only this benchmark (repeatable): {", ".join(names)}')
     parser.add_argument('--quick', action='store_true',
-                        help='pass --quick: smaller sizes (each benchmark under 30 s)')
+                        help='pass --quick: smaller sizes (under 30 s each, the soak ~2 min)')
     parser.add_argument('--list', action='store_true', help='list the benchmarks and exit')
     args = parser.parse_args(argv)
     if args.list:

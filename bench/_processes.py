@@ -7,7 +7,8 @@ Separate processes for the node benchmarks: a private ROS domain, launch, readin
   --ros-args -p key:=value ...``, its log in a file; readiness is a line it logs.
 - :func:`start_role` and :func:`role_result` run a benchmark module's own helper role
   (``python -m bench.bench_<name> --role ROLE ...``) that prints one JSON line at the end.
-- :func:`cpu_seconds`, :func:`rss_bytes` and :class:`CpuSampler` read ``/proc`` (no psutil).
+- :func:`cpu_seconds`, :func:`rss_bytes`, :func:`tree_usage` (a process with its children)
+  and :class:`CpuSampler` read ``/proc`` (no psutil).
 - :func:`write_model_file` writes the 2nd-order model of the simulator's default sensor
   that the benchmarks start the compensation node with.
 
@@ -204,6 +205,38 @@ def rss_bytes(pid: int) -> int:
                 raise RuntimeError(f'/proc/{pid}/status: VmRSS in {unit!r}, expected kB')
             return int(value) * 1024
     raise RuntimeError(f'/proc/{pid}/status has no VmRSS line (a zombie?)')
+
+
+def process_tree(pid: int) -> list[int]:
+    """Return ``pid`` and its live descendants (e.g. a node's fit worker), from ``/proc``."""
+    children: dict[int, list[int]] = {}
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                parent = int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue  # exited while we looked
+            children.setdefault(parent, []).append(int(entry.name))
+    tree, todo = [], [pid]
+    while todo:
+        tree.append(todo.pop())
+        todo.extend(children.get(tree[-1], ()))
+    return tree
+
+
+def tree_usage(pid: int) -> tuple[int, float]:
+    """
+    Return the RSS (bytes) and CPU seconds of ``pid`` and its live descendants together.
+
+    A descendant that has exited no longer counts (its CPU time is lost until reaped).
+    """
+    rss, cpu = rss_bytes(pid), cpu_seconds(pid)
+    for child in process_tree(pid)[1:]:
+        try:
+            rss, cpu = rss + rss_bytes(child), cpu + cpu_seconds(child)
+        except (OSError, RuntimeError):
+            pass  # exited between the listing and the reading
+    return rss, cpu
 
 
 class CpuSampler:

@@ -20,12 +20,13 @@ private ROS domain (localhost discovery):
   (``soak_0000.mcap``, ``soak_0001.mcap``, ...: see :mod:`sensor_comp.nodes.recorder`).
 
 While it runs, every ``--sample-period`` s the soak reads ``VmRSS`` and the CPU time of each
-process from ``/proc`` and every node's ``/diagnostics`` (the soak process subscribes); a
-thread verifies each split file as soon as the recorder has closed it (the next one
-exists), then deletes it (``--keep`` keeps them): block stamps contiguous per topic within
-and across files, no gap, no overlap, no duplicate, the rows each topic must have. After
-``--duration`` s of rig time it stops the acquisition (SIGINT), waits until every consumer
-has taken every sample, stops the other nodes (SIGINT) and verifies the last files.
+process with its children (the identification's fit worker) from ``/proc`` and every node's
+``/diagnostics`` (the soak process subscribes); a thread verifies each split file as soon as
+the recorder has closed it (the next one exists), then deletes it (``--keep`` keeps them):
+block stamps contiguous per topic within and across files, no gap, no overlap, no duplicate,
+the rows each topic must have. After ``--duration`` s of rig time it stops the acquisition
+(SIGINT), waits until every consumer has taken every sample, stops the other nodes (SIGINT)
+and verifies the last files.
 
 Checks (exit code 1 and one line per failed check):
 
@@ -81,7 +82,7 @@ from sensor_comp.io.bag_reader import BagReader
 from sensor_comp.io.messages import decode_block, decode_stream_info, MessageError
 
 from ._processes import (cpu_seconds, isolate_ros, log_time, NodeProcess, rss_bytes,
-                         write_model_file)
+                         tree_usage, write_model_file)
 
 __all__ = ['main']
 
@@ -170,9 +171,11 @@ class _Usage:
 
     samples: list[tuple[float, int, float]] = field(default_factory=list)
 
-    def add(self, pid: int) -> None:
+    def add(self, pid: int, *, children: bool = True) -> None:
         try:
-            self.samples.append((time.time(), rss_bytes(pid), cpu_seconds(pid)))
+            # With children: the identification fits in a worker process.
+            usage = tree_usage(pid) if children else (rss_bytes(pid), cpu_seconds(pid))
+            self.samples.append((time.time(), *usage))
         except (FileNotFoundError, ProcessLookupError, RuntimeError):
             pass  # exited between two samples
 
@@ -369,7 +372,7 @@ class _Soak:
         """Sample RSS and CPU and, while publishing, how far behind each consumer is."""
         for name, node in self.nodes.items():
             self.usage[name].add(node.pid)
-        self.usage['soak'].add(os.getpid())
+        self.usage['soak'].add(os.getpid(), children=False)  # the nodes are its children
         for name in self.lag if publishing else ():
             got = self._samples_taken(name)
             if got is not None:  # against what was due when the node sent its status
