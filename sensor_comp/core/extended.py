@@ -41,6 +41,7 @@ from .effects import EffectError, get_effect, ordered
 from .effects.base import effect_entry, Effect, ModelSpec, Physical, Search
 from .ident import Estimate, fit_oe, IdentError, simulate
 from .ident.least_squares import scaled_qr
+from .ident.levenberg_marquardt import levenberg_marquardt
 from .ident.polynomials import max_root_radius
 from .inputs import input_channels, mode_pair
 from .model import Model
@@ -357,42 +358,12 @@ def _joint(problem: _Problem, a0: np.ndarray, *, method: str,
                 jacs.append(np.concatenate([fcols, xcols, c.T], axis=1))
         return np.concatenate(errors), (np.concatenate(jacs) if jacobian else None)
 
-    theta = x0
-    e, jac = parts(theta, True)
-    cost = float(e @ e)
-    damping, converged, evaluations = 1e-4, False, 1
-    for _ in range(MAX_ITERATIONS):
-        # Levenberg-Marquardt in column-scaled coordinates; unstable trials are rejected.
-        scale = np.linalg.norm(jac, axis=0)
-        scale[scale == 0] = 1.0
-        js = jac / scale
-        gram, grad = js.T @ js, js.T @ e
-        while True:
-            try:
-                trial = theta + np.linalg.solve(gram + damping * np.eye(theta.size),
-                                                grad) / scale
-            except np.linalg.LinAlgError:
-                trial = None
-            if trial is not None and np.all(np.isfinite(trial)) and \
-                    max_root_radius(unpack(trial)[0]) < 1.0:
-                e_trial = parts(trial, False)[0]
-                evaluations += 1
-                if float(e_trial @ e_trial) <= cost:
-                    break
-            damping *= 10.0
-            if damping > 1e12:
-                trial = None
-                break
-        if trial is None:
-            converged = True  # no step improves the cost: a minimum to working precision
-            break
-        decrease = cost - float(e_trial @ e_trial)
-        theta, damping = trial, max(damping / 10.0, 1e-12)
-        e, jac = parts(theta, True)
-        cost = float(e @ e)
-        if decrease <= 1e-9 * cost:
-            converged = True
-            break
+    result = levenberg_marquardt(
+        lambda theta, jacobian: parts(theta, True) if jacobian else parts(theta, False)[0],
+        x0, stable=lambda theta: max_root_radius(unpack(theta)[0]) < 1.0,
+        max_iter=MAX_ITERATIONS, tol=1e-9)
+    theta, cost, e, jac = result.theta, result.cost, result.e, result.jac
+    converged, evaluations = result.converged, result.evaluations
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
     _, r, scale = _qr(jac)

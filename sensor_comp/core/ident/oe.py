@@ -25,6 +25,7 @@ from .arx import fit_arx
 from .data import as_segments, Segment
 from .estimate import Estimate
 from .least_squares import check_orders, filter_each, lagged_regression, solve_least_squares
+from .levenberg_marquardt import levenberg_marquardt, scaled_normal_equations
 from .polynomials import is_stable, reflect_unstable
 
 __all__ = ['SteiglitzMcBride', 'fit_oe', 'steiglitz_mcbride']
@@ -148,53 +149,6 @@ class _OutputError:
         return (e, np.concatenate(jacs)) if jacobian else e
 
 
-def _scaled_normal_equations(jac: np.ndarray, e: np.ndarray):
-    """Return ``(JsᵀJs, Jsᵀe, scale)`` for the Jacobian scaled to unit column norms."""
-    scale = np.linalg.norm(jac, axis=0)
-    scale[scale == 0] = 1.0
-    js = jac / scale
-    return js.T @ js, js.T @ e, scale
-
-
-def _levenberg_marquardt(problem: _OutputError, theta: np.ndarray, *, max_iter: int,
-                         tol: float):
-    """Minimise the simulation error from ``theta``; keep the denominator stable."""
-    e, jac = problem.residual(theta, jacobian=True)
-    cost = float(e @ e)
-    damping = 1e-4
-    converged = False
-    iterations = 0
-    for iterations in range(1, max_iter + 1):
-        gram, grad, scale = _scaled_normal_equations(jac, e)
-        while True:
-            # Levenberg-Marquardt step in column-scaled coordinates.
-            try:
-                step = np.linalg.solve(gram + damping * np.eye(gram.shape[0]), grad) / scale
-            except np.linalg.LinAlgError:  # singular at this damping: damp more
-                step = np.full_like(theta, np.nan)
-            trial = theta + step
-            if np.all(np.isfinite(trial)) and is_stable(problem.unpack(trial)[0]):
-                e_trial = problem.residual(trial)
-                cost_trial = float(e_trial @ e_trial)
-                if cost_trial <= cost:
-                    break
-            damping *= 10.0
-            if damping > 1e12:
-                trial = None
-                break
-        if trial is None:
-            converged = True  # no step improves the cost: a minimum to working precision
-            break
-        decrease = cost - cost_trial
-        theta, cost = trial, cost_trial
-        damping = max(damping / 10.0, 1e-12)
-        e, jac = problem.residual(theta, jacobian=True)
-        if decrease <= tol * cost or cost == 0.0:
-            converged = True
-            break
-    return theta, cost, e, jac, iterations, converged
-
-
 def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, nk: int = 1,
            max_iter: int = 100, tol: float = 1e-8) -> Estimate:
     """
@@ -234,14 +188,17 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     starts.append(np.concatenate([f0[1:], problem.numerators(f0).ravel()]))
     best = None
     for theta in starts:
-        result = _levenberg_marquardt(problem, theta, max_iter=max_iter, tol=tol)
-        if best is None or result[1] < best[1]:
+        result = levenberg_marquardt(
+            lambda th, jacobian: problem.residual(th, jacobian=jacobian), theta,
+            stable=lambda th: is_stable(problem.unpack(th)[0]), max_iter=max_iter, tol=tol)
+        if best is None or result.cost < best.cost:
             best = result
-    theta, cost, e, jac, iterations, converged = best
+    theta, cost, e, jac, iterations, converged = (best.theta, best.cost, best.e, best.jac,
+                                                  best.iterations, best.converged)
     f, b = problem.unpack(theta)
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
-    gram, _, scale = _scaled_normal_equations(jac, e)
+    gram, _, scale = scaled_normal_equations(jac, e)
     if np.linalg.cond(gram) < 1e12:
         covariance = variance * np.linalg.inv(gram) / np.outer(scale, scale)
     else:  # over-parameterised (e.g. a pole cancels a zero): not identifiable
