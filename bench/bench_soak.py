@@ -19,14 +19,14 @@ private ROS domain (localhost discovery):
 - **recorder**: every topic under ``/rig``, zstd, a new file every ``--split`` s
   (``soak_0000.mcap``, ``soak_0001.mcap``, ...: see :mod:`sensor_comp.nodes.recorder`).
 
-While it runs, every ``--sample-period`` s the soak reads ``VmRSS`` and the CPU time of each
-process with its children (the identification's fit worker) from ``/proc`` and every node's
-``/diagnostics`` (the soak process subscribes); a thread verifies each split file as soon as
-the recorder has closed it (the next one exists), then deletes it (``--keep`` keeps them):
-block stamps contiguous per topic within and across files, no gap, no overlap, no duplicate,
-the rows each topic must have. After ``--duration`` s of rig time it stops the acquisition
-(SIGINT), waits until every consumer has taken every sample, stops the other nodes (SIGINT)
-and verifies the last files.
+While it runs, every ``--sample-period`` s the soak reads each process's ``VmRSS`` (its
+children's, the identification's fit workers, apart) and CPU time (children included) from
+``/proc`` and every node's ``/diagnostics`` (the soak process subscribes); a thread verifies
+each split file as soon as the recorder has closed it (the next one exists), then deletes it
+(``--keep`` keeps them): block stamps contiguous per topic within and across files, no gap,
+no overlap, no duplicate, the rows each topic must have. After ``--duration`` s of rig time
+it stops the acquisition (SIGINT), waits until every consumer has taken every sample, stops
+the other nodes (SIGINT) and verifies the last files.
 
 Checks (exit code 1 and one line per failed check):
 
@@ -167,15 +167,27 @@ class _Diagnostics:
 
 @dataclass
 class _Usage:
-    """RSS and CPU samples of one process: ``(wall s, RSS bytes, CPU s)``."""
+    """
+    RSS and CPU samples of one process: ``(wall s, RSS bytes, CPU s)``.
+
+    The CPU counts the process's live children too (the identification fits in a worker
+    process); the RSS is the process's own, so that the slope check sees the node, not
+    the rise and fall of a worker that is replaced after each fit. The children's largest
+    RSS is kept apart.
+    """
 
     samples: list[tuple[float, int, float]] = field(default_factory=list)
+    children_peak: int = 0
 
     def add(self, pid: int, *, children: bool = True) -> None:
         try:
-            # With children: the identification fits in a worker process.
-            usage = tree_usage(pid) if children else (rss_bytes(pid), cpu_seconds(pid))
-            self.samples.append((time.time(), *usage))
+            own = rss_bytes(pid)
+            if children:
+                tree, cpu = tree_usage(pid)
+                self.children_peak = max(self.children_peak, tree - own)
+            else:
+                cpu = cpu_seconds(pid)
+            self.samples.append((time.time(), own, cpu))
         except (FileNotFoundError, ProcessLookupError, RuntimeError):
             pass  # exited between two samples
 
@@ -191,6 +203,7 @@ class _Usage:
                 'rss_start_mb': float(rss[inside][0] / _MB),
                 'rss_end_mb': float(rss[inside][-1] / _MB),
                 'rss_peak_mb': float(rss.max() / _MB),
+                'children_rss_peak_mb': self.children_peak / _MB,
                 'rss_slope_mb_per_min': float(slope), 'samples': int(after.sum())}
 
 
@@ -659,6 +672,10 @@ def _print(report: dict, failures: list[str]) -> None:
         print(f'{name:<15} {100 * p["cpu_cores"]:5.0f}% | {p["rss_start_mb"]:6.0f} MB '
               f'{p["rss_end_mb"]:7.0f} {p["rss_peak_mb"]:7.0f} | '
               f'{p["rss_slope_mb_per_min"]:13.2f} MB/min | {lag}')
+    for name, p in r['processes'].items():
+        if p.get('children_rss_peak_mb'):
+            print(f'{name}: its worker processes reached {p["children_rss_peak_mb"]:.0f} MB '
+                  f'(not in the RSS columns)')
     window = f'over the {r["slope_window_s"]:.0f} s after the warm-up'
     print(f'CPU in % of one core while publishing; RSS slope (Theil-Sen) {window}: '
           + (f'limit {r["max_slope"]:g} MB/min' if r['slope_checked'] else
