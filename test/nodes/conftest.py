@@ -33,7 +33,7 @@ rclpy = pytest.importorskip('rclpy')
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
@@ -241,14 +241,17 @@ def spin():
     """
     Return the spinner: called with nodes, it spins them in a thread and returns a stopper.
 
-    The executor (2 threads) uses the first node's context. Calling the stopper shuts it
-    down, joins its thread and waits for its callbacks (destroy the nodes only after that);
-    spinners not stopped by the test are stopped at its end.
+    The executor (2 threads; ``threads=1``: a single-threaded one) uses the first node's
+    context. Calling the stopper shuts it down, joins its thread and waits for its callbacks
+    (destroy the nodes only after that); spinners not stopped by the test are stopped at
+    its end.
     """
     stoppers = []
 
-    def start(*nodes):
-        executor = MultiThreadedExecutor(num_threads=2, context=nodes[0].context)
+    def start(*nodes, threads: int = 2):
+        context = nodes[0].context
+        executor = (SingleThreadedExecutor(context=context) if threads == 1
+                    else MultiThreadedExecutor(num_threads=threads, context=context))
         for node in nodes:
             executor.add_node(node)
         thread = threading.Thread(target=executor.spin, daemon=True)

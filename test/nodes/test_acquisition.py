@@ -141,7 +141,9 @@ def test_paced_blocks_leave_when_their_last_sample_is_acquired(context, make_nod
     listener.create_subscription(message_class(IMAGE), 'acceleration', len, BLOCK_QOS,
                                  raw=True)
     listener.create_subscription(DiagnosticArray, 'stream_info', len, LATCHED_QOS, raw=True)
-    stop_spinning = spin(listener)
+    # One thread: a pool of executor threads competes with the publishing thread for the
+    # GIL and delays the sends this test times.
+    stop_spinning = spin(listener, threads=1)
     node = make_acquisition(**SIM, block_size=500, pacing=pacing, wait_for_subscribers=1)
     node.run()
     n = node.recording.n_samples
