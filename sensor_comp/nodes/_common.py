@@ -217,7 +217,7 @@ def message_class(msgtype: str, *, topic: str = ''):
 
 
 def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
-                       infos: Sequence[StreamInfo]) -> None:
+                       infos: Sequence[StreamInfo]) -> StreamInfo | None:
     """
     Merge the raw streams' descriptions from a ``stream_info`` message into ``known``.
 
@@ -230,6 +230,13 @@ def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
         known: Descriptions by relative topic name, updated in place.
         infos: The message's descriptions (other streams are ignored).
 
+    Returns:
+        The description of ``pressure/raw`` once both raw streams are described, else None.
+
+    Raises:
+        NodeError: If the two raw streams are described at different rates (their blocks
+            cannot be paired).
+
     """
     for info in infos:
         if info.topic not in (PRESSURE_RAW, ACCELERATION):
@@ -239,6 +246,14 @@ def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
             node.get_logger().error(
                 f'{node.resolve_topic_name(STREAM_INFO)}: {info.topic} now at {info.fs:g} '
                 f'Hz, was {first.fs:g} Hz; the first rate stays in use')
+    if len(known) < 2:
+        return None
+    pressure, acceleration = known[PRESSURE_RAW], known[ACCELERATION]
+    if pressure.fs != acceleration.fs:
+        raise NodeError(f'stream_info gives {pressure.fs:g} Hz for {PRESSURE_RAW} but '
+                        f'{acceleration.fs:g} Hz for {ACCELERATION}: the blocks cannot be '
+                        f'paired')
+    return pressure
 
 
 def sleep_until(deadline: float, stop: threading.Event) -> bool:

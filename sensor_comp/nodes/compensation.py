@@ -294,15 +294,13 @@ class Compensation(Node):
         except MessageError as exc:
             self._bad(STREAM_INFO, exc)
             return
-        merge_stream_infos(self, self._infos, infos)
-        if self._fs is not None or len(self._infos) < 2:
-            return
-        pressure, acceleration = self._infos[PRESSURE_RAW], self._infos[ACCELERATION]
-        if pressure.fs != acceleration.fs:
-            self._stream_error = (f'stream_info gives {pressure.fs:g} Hz for {PRESSURE_RAW} '
-                                  f'but {acceleration.fs:g} Hz for {ACCELERATION}: the '
-                                  f'blocks cannot be paired')
+        try:
+            pressure = merge_stream_infos(self, self._infos, infos)
+        except NodeError as exc:
+            self._stream_error = str(exc)
             self.get_logger().error(self._stream_error)
+            return
+        if self._fs is not None or pressure is None:
             return
         self._fs = pressure.fs
         outputs = [StreamInfo(name, pressure.fs, ('p',), 'Pa', pressure.frame_id,

@@ -128,8 +128,8 @@ from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, e
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
 from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTICS_QOS,
                       diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
-                      merge_stream_infos, message_class, publish_raw, run_main, spin_until,
-                      subscribe_blocks, take_queued)
+                      merge_stream_infos, message_class, NodeError, publish_raw, run_main,
+                      spin_until, subscribe_blocks, take_queued)
 from ._fit_worker import diagnose_fit, fit_shots, start_pool
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
@@ -484,14 +484,12 @@ class Identification(Node):
         except MessageError as exc:
             self._bad(STREAM_INFO, exc)
             return
-        merge_stream_infos(self, self._infos, infos)
-        if self._live is not None or len(self._infos) < 2:
+        try:
+            pressure = merge_stream_infos(self, self._infos, infos)
+        except NodeError as exc:
+            self.get_logger().error(str(exc))
             return
-        pressure, acceleration = self._infos[PRESSURE_RAW], self._infos[ACCELERATION]
-        if pressure.fs != acceleration.fs:
-            self.get_logger().error(
-                f'stream_info gives {pressure.fs:g} Hz for {PRESSURE_RAW} but '
-                f'{acceleration.fs:g} Hz for {ACCELERATION}: cannot pair them')
+        if self._live is not None or pressure is None:
             return
         self._live = _LiveShots(fs=pressure.fs, threshold_g=self.threshold_g,
                                 frame_id=pressure.frame_id, metadata=dict(pressure.metadata),
