@@ -13,12 +13,14 @@ points, so on the clean acceleration this model reproduces the clean induced pre
 about 3e-4 of its peak, twenty times below the pressure noise.
 """
 
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy import signal
 
+from sensor_comp.cli.main import main
 from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.core.model import Model
 from sensor_comp.io.bag_writer import write_recording
@@ -77,3 +79,24 @@ def model_files(tmp_path_factory, calibration):
         paths[name] = str(folder / f'{name}.json')
         model.save(paths[name])
     return paths
+
+
+@pytest.fixture
+def cli_error(capsys):
+    """
+    Return ``check(argv, words, outputs=())``: run ``sensor-comp argv`` and assert a user error.
+
+    The run must exit 1 with exactly one ``sensor-comp: error:`` line holding every one of
+    ``words``, no traceback, and leave none of ``outputs``; ``check`` returns the line.
+    """
+    def check(argv, words, outputs=()) -> str:
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert err.startswith('sensor-comp: error: ') and err.count('\n') == 1, err
+        assert 'Traceback' not in err
+        for word in words:
+            assert word in err, err
+        for output in outputs:
+            assert not Path(output).exists()
+        return err
+    return check

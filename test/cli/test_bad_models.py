@@ -93,40 +93,26 @@ def commands(model, bag, calib, out) -> dict[str, list[str]]:
     }
 
 
-def fails(capsys, argv, words, outputs=()) -> str:
-    """Run ``argv``; assert one error line with ``words``, exit 1, no output file."""
-    assert main(argv) == 1
-    captured = capsys.readouterr()
-    err = captured.err
-    assert err.startswith('sensor-comp: error: ') and err.count('\n') == 1, err
-    assert 'Traceback' not in err
-    for word in words:
-        assert word in err, err
-    for output in outputs:
-        assert not Path(output).exists()
-    return err
-
-
 @pytest.mark.parametrize('command', ['show', 'compare', 'diagnose', 'report', 'report_after',
                                      'compensate'])
 @pytest.mark.parametrize('name', CORRUPTIONS)
 def test_a_bad_model_file_is_one_error_line_naming_it(command, name, model_files, validation,
-                                                      calibration, tmp_path, capsys):
+                                                      calibration, tmp_path, cli_error):
     bad = corrupt(tmp_path, model_files['true'], name)
     out = str(tmp_path / 'out')
     argv = commands(bad, validation.path, calibration.path, out)[command]
     argv = [model_files['true'] if arg == 'MODEL' else arg for arg in argv]
-    fails(capsys, argv, [bad, *CORRUPTIONS[name][1]], [out + '.html', out + '.mcap'])
+    cli_error(argv, [bad, *CORRUPTIONS[name][1]], [out + '.html', out + '.mcap'])
 
 
 @pytest.mark.parametrize('command', ['compare', 'report', 'report_after', 'compensate'])
 def test_an_unstable_model_is_refused_where_it_would_be_simulated(
-        command, model_files, validation, calibration, tmp_path, capsys):
+        command, model_files, validation, calibration, tmp_path, cli_error):
     bad = unstable(tmp_path, model_files['true'])
     out = str(tmp_path / 'out')
     argv = commands(bad, validation.path, calibration.path, out)[command]
     argv = [model_files['true'] if arg == 'MODEL' else arg for arg in argv]
-    fails(capsys, argv, [bad, 'unstable', '|z| = 1.010000'], [out + '.html', out + '.mcap'])
+    cli_error(argv, [bad, 'unstable', '|z| = 1.010000'], [out + '.html', out + '.mcap'])
 
 
 def test_show_flags_an_unstable_model(model_files, tmp_path, capsys):
@@ -138,7 +124,7 @@ def test_show_flags_an_unstable_model(model_files, tmp_path, capsys):
     assert doc[bad]['stable'] is False and doc[model_files['true']]['stable'] is True
 
 
-def test_identify_never_writes_an_unstable_model(calibration, tmp_path, capsys, monkeypatch):
+def test_identify_never_writes_an_unstable_model(calibration, tmp_path, cli_error, monkeypatch):
     # Make the fit return an estimate with its poles pushed out of the unit circle.
     def unstable_fit(segs, na, nb, nk):
         estimate = fit_oe(segs, nf=na, nb=nb, nk=nk)
@@ -148,8 +134,8 @@ def test_identify_never_writes_an_unstable_model(calibration, tmp_path, capsys, 
 
     monkeypatch.setitem(identify_module._FITTERS, 'oe', unstable_fit)
     out = tmp_path / 'model.json'
-    fails(capsys, ['identify', calibration.path, '-o', str(out), *FAST],
-          ['the model is unstable', '|z| = 1.010000'], [out])
+    cli_error(['identify', calibration.path, '-o', str(out), *FAST],
+              ['the model is unstable', '|z| = 1.010000'], [out])
     assert list(tmp_path.iterdir()) == []  # no temporary file left either
 
 
@@ -164,41 +150,41 @@ def fast_bag(tmp_path_factory):
 @pytest.mark.parametrize('command', ['compare', 'diagnose', 'report', 'report_after',
                                      'compensate'])
 def test_a_model_at_another_rate_names_both_rates_and_files(
-        command, model_files, validation, calibration, tmp_path, capsys):
+        command, model_files, validation, calibration, tmp_path, cli_error):
     fast = model_files['fast']  # the rig's sensor at 1 MS/s; the bags are at 200 kS/s
     out = str(tmp_path / 'out')
     argv = commands(fast, validation.path, calibration.path, out)[command]
     argv = [model_files['true'] if arg == 'MODEL' else arg for arg in argv]
     words = ['1e+06 Hz', '200000 Hz', validation.path]
-    fails(capsys, argv, words + ([] if command == 'compensate' else [fast]),
-          [out + '.html', out + '.mcap'])
+    cli_error(argv, words + ([] if command == 'compensate' else [fast]),
+              [out + '.html', out + '.mcap'])
 
 
 def test_diagnose_checks_the_calibration_recordings_rate_too(model_files, fast_bag,
-                                                             validation, capsys):
-    fails(capsys, ['diagnose', model_files['true'], validation.path, '--calibration',
-                   fast_bag], [model_files['true'], 'calibration recording', fast_bag,
-                               '200000 Hz', '1e+06 Hz'])
+                                                             validation, cli_error):
+    cli_error(['diagnose', model_files['true'], validation.path, '--calibration',
+               fast_bag], [model_files['true'], 'calibration recording', fast_bag,
+                           '200000 Hz', '1e+06 Hz'])
 
 
-def test_identify_refuses_mixed_rates_naming_both(calibration, fast_bag, tmp_path, capsys):
+def test_identify_refuses_mixed_rates_naming_both(calibration, fast_bag, tmp_path, cli_error):
     out = tmp_path / 'model.json'
-    fails(capsys, ['identify', calibration.path, '--validate', fast_bag, '-o', str(out),
-                   *FAST], [f'{calibration.path} at 200000 Hz', f'{fast_bag} at 1e+06 Hz'],
-          [out])
+    cli_error(['identify', calibration.path, '--validate', fast_bag, '-o', str(out),
+               *FAST], [f'{calibration.path} at 200000 Hz', f'{fast_bag} at 1e+06 Hz'],
+              [out])
 
 
 @pytest.mark.parametrize('argv', [['identify', 'CALIB', '-o', 'OUT', *FAST],
                                   ['diagnose', 'MODEL', 'VALID', '--calibration', 'CALIB']])
 def test_an_unknown_effect_lists_the_known_ones(argv, calibration, validation, model_files,
-                                                tmp_path, capsys):
+                                                tmp_path, cli_error):
     out = tmp_path / 'model.json'
     names = {'CALIB': calibration.path, 'VALID': validation.path, 'MODEL': model_files['true'],
              'OUT': str(out)}
     argv = [names.get(arg, arg) for arg in argv]
     argv += ['--effect', 'second_resonance', '--effect', 'flux_capacitor']
-    fails(capsys, argv, ["unknown effect 'flux_capacitor'", f'known effects: '
-                         f'{", ".join(EFFECTS)}'], [out])
+    cli_error(argv, ["unknown effect 'flux_capacitor'", f'known effects: '
+                     f'{", ".join(EFFECTS)}'], [out])
 
 
 def test_a_bad_model_file_has_no_traceback_in_a_real_process(model_files, validation,

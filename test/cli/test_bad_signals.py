@@ -33,19 +33,6 @@ def bag(tmp_path, rec: Recording, name: str, *, pressure=None, acceleration=None
     return str(path)
 
 
-def error(capsys, argv, words, outputs=()) -> str:
-    """Run ``argv``; assert one error line with ``words``, exit 1, no output file."""
-    assert main(argv) == 1
-    err = capsys.readouterr().err
-    assert err.startswith('sensor-comp: error: ') and err.count('\n') == 1, err
-    assert 'Traceback' not in err
-    for word in words:
-        assert word in err, err
-    for output in outputs:
-        assert not Path(output).exists()
-    return err
-
-
 @pytest.fixture(scope='module')
 def nan_bag(calibration, tmp_path_factory):
     """Return (path, shot index, sample index) of the calibration run with a NaN in shot 1."""
@@ -103,22 +90,22 @@ def test_identify_warns_of_a_clipped_shot_and_shows_it_in_the_table(
     assert out.exists()
 
 
-def test_no_shot_names_the_threshold_and_suggests_the_option(calibration, tmp_path, capsys):
+def test_no_shot_names_the_threshold_and_suggests_the_option(calibration, tmp_path, cli_error):
     rec = calibration.sim.recording
     quiet = bag(tmp_path, rec.slice(0, calibration.sim.onsets[0] - 100), 'quiet.mcap')
     out = tmp_path / 'model.json'
-    err = error(capsys, ['identify', quiet, '-o', str(out), *FAST],
-                [quiet, 'no shot found', 'automatic threshold', 'largest excursion',
-                 '--threshold G', '--window START STOP'], [out])
+    err = cli_error(['identify', quiet, '-o', str(out), *FAST],
+                    [quiet, 'no shot found', 'automatic threshold', 'largest excursion',
+                     '--threshold G', '--window START STOP'], [out])
     assert 'Traceback' not in err
-    error(capsys, ['compare', 'm.json', calibration.path, '--threshold', '5000'],
-          ['m.json: no such model file'])
-    error(capsys, ['identify', calibration.path, '-o', str(out), '--threshold', '5000', *FAST],
-          [calibration.path, 'never reaches 5000 g', 'the threshold given',
-           'its largest excursion is 21'], [out])
+    cli_error(['compare', 'm.json', calibration.path, '--threshold', '5000'],
+              ['m.json: no such model file'])
+    cli_error(['identify', calibration.path, '-o', str(out), '--threshold', '5000', *FAST],
+              [calibration.path, 'never reaches 5000 g', 'the threshold given',
+               'its largest excursion is 21'], [out])
 
 
-def test_threshold_selects_the_shots(calibration, tmp_path, capsys):
+def test_threshold_selects_the_shots(calibration, tmp_path, capsys, cli_error):
     out = tmp_path / 'model.json'
     # Above 1500 g: the 2185 g and 1963 g shots, one to fit and one to validate on.
     assert main(['identify', calibration.path, '-o', str(out), '--threshold', '1500',
@@ -127,13 +114,13 @@ def test_threshold_selects_the_shots(calibration, tmp_path, capsys):
     assert lines[5] == '' and min(float(lines[k].split()[1]) for k in (3, 4)) > 1500
     assert [s['index'] for source in load(out).provenance for s in source.shots] == [0, 1]
     # Above 2000 g: one shot is too few.
-    error(capsys, ['identify', calibration.path, '-o', str(out), '--threshold', '2000',
-                   *FAST], [calibration.path, '1 usable shot(s)', 'at least 2 per recording',
-                            '--validate'])
+    cli_error(['identify', calibration.path, '-o', str(out), '--threshold', '2000',
+               *FAST], [calibration.path, '1 usable shot(s)', 'at least 2 per recording',
+                        '--validate'])
 
 
 @pytest.mark.parametrize('channel', ['pressure', 'acceleration'])
-def test_a_dead_channel_is_named(channel, calibration, model_files, tmp_path, capsys):
+def test_a_dead_channel_is_named(channel, calibration, model_files, tmp_path, cli_error):
     rec = calibration.sim.recording
     if channel == 'pressure':
         path = bag(tmp_path, rec, 'dead.mcap', pressure=np.zeros(rec.n_samples))
@@ -146,11 +133,11 @@ def test_a_dead_channel_is_named(channel, calibration, model_files, tmp_path, ca
     out = tmp_path / 'model.json'
     for argv in (['identify', path, '-o', str(out), *FAST],
                  ['compare', model_files['true'], path]):
-        error(capsys, argv, [path, *words, f'{rec.n_samples} samples'], [out])
+        cli_error(argv, [path, *words, f'{rec.n_samples} samples'], [out])
 
 
 def test_pressure_in_mpa_labelled_pa_is_refused_with_the_factor(
-        calibration, model_files, tmp_path, capsys):
+        calibration, model_files, tmp_path, cli_error):
     rec = calibration.sim.recording
     rows = '\n'.join(f'{k / rec.fs:.6f},{p / 1e6:.9g},{a:.9g}'
                      for k, (p, a) in enumerate(zip(rec.pressure, rec.acceleration[2])))
@@ -159,8 +146,8 @@ def test_pressure_in_mpa_labelled_pa_is_refused_with_the_factor(
     out = tmp_path / 'model.json'
     words = [str(csv), 'decades below the range any piezoelectric pressure sensor can show',
              'the pressure is recorded in MPa instead of Pa']
-    error(capsys, ['identify', str(csv), '-o', str(out), *FAST], words, [out])
-    error(capsys, ['compare', model_files['true'], str(csv)], words)
+    cli_error(['identify', str(csv), '-o', str(out), *FAST], words, [out])
+    cli_error(['compare', model_files['true'], str(csv)], words)
 
 
 def test_no_shot_has_no_traceback_in_a_real_process(calibration, tmp_path):
