@@ -94,9 +94,17 @@ def _source(case, role: str) -> ShotSource:
 def _ceiling(case, valid: ShotSource) -> float:
     """Return the noise-limited validation fit (the simulator's clean pressure), %."""
     args = build_parser().parse_args(['simulate', '-o', case.bag('valid'), *case.argv('valid')])
-    sim = simulate(build_config(args))
-    assert np.array_equal(sim.recording.pressure, valid.recording.pressure), (
-        f'{case.bag("valid")} is not the run its case describes: regenerate the bags')
+    config = build_config(args)
+    sim = simulate(config)
+    # Same run, other library versions or CPU: the refined-grid recursion of N steps may
+    # differ by up to N float64 round-offs of the peak (measured: 1e5 eps; a wrong run
+    # differs by the noise, 1e-3 of the peak).
+    steps = config.oversample * sim.recording.pressure.size
+    peak = np.abs(valid.recording.pressure).max()
+    np.testing.assert_allclose(
+        sim.recording.pressure, valid.recording.pressure, rtol=0,
+        atol=steps * np.finfo(float).eps * peak,
+        err_msg=f'{case.bag("valid")} is not the run its case describes: regenerate the bags')
     clean = sim.induced + sim.disturbance
     measured = [y for _, y in segments(valid.recording, valid.shots)]
     model = [clean[s.window] - clean[s.baseline_window].mean() for s in valid.shots]
