@@ -15,7 +15,8 @@ setup(
         ('share/' + PACKAGE, ['package.xml', 'README.md']),
         ('share/' + PACKAGE + '/bags', sorted(glob('bags/*.mcap') + glob('bags/*.md'))),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'mcap', 'EMD-signal', 'matplotlib'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'mcap', 'EMD-signal', 'matplotlib',
+                      'dask[distributed]', 'pyarrow'],
     extras_require={
         'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags',
                  'mcap-ros2-support'],
