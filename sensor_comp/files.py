@@ -1,12 +1,216 @@
-"""Atomic file writes: a file appears under its final name only when it is complete."""
+"""
+Safe outputs: check an output path before any work, then write it atomically.
+
+Every ``sensor-comp`` command that writes a file calls :func:`check_output` on each output
+before it reads a bag or fits a model, so that a wrong ``-o`` fails in a second with one
+line instead of replacing an input or failing with a traceback after the work. A file
+appears under its final name only when complete: writers fill a temporary file with a
+unique name in the target folder and rename it.
+"""
 
 from __future__ import annotations
 
+import errno
+import json
 import os
 from pathlib import Path
 import tempfile
+from typing import Iterable
 
-__all__ = ['write_text_atomically']
+from .errors import SensorCompError
+
+__all__ = ['check_output', 'KINDS', 'OutputError', 'sniff_kind', 'write_text_atomically']
+
+#: What an output can be, with the words the error messages use for it.
+KINDS = {
+    'model': 'a sensor_comp model file',
+    'bag': 'an MCAP recording',
+    'html': 'an HTML page',
+    'png': 'an image',
+    'json': 'a JSON file',
+    'directory': 'a folder',
+}
+
+#: Image suffixes a plot may have (formats matplotlib saves without extra packages).
+_PLOT_SUFFIXES = ('.png', '.svg', '.pdf', '.jpg', '.jpeg', '.eps', '.ps', '.webp', '.tif',
+                  '.tiff')
+_IMAGE_MAGICS = (b'\x89PNG\r\n\x1a\n', b'%PDF-', b'\xff\xd8\xff', b'%!PS', b'II*\x00',
+                 b'MM\x00*')
+_MCAP_MAGIC = b'\x89MCAP0\r\n'
+_MODEL_SCHEMA_PREFIX = 'sensor_comp.model/'
+#: Sniffing parses JSON files up to this size whole; larger ones are judged by their head.
+_JSON_PARSE_LIMIT = 8 << 20
+
+
+class OutputError(SensorCompError):
+    """An output path that would replace an input, a file of another kind, or cannot be written."""
+
+
+def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = (),
+                 kind: str, force: bool = False) -> Path:
+    """
+    Check that ``path`` can take an output of ``kind``, before any work; return the path to write.
+
+    Refused: an output that is one of ``inputs`` (same inode, so through symlinks, hard
+    links and other spellings; a folder input counts with the files directly in it), an
+    existing file of another kind (unless ``force``), a folder where a file is due, and a
+    folder to write in that is missing or not writable (probed with a real file, so this
+    also holds for root and read-only mounts). Nothing is created or changed.
+
+    Args:
+        path: The output as the user gave it.
+        inputs: The files and folders the command reads.
+        kind: One of :data:`KINDS`. A ``'png'`` plot may also end in another image suffix
+            (``.svg``, ``.pdf``, ...); without a suffix, ``.png`` is appended.
+        force: Replace an existing file of another kind.
+
+    Returns:
+        The path to write and to name in messages: ``path``, with ``.png`` appended to a plot
+        name without suffix.
+
+    Raises:
+        OutputError: If the output is refused; the message names the path and the fix.
+        ValueError: If ``kind`` is not one of :data:`KINDS`.
+
+    """
+    if kind not in KINDS:
+        raise ValueError(f'kind must be one of {", ".join(KINDS)}, not {kind!r}')
+    if not str(path) or str(path).endswith(os.sep) and kind != 'directory':
+        raise OutputError(f'output {str(path)!r} is not a file name; give a name like '
+                          f'out{_example_suffix(kind)}')
+    path = _with_plot_suffix(Path(path)) if kind == 'png' else Path(path)
+    _check_folder(path.parent)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return path
+    except OSError as exc:
+        raise OutputError(f'cannot use output {path}: {exc.strerror}') from None
+    for source in inputs:
+        if _same_file(st, source):
+            raise OutputError(f'output {path} is the input {source}; writing it would destroy '
+                              f'the input: choose another output name')
+    found = sniff_kind(path)
+    if kind == 'directory':
+        if found != 'directory':
+            raise OutputError(f'output folder {path} is {KINDS.get(found, "a file")}; choose '
+                              f'another folder name')
+        _check_folder(path)
+    elif found == 'directory':
+        raise OutputError(f'output {path} is a folder; give a file name in it, like '
+                          f'{path / ("out" + _example_suffix(kind))}')
+    elif found not in (kind, None, 'empty') and not force:
+        what = KINDS.get(found, 'a file of another kind')
+        raise OutputError(f'output {path} exists and is {what}, not {KINDS[kind]}; choose '
+                          f'another name, or pass --force to replace it')
+    return path
+
+
+def sniff_kind(path: str | os.PathLike) -> str | None:
+    """
+    Return which of :data:`KINDS` the existing ``path`` is by its content.
+
+    Returns:
+        A key of :data:`KINDS`; ``'empty'`` for an empty file, ``'other'`` for content of
+        no known kind (a CSV file, say), ``None`` if ``path`` does not exist or cannot be read.
+
+    """
+    path = Path(path)
+    if path.is_dir():
+        return 'directory'
+    try:
+        with open(path, 'rb') as f:
+            head = f.read(4096)
+            size = os.fstat(f.fileno()).st_size
+    except OSError:
+        return None
+    text = head.lstrip().lower()
+    if not head:
+        return 'empty'
+    if head.startswith(_MCAP_MAGIC):
+        return 'bag'
+    if head.startswith(_IMAGE_MAGICS) or text.startswith((b'<svg', b'<?xml')) and b'<svg' in text:
+        return 'png'
+    if text.startswith((b'<!doctype html', b'<html')):
+        return 'html'
+    if text.startswith((b'{', b'[')):
+        return 'model' if _is_model(path, head, size) else 'json'
+    return 'other'
+
+
+def _is_model(path: Path, head: bytes, size: int) -> bool:
+    """Tell whether a JSON file holds a sensor_comp model (any schema version)."""
+    if size > _JSON_PARSE_LIMIT:
+        return _MODEL_SCHEMA_PREFIX.encode() in head
+    try:
+        doc = json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        return _MODEL_SCHEMA_PREFIX.encode() in head
+    return isinstance(doc, dict) and str(doc.get('schema', '')).startswith(_MODEL_SCHEMA_PREFIX)
+
+
+def _with_plot_suffix(path: Path) -> Path:
+    """Return a plot path with an image suffix: ``.png`` appended if it has none."""
+    if not path.suffix:
+        return path.with_name(path.name + '.png')
+    if path.suffix.lower() not in _PLOT_SUFFIXES:
+        raise OutputError(f'plot {path} has suffix {path.suffix!r}, which is no image format; '
+                          f'use one of {", ".join(_PLOT_SUFFIXES[:3])} (or none for .png)')
+    return path
+
+
+def _example_suffix(kind: str) -> str:
+    """Return a file suffix that suits ``kind``, for examples in messages."""
+    return {'model': '.json', 'bag': '.mcap', 'html': '.html', 'png': '.png',
+            'json': '.json'}.get(kind, '')
+
+
+def _check_folder(folder: Path) -> None:
+    """Raise :class:`OutputError` unless files can be created in ``folder``."""
+    folder = folder if str(folder) else Path('.')
+    if not folder.exists():
+        # A path under a regular file ends here too (exists() is False for file/sub).
+        above = next((p for p in folder.parents if p.exists()), None)
+        if above is not None and not above.is_dir():
+            raise OutputError(f'cannot write in {folder}: {above} is a file, not a folder')
+        raise OutputError(f'output folder {folder} does not exist; create it first '
+                          f'(mkdir -p {folder})')
+    if not folder.is_dir():
+        raise OutputError(f'cannot write in {folder}: it is not a folder')
+    denied = OutputError(f'output folder {folder} is not writable; choose another folder or '
+                         f'fix its permissions')
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise denied
+    # os.access says yes to root on a read-only mount, and knows no ACL: try for real.
+    try:
+        fd, probe = tempfile.mkstemp(prefix='.sensor-comp.', suffix='.probe', dir=folder)
+    except OSError as exc:
+        if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+            raise denied from None
+        raise OutputError(f'cannot write in {folder}: {exc.strerror}') from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _same_file(st: os.stat_result, source: str | os.PathLike) -> bool:
+    """Tell whether ``st`` is the file ``source`` or a file directly in the folder ``source``."""
+    try:
+        other = os.stat(source)
+    except OSError:
+        return False
+    if (other.st_dev, other.st_ino) == (st.st_dev, st.st_ino):
+        return True
+    if not os.path.isdir(source):
+        return False
+    with os.scandir(source) as entries:
+        for entry in entries:
+            try:
+                inner = entry.stat()
+            except OSError:
+                continue
+            if (inner.st_dev, inner.st_ino) == (st.st_dev, st.st_ino):
+                return True
+    return False
 
 
 def write_text_atomically(path: str | os.PathLike, text: str) -> None:
