@@ -696,4 +696,3 @@ def write_csv(recording: Recording, path: str | Path) -> Path:
         stream.write('\n'.join(lines + [header]) + '\n')
         np.savetxt(stream, table, fmt=['%.12f'] + ['%.9g'] * 4, delimiter=',')
     return path
-
