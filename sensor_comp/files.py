@@ -10,16 +10,18 @@ unique name in the target folder and rename it.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 import errno
 import json
 import os
 from pathlib import Path
 import tempfile
-from typing import Iterable
+from typing import IO, Iterable, Iterator
 
 from .errors import SensorCompError
 
-__all__ = ['check_output', 'KINDS', 'OutputError', 'sniff_kind', 'write_text_atomically']
+__all__ = ['atomic_file', 'check_output', 'KINDS', 'open_temporary', 'OutputError', 'publish',
+           'save_figure', 'sniff_kind', 'write_text_atomically']
 
 #: What an output can be, with the words the error messages use for it.
 KINDS = {
@@ -88,8 +90,8 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
         raise OutputError(f'cannot use output {path}: {exc.strerror}') from None
     for source in inputs:
         if _same_file(st, source):
-            raise OutputError(f'output {path} is the input {source}; writing it would destroy '
-                              f'the input: choose another output name')
+            raise OutputError(f'output {path} would overwrite the input {source} (the same '
+                              f'file); inputs are never replaced: choose another output name')
     found = sniff_kind(path)
     if kind == 'directory':
         if found != 'directory':
@@ -213,29 +215,102 @@ def _same_file(st: os.stat_result, source: str | os.PathLike) -> bool:
     return False
 
 
-def write_text_atomically(path: str | os.PathLike, text: str) -> None:
+@contextmanager
+def atomic_file(path: str | os.PathLike, *, text: bool = False) -> Iterator[IO]:
     """
-    Write ``text`` to ``path`` via a temporary file in the same folder, then rename.
+    Open a unique temporary file beside ``path``; rename it to ``path`` when the block ends.
 
-    The file gets the permissions a plain ``open(path, 'w')`` would give (``0o666`` less
-    the umask), not the ``0o600`` of a temporary file.
+    The file appears under ``path`` only complete (flushed to disk), with the permissions a
+    plain ``open(path, 'w')`` gives. On any exception, ``KeyboardInterrupt`` and a SIGTERM
+    turned into one included, the temporary file is removed and ``path`` left as it was.
+
+    Args:
+        path: The file to write.
+        text: Open in text mode (UTF-8) instead of binary.
 
     Raises:
-        OSError: If the file cannot be written; ``path`` is then left as it was.
+        OSError: If the file cannot be created or written.
+
+    """
+    path = Path(path)
+    file, tmp = open_temporary(path, text=text)
+    try:
+        with file:
+            yield file
+            file.flush()
+            os.fsync(file.fileno())
+        publish(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def open_temporary(path: str | os.PathLike, *, text: bool = False) -> tuple[IO, Path]:
+    """
+    Create and open a temporary file for ``path`` in its folder: ``.NAME.XXXXXXXX.partial``.
+
+    The name is unique per call, so that concurrent writers of one output never share it;
+    the caller removes the file on failure or renames it with :func:`publish`.
+
+    Returns:
+        The open file (``'w'`` UTF-8 or ``'wb'``) and its path.
+
+    Raises:
+        OSError: If the folder does not take the file.
 
     """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial',
                                dir=path.parent or '.')
     try:
-        with os.fdopen(fd, 'w', encoding='utf-8') as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        return (os.fdopen(fd, 'w', encoding='utf-8') if text else os.fdopen(fd, 'wb')), Path(tmp)
     except BaseException:
+        os.close(fd)
         os.unlink(tmp)
         raise
+
+
+def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """
+    Rename a finished temporary file to ``path`` with a new file's permissions.
+
+    The permissions become ``0o666`` less the umask, not the ``0o600`` of a temporary file.
+
+    Raises:
+        OSError: If the rename fails (``tmp`` is then left for the caller to remove).
+
+    """
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+
+
+def save_figure(figure, path: str | os.PathLike, *, dpi: int = 100) -> None:
+    """
+    Save a matplotlib figure to ``path`` atomically, in the format its suffix names.
+
+    Check ``path`` first with :func:`check_output` (kind ``'png'``), which gives it a suffix.
+
+    Raises:
+        OutputError: If the file cannot be written (a full disk, say); ``path`` is then left
+            as it was.
+
+    """
+    try:
+        with atomic_file(path) as f:
+            figure.savefig(f, format=Path(path).suffix.lstrip('.').lower() or 'png', dpi=dpi)
+    except OSError as exc:
+        raise OutputError(f'cannot write plot {path}: {exc.strerror or exc}') from None
+
+
+def write_text_atomically(path: str | os.PathLike, text: str) -> None:
+    """
+    Write ``text`` to ``path`` via a temporary file in the same folder, then rename.
+
+    Raises:
+        OSError: If the file cannot be written; ``path`` is then left as it was.
+
+    """
+    with atomic_file(path, text=True) as f:
+        f.write(text)

@@ -14,7 +14,6 @@ interleaved in time order, each block's ``log_time`` and ``publish_time`` equal 
 from __future__ import annotations
 
 import heapq
-import os
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -22,6 +21,7 @@ from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 
 from .. import __version__
 from ..blocks import iter_blocks
+from ..files import open_temporary, publish
 from ..streams import Recording, STREAM_INFO, Stream
 from .messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info, IMAGE
 from .msgdefs import message_definition, type_hash
@@ -62,13 +62,16 @@ class BagWriter:
         path: The ``.mcap`` file to create (replaced if it exists). Its directory must exist.
         compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
         chunk_size: Uncompressed bytes after which a chunk is closed and written.
-        atomic: Write ``<path>.partial`` and rename it to ``path`` only when :meth:`close`
-            succeeds, so that ``path`` never holds a half-written bag. After an exception
-            inside the ``with`` block the ``.partial`` file is closed and kept for
-            inspection (the exception says where).
+        atomic: Write a temporary file with a unique name beside ``path``
+            (``.NAME.XXXXXXXX.partial``, see :func:`~sensor_comp.files.open_temporary`) and
+            rename it to ``path`` only when :meth:`close` succeeds, so that ``path`` never
+            holds a half-written bag and concurrent writers of one ``path`` do not collide.
+            On any exception inside the ``with`` block or in :meth:`close` (Ctrl-C and a
+            SIGTERM turned into an exception included) the temporary file is removed.
 
     Raises:
-        BagError: On an unknown compression, a bad chunk size or a missing directory.
+        BagError: On an unknown compression, a bad chunk size or a folder that does not
+            take the file.
 
     """
 
@@ -81,15 +84,21 @@ class BagWriter:
             raise BagError(f'chunk_size must be a positive number of bytes, got {chunk_size!r}')
         self.path = Path(path)
         self.atomic = atomic
-        self._file_path = (self.path.with_name(self.path.name + '.partial') if atomic
-                           else self.path)
         try:
-            self._file = open(self._file_path, 'wb')
+            if atomic:
+                self._file, self._file_path = open_temporary(self.path)
+            else:
+                self._file, self._file_path = open(self.path, 'wb'), self.path
         except OSError as exc:
-            raise BagError(f'cannot create bag {self._file_path}: {exc.strerror}') from None
-        self._writer = Writer(self._file, chunk_size=chunk_size,
-                              compression=_COMPRESSIONS[compression])
-        self._writer.start(profile=PROFILE, library=_LIBRARY)
+            raise BagError(f'cannot create bag {self.path}: {exc.strerror}') from None
+        try:
+            self._writer = Writer(self._file, chunk_size=chunk_size,
+                                  compression=_COMPRESSIONS[compression])
+            self._writer.start(profile=PROFILE, library=_LIBRARY)
+        except BaseException:
+            self._file.close()
+            self._discard()
+            raise
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
@@ -97,7 +106,7 @@ class BagWriter:
 
     @property
     def file_path(self) -> Path:
-        """File being written: ``path``, or ``<path>.partial`` until an atomic bag closes."""
+        """File being written: ``path``, or the temporary file until an atomic bag closes."""
         return self._file_path
 
     def __enter__(self) -> BagWriter:
@@ -107,10 +116,13 @@ class BagWriter:
         if exc is None:
             self.close()
             return
-        self._finish()
+        try:
+            self._finish()
+        finally:
+            self._discard()
         if self.atomic:
-            exc.add_note(f'the unfinished bag is kept for inspection at {self._file_path}; '
-                         f'{self.path} was not written')
+            exc.add_note(f'bag {self.path} was not written (its unfinished temporary file '
+                         f'was removed)')
         else:
             exc.add_note(f'bag {self.path} was closed early; it holds only the messages '
                          f'written before the error')
@@ -253,14 +265,24 @@ class BagWriter:
         """
         Finish the file (summary and footer) and, for an atomic bag, rename it to ``path``.
 
-        Calling it again does nothing.
+        Calling it again does nothing. If finishing an atomic bag fails or is interrupted,
+        its temporary file is removed.
         """
         if self._closed:
             return
-        self._finish()
+        try:
+            self._finish()
+            if self.atomic:
+                publish(self._file_path, self.path)
+        except BaseException:
+            self._discard()
+            raise
+        self._file_path = self.path
+
+    def _discard(self) -> None:
+        """Remove an atomic bag's temporary file (a plain bag stays as far as written)."""
         if self.atomic:
-            os.replace(self._file_path, self.path)
-            self._file_path = self.path
+            self._file_path.unlink(missing_ok=True)
 
     def _finish(self) -> None:
         if self._closed:
@@ -299,7 +321,8 @@ def write_streams(path, streams: Sequence[Stream], *, namespace: str = '/rig',
         streams: Streams with distinct relative topics (``info.topic``).
         namespace: Rig namespace of the topics.
         block_width: Samples per block.
-        atomic: Write to ``<path>.partial`` and rename on success.
+        atomic: Write a temporary file beside ``path`` and rename it on success (see
+            :class:`BagWriter`).
         compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
 
     Raises:

@@ -22,6 +22,7 @@ from pathlib import Path
 from .bag_reader import (AttachmentRecord, BagError, BagReader, DamagedChunk, MetadataRecord,
                          RawMessage)
 from .bag_writer import BagWriter
+from ..files import open_temporary, publish
 
 __all__ = ['RepairError', 'RepairReport', 'default_output', 'repair_bag']
 
@@ -173,8 +174,8 @@ def _same_file(a: Path, b: Path) -> bool:
     return a.exists() and b.exists() and os.path.samefile(a, b)
 
 
-def _check_output(source: Path, output: Path, overwrite: bool) -> Path:
-    """Refuse outputs that would replace the input or an existing file; return a temp name."""
+def _check_output(source: Path, output: Path, overwrite: bool) -> None:
+    """Refuse outputs that would replace the input or an existing file without overwrite."""
     if _same_file(output, source) or output.resolve() == source.resolve():
         raise RepairError(f'{output} is the bag being repaired; the input is never replaced: '
                           f'give another output (-o), e.g. {default_output(source)}')
@@ -184,10 +185,6 @@ def _check_output(source: Path, output: Path, overwrite: bool) -> Path:
     if output.exists() and not overwrite:
         raise RepairError(f'{output} exists; pass --force to replace it (it is replaced only '
                           f'once the repaired bag is complete)')
-    partial = output.with_name(output.name + '.partial')
-    if _same_file(partial, source):  # repairing run.mcap.partial into run.mcap
-        partial = output.with_name(output.name + '.repair.partial')
-    return partial
 
 
 def repair_bag(source, output=None, *, overwrite: bool = False) -> RepairReport:
@@ -211,14 +208,19 @@ def repair_bag(source, output=None, *, overwrite: bool = False) -> RepairReport:
     """
     output = default_output(source) if output is None else Path(output)
     with BagReader(source, skip_damaged=True) as bag:
-        partial = _check_output(bag.path, output, overwrite)
+        _check_output(bag.path, output, overwrite)
         recovered = {topic: 0 for topic in bag.topics}
         metadata = attachments = 0
         last = None
         added = set()
         try:
-            # Written under a temporary name, read back, then renamed: the output never
-            # holds a half-written or unverified bag.
+            # Written under a unique temporary name, read back, then renamed: the output
+            # never holds a half-written or unverified bag, and concurrent runs never collide.
+            file, partial = open_temporary(output)
+            file.close()
+        except OSError as exc:
+            raise RepairError(f'cannot write {output}: {exc.strerror or exc}') from None
+        try:
             with BagWriter(partial) as out:
                 for channel in bag.channels.values():
                     if channel.topic in added:
@@ -245,12 +247,14 @@ def repair_bag(source, output=None, *, overwrite: bool = False) -> RepairReport:
                                            create_time_ns=record.create_time_ns)
                         attachments += 1
             _verify(partial, recovered)
-            os.replace(partial, output)
-        except (BagError, OSError) as exc:
+            publish(partial, output)
+        except OSError as exc:
             partial.unlink(missing_ok=True)
-            if isinstance(exc, BagError):
-                raise
             raise RepairError(f'cannot write {output}: {exc.strerror or exc}') from None
+        except BaseException:
+            # A bad bag found half-way, Ctrl-C or SIGTERM: no temporary file is left.
+            partial.unlink(missing_ok=True)
+            raise
         return RepairReport(
             source=bag.path, output=output, source_bytes=bag.size, state=_state(bag),
             warning=bag.warning,
