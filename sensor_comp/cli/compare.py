@@ -7,11 +7,12 @@ import json
 import os
 
 from .identify import add_threshold
-from .sources import load_model, load_shots
+from .sources import add_force, load_model, load_shots
 from ..core.compare import compare, format_table
 from ..core.identify import ShotSource
 from ..core.model import Model, ModelError
 from ..errors import SensorCompError
+from ..files import check_output, save_figure
 
 __all__ = ['register', 'run', 'usable_source']
 
@@ -66,6 +67,7 @@ def register(subparsers) -> None:
     parser.add_argument('--window', nargs=2, type=float, action='append',
                         metavar=('START', 'STOP'), help='manual shot window in seconds')
     add_threshold(parser)
+    add_force(parser)
     parser.set_defaults(func=run)
 
 
@@ -79,17 +81,22 @@ def run(args: argparse.Namespace) -> int:
         if not path.endswith('.json'):
             raise SensorCompError(f'{path}: expected a model file (.json) before the '
                                   f'recording, which comes last')
+    plots = {flag: str(check_output(getattr(args, flag), inputs=args.paths, kind='png',
+                                    force=args.force))
+             for flag in ('plot', 'residual_plot') if getattr(args, flag)}
+    if len(set(plots.values())) < len(plots):
+        raise SensorCompError(f'--plot and --residual-plot both name {plots["plot"]}; give '
+                              f'them different names')
     models = [load_model(p) for p in model_paths]
     labels = _labels(model_paths)
     source, warnings = usable_source(recording_path, dict(zip(model_paths, models)),
                                      windows=args.window, threshold_g=args.threshold)
     comparisons = compare(models, source.recording, list(source.shots), labels=labels)
-    if args.plot or args.residual_plot:
+    if plots:
         from ..core.plots import comparison_figure, comparison_residual_figure
-        if args.plot:
-            comparison_figure(comparisons, path=args.plot)
-        if args.residual_plot:
-            comparison_residual_figure(comparisons, path=args.residual_plot)
+        figures = {'plot': comparison_figure, 'residual_plot': comparison_residual_figure}
+        for flag, path in plots.items():
+            save_figure(figures[flag](comparisons), path)
     if args.json:
         first = comparisons[0].to_dict()
         print(json.dumps({**first, 'recording': recording_path, 'warnings': warnings,
@@ -100,9 +107,8 @@ def run(args: argparse.Namespace) -> int:
         print(f'warning: {line}')
     print(f'{recording_path}: {len(source.shots)} shots')
     print(format_table(comparisons))
-    for plot in (args.plot, args.residual_plot):
-        if plot:
-            print(f'wrote {plot}')
+    for plot in plots.values():
+        print(f'wrote {plot}')
     return 0
 
 

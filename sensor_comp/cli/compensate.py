@@ -5,16 +5,16 @@ from __future__ import annotations
 import argparse
 from collections import deque
 import json
-import os
 
 import numpy as np
 
-from .sources import load_model
+from .sources import add_force, load_model
 from ..blocks import BlockSequence
 from ..core.compensation import CompensationFilter
 from ..core.model import ModelError
 from ..core.streaming import BlockCompensator
 from ..errors import SensorCompError
+from ..files import check_output
 from ..io.bag_reader import (BagReader, block_topics, find_namespace, read_stream_infos,
                              require_described)
 from ..io.bag_writer import BagWriter, topic_name
@@ -37,23 +37,27 @@ def register(subparsers) -> None:
     parser.add_argument('-o', '--output', required=True, help='output bag (.mcap)')
     parser.add_argument('--namespace', help='rig namespace (default: found from stream_info)')
     parser.add_argument('--json', action='store_true', help='print the sample accounting')
+    add_force(parser)
     parser.set_defaults(func=run)
 
 
 def compensate_bag(model, input_path: str, output_path: str, *,
-                   namespace: str | None = None) -> dict:
+                   namespace: str | None = None, force: bool = False) -> dict:
     """
     Copy a bag and add the model's ``pressure/compensated`` and ``pressure/induced``.
 
-    The output is written atomically (``OUTPUT.partial`` renamed when complete; removed when
-    the input turns out to be bad half-way). Blocks are paired by stamp and compensated in
-    time order with state carried across blocks; a stamp gap restarts the filter from rest.
+    The output is checked first (:func:`~sensor_comp.files.check_output`) and written
+    atomically: a uniquely named temporary file, renamed when complete and removed when the
+    input turns out to be bad half-way or the run is interrupted. Blocks are paired by stamp
+    and compensated in time order with state carried across blocks; a stamp gap restarts
+    the filter from rest.
 
     Args:
         model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``).
         input_path: The bag to read.
         output_path: The bag to write (not the input).
         namespace: Rig namespace; found from the ``stream_info`` topic when None.
+        force: Replace an existing output file of another kind (never the input).
 
     Returns:
         The sample accounting (see :class:`~sensor_comp.core.streaming.StreamCounters`)
@@ -64,13 +68,11 @@ def compensate_bag(model, input_path: str, output_path: str, *,
         SensorCompError: On a bag cut short, without both raw streams or their
             description, streams of different rates, a model/bag rate mismatch, blocks
             that overlap, are out of order or have the wrong shape, pressure and
-            acceleration blocks of which none pair, or when the output would overwrite the
-            input.
+            acceleration blocks of which none pair, or an output refused by
+            :func:`~sensor_comp.files.check_output` (e.g. the input itself).
 
     """
-    if os.path.abspath(output_path) == os.path.abspath(input_path) or (
-            os.path.exists(output_path) and os.path.samefile(output_path, input_path)):
-        raise SensorCompError(f'{output_path}: the output must not overwrite the input bag')
+    check_output(output_path, inputs=(input_path,), kind='bag', force=force)
     with BagReader(input_path) as bag:
         bag.check_complete()
         namespace = find_namespace(bag) if namespace is None else namespace
@@ -87,44 +89,40 @@ def compensate_bag(model, input_path: str, output_path: str, *,
                      topics[ACCELERATION]: BlockSequence(accel, name=topics[ACCELERATION])}
         pairing = _Pairing(topics[PRESSURE_RAW], topics[ACCELERATION])
         copied = 0
-        writer = BagWriter(output_path, atomic=True)
-        try:
-            with writer as out:
-                for name, info in bag.topics.items():
-                    out.add_topic(name, info.msgtype, latched=info.latched)
-                for name in (COMPENSATED, INDUCED):
-                    out.add_topic(topics[name], IMAGE)
-                announced = False
-                for msg in bag.messages():
-                    out.write(msg.topic, msg.data, log_time_ns=msg.log_time_ns,
+        # An error or interruption inside removes the temporary file: a partial output
+        # would only mislead.
+        with BagWriter(output_path, atomic=True) as out:
+            for name, info in bag.topics.items():
+                out.add_topic(name, info.msgtype, latched=info.latched)
+            for name in (COMPENSATED, INDUCED):
+                out.add_topic(topics[name], IMAGE)
+            announced = False
+            for msg in bag.messages():
+                out.write(msg.topic, msg.data, log_time_ns=msg.log_time_ns,
+                          publish_time_ns=msg.publish_time_ns)
+                copied += 1
+                if msg.topic == topics[STREAM_INFO] and not announced:
+                    out.write(msg.topic, _output_info(raw, msg.publish_time_ns),
+                              log_time_ns=msg.log_time_ns,
                               publish_time_ns=msg.publish_time_ns)
-                    copied += 1
-                    if msg.topic == topics[STREAM_INFO] and not announced:
-                        out.write(msg.topic, _output_info(raw, msg.publish_time_ns),
-                                  log_time_ns=msg.log_time_ns,
-                                  publish_time_ns=msg.publish_time_ns)
-                        announced = True
-                    elif msg.topic in sequences:
-                        stamp, data = _checked_block(input_path, msg, sequences[msg.topic])
-                        pairing.received(msg.topic, stamp, data.shape[1])
-                        add = (compensator.add_pressure if msg.topic == topics[PRESSURE_RAW]
-                               else compensator.add_acceleration)
-                        for block in add(stamp, data):
-                            pairing.paired(block.stamp_ns)
-                            for name, values in ((COMPENSATED, block.compensated),
-                                                 (INDUCED, block.induced)):
-                                out.write(topics[name], encode_block(
-                                    values[None], stamp_ns=block.stamp_ns,
-                                    frame_id=raw.frame_id),
-                                    log_time_ns=msg.log_time_ns, publish_time_ns=block.stamp_ns)
-                compensator.flush()
-                pairing.finish()
-                if not compensator.counters.output_samples:
-                    raise SensorCompError(pairing.describe_failure(input_path, raw.fs))
-        except SensorCompError:
-            # Bad input, found half-way: a partial output would only mislead.
-            writer.file_path.unlink(missing_ok=True)
-            raise
+                    announced = True
+                elif msg.topic in sequences:
+                    stamp, data = _checked_block(input_path, msg, sequences[msg.topic])
+                    pairing.received(msg.topic, stamp, data.shape[1])
+                    add = (compensator.add_pressure if msg.topic == topics[PRESSURE_RAW]
+                           else compensator.add_acceleration)
+                    for block in add(stamp, data):
+                        pairing.paired(block.stamp_ns)
+                        for name, values in ((COMPENSATED, block.compensated),
+                                             (INDUCED, block.induced)):
+                            out.write(topics[name], encode_block(
+                                values[None], stamp_ns=block.stamp_ns,
+                                frame_id=raw.frame_id),
+                                log_time_ns=msg.log_time_ns, publish_time_ns=block.stamp_ns)
+            compensator.flush()
+            pairing.finish()
+            if not compensator.counters.output_samples:
+                raise SensorCompError(pairing.describe_failure(input_path, raw.fs))
     return {**compensator.counters.to_dict(), 'copied_messages': copied,
             'first_unpaired': pairing.first_unpaired()}
 
@@ -225,12 +223,15 @@ def _output_info(raw: StreamInfo, stamp_ns: int) -> bytes:
 
 def run(args: argparse.Namespace) -> int:
     """Compensate the bag; return the exit code."""
+    args.output = str(check_output(args.output, inputs=(args.model, args.input), kind='bag',
+                                   force=args.force))
     model = load_model(args.model)
     try:
         model.check_stable()
     except ModelError as exc:
         raise ModelError(f'model {args.model}: {exc}') from None
-    counts = compensate_bag(model, args.input, args.output, namespace=args.namespace)
+    counts = compensate_bag(model, args.input, args.output, namespace=args.namespace,
+                            force=args.force)
     if args.json:
         print(json.dumps(counts, indent=2))
     elif not args.quiet:

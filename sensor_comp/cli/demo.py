@@ -10,24 +10,27 @@ the HTML report, and compensate the validation bag with the final model.
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 from .compensate import compensate_bag
 from .identify import describe_effect, describe_model
-from .sources import load_shots, progress_factory
+from .sources import add_force, load_shots, progress_factory
 from ..bundled import bundled_bag
 from ..core.compare import compare, format_table
 from ..core.diagnose import diagnose
 from ..core.identify import identify
 from ..core.report import html_report, write_report
 from ..core.residual import analyse
+from ..files import check_output, OutputError
 
 __all__ = ['register', 'run']
 
 #: The bundled pair the demo runs on (which effect it hides is for the demo to find out).
 CALIBRATION = 'case_i_calib.mcap'
 VALIDATION = 'case_i_valid.mcap'
+#: The files the demo writes in its output folder, by kind.
+OUTPUTS = {'model_base.json': 'model', 'model_paper_arx.json': 'model',
+           'model_extended.json': 'model', 'report.html': 'html', 'compensated.mcap': 'bag'}
 
 
 def register(subparsers) -> None:
@@ -39,15 +42,16 @@ def register(subparsers) -> None:
                     'write the HTML report and compensate the validation bag.')
     parser.add_argument('-o', '--output-dir', default='demo-out',
                         help='folder for models, report and compensated bag '
-                             '(default: %(default)s)')
+                             '(default: %(default)s; created if missing, in an existing '
+                             'folder)')
+    add_force(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo; return the exit code."""
-    out = Path(args.output_dir)
-    os.makedirs(out, exist_ok=True)
     calib_path, valid_path = str(bundled_bag(CALIBRATION)), str(bundled_bag(VALIDATION))
+    out = _output_folder(args.output_dir, inputs=(calib_path, valid_path), force=args.force)
     progress = progress_factory(args.quiet)
     calibration, validation = load_shots(calib_path), load_shots(valid_path)
     print(f'calibration: {calib_path} ({len(calibration.shots)} shots)')
@@ -104,8 +108,31 @@ def run(args: argparse.Namespace) -> int:
         title=f'sensor_comp demo: {VALIDATION}', shots=shots, comparisons=before,
         analysis=analysis, diagnosis=diagnosis.to_dict(), after=after[1:],
         sources=[f'calibration: {calib_path}', f'validation: {valid_path}']))
-    counts = compensate_bag(extended, valid_path, str(out / 'compensated.mcap'))
+    counts = compensate_bag(extended, valid_path, str(out / 'compensated.mcap'),
+                            force=args.force)
     print(f'compensated {counts["output_samples"]} of {counts["pressure_samples"]} samples '
           f'into {out / "compensated.mcap"}')
     print(f'report: {report}')
     return 0
+
+
+def _output_folder(folder: str, *, inputs: tuple[str, ...], force: bool) -> Path:
+    """
+    Check the output folder and the files the demo writes in it; create the folder.
+
+    Every check comes before the work, so that a bad ``-o`` fails at once.
+
+    Raises:
+        OutputError: If the folder cannot be used or one of :data:`OUTPUTS` is refused.
+
+    """
+    out = check_output(folder, inputs=inputs, kind='directory', force=force)
+    if out.is_dir():
+        for name, kind in OUTPUTS.items():
+            check_output(out / name, inputs=inputs, kind=kind, force=force)
+        return out
+    try:
+        out.mkdir()
+    except OSError as exc:
+        raise OutputError(f'cannot create output folder {out}: {exc.strerror}') from None
+    return out

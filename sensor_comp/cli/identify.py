@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 
-from .sources import load_shots, progress_factory
+from .sources import add_force, load_shots, progress_factory
 from ..core.identify import identify, STRUCTURES
 from ..core.shots import shot_table
+from ..files import check_output
 
 __all__ = ['add_threshold', 'describe_effect', 'describe_model', 'register',
            'run']
@@ -55,12 +56,15 @@ def register(subparsers) -> None:
                         help='add a physical effect of the catalogue to the model (repeat for '
                              'several; see sensor-comp diagnose)')
     add_threshold(parser)
+    add_force(parser)
     parser.add_argument('--json', action='store_true', help='print a JSON summary')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Identify and write the model; return the exit code."""
+    args.output = str(check_output(args.output, inputs=[*args.calibration, *args.validate],
+                                   kind='model', force=args.force))
     calibration = [load_shots(p, windows=args.window, threshold_g=args.threshold)
                    for p in args.calibration]
     validation = [load_shots(p, threshold_g=args.threshold) for p in args.validate]

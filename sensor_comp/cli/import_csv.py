@@ -7,7 +7,8 @@ from dataclasses import replace
 import math
 from pathlib import Path
 
-from ..errors import SensorCompError
+from .sources import add_force
+from ..files import check_output
 from ..io.csv_import import read_csv
 
 __all__ = ['register', 'run']
@@ -58,6 +59,7 @@ def register(subparsers) -> None:
     parser.add_argument('--time-tolerance', type=_positive_float, metavar='SECONDS',
                         help='accepted deviation of the time stamps from a uniform grid '
                              '(default: from the printed precision of the time column)')
+    add_force(parser)
     parser.set_defaults(func=run)
 
 
@@ -66,13 +68,12 @@ def run(args: argparse.Namespace) -> int:
     Import ``args.csv`` into the bag ``args.output``; return the exit code.
 
     Raises:
-        SensorCompError: On a malformed CSV file (:class:`CsvError`), an output that
-            would replace the input, or a failure writing the bag.
+        SensorCompError: On a malformed CSV file (:class:`CsvError`), an output refused by
+            :func:`~sensor_comp.files.check_output` (e.g. the CSV file itself), or a failure
+            writing the bag.
 
     """
-    if args.output.resolve() == args.csv.resolve():
-        raise SensorCompError(f'{args.output}: the bag would overwrite the CSV file; choose '
-                              f'another output name')
+    args.output = check_output(args.output, inputs=(args.csv,), kind='bag', force=args.force)
     recording = read_csv(args.csv, frame_id=args.frame_id,
                          time_tolerance_s=args.time_tolerance)
     if args.charge_sensitivity is not None:

@@ -8,11 +8,13 @@ Each sub-command module exposes ``register(subparsers)``, which adds its parser 
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 
 from ..errors import SensorCompError
 
-__all__ = ['main']
+__all__ = ['main', 'Terminated']
 
 #: Sub-command modules of :mod:`sensor_comp.cli`, in the order ``--help`` lists them.
 COMMANDS = ('simulate', 'import_csv', 'info', 'repair', 'identify', 'show', 'compare',
@@ -33,19 +35,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised as an exception so that writers remove their temporary files."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     """
     Run ``sensor-comp``; return the process exit code.
 
     User errors (bad files, bad values) print one ``sensor-comp: error:`` line and exit 1;
-    argparse usage errors exit 2.
+    argparse usage errors exit 2. Ctrl-C exits 130 and SIGTERM 143, both through the
+    writers' cleanup (no temporary file is left behind).
     """
     args = build_parser().parse_args(argv)
+    # signal.signal works only in the main thread (tests may call main from others).
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         return int(args.func(args) or 0)
     except SensorCompError as exc:
         print(f'sensor-comp: error: {exc}', file=sys.stderr)
         return 1
+    except Terminated:
+        print('sensor-comp: terminated', file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print('sensor-comp: interrupted', file=sys.stderr)
         return 130
@@ -53,6 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous or signal.SIG_DFL)
 
 
 if __name__ == '__main__':

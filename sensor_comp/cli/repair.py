@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from .sources import add_force
+from ..files import check_output
+
 __all__ = ['register', 'run']
 
 
@@ -20,17 +23,20 @@ def register(subparsers) -> None:
     parser.add_argument('bag', help='bag to repair (.mcap, or a rosbag2 directory)')
     parser.add_argument('-o', '--output', metavar='FIXED.mcap',
                         help='bag to write (default: BAG.repaired.mcap next to BAG)')
-    parser.add_argument('--force', action='store_true',
-                        help='replace the output if it exists (never the input)')
+    add_force(parser, help='replace the output if it exists (never the input)')
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Repair the bag and print what was recovered and lost; return the exit code."""
-    from ..io.repair import repair_bag
+    from ..io.repair import default_output, repair_bag
 
-    report = repair_bag(args.bag, args.output, overwrite=args.force)
+    # Checked here too (missing folder, a file of another kind), before the bag is read;
+    # repair_bag then refuses any existing output without --force.
+    output = check_output(default_output(args.bag) if args.output is None else args.output,
+                          inputs=(args.bag,), kind='bag', force=args.force)
+    report = repair_bag(args.bag, output, overwrite=args.force)
     if args.json:
         print(json.dumps(report.to_dict(), indent=2))
     elif not args.quiet:

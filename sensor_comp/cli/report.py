@@ -7,10 +7,11 @@ import argparse
 from .compare import usable_source
 from .diagnose import run_diagnosis
 from .identify import add_threshold
-from .sources import load_model
+from .sources import add_force, load_model
 from ..core.compare import compare
 from ..core.report import html_report, write_report
 from ..core.residual import analyse
+from ..files import check_output, OutputError
 
 __all__ = ['register', 'run']
 
@@ -35,6 +36,7 @@ def register(subparsers) -> None:
     parser.add_argument('--no-diagnosis', action='store_true',
                         help='leave the diagnosis out (no calibration data needed)')
     add_threshold(parser)
+    add_force(parser)
     parser.set_defaults(func=run)
 
 
@@ -42,6 +44,11 @@ def run(args: argparse.Namespace) -> int:
     """Write the report; return the exit code."""
     model = load_model(args.model)
     after = [load_model(p) for p in args.after]
+    # The diagnosis reads the model's own calibration bags unless --calibration names others.
+    calibration = args.calibration or [s.path for s in model.provenance]
+    args.output = str(check_output(args.output, inputs=[args.model, args.bag, *args.after,
+                                                        *calibration],
+                                   kind='html', force=args.force))
     source, warnings = usable_source(args.bag, dict(zip([args.model, *args.after],
                                                         [model, *after])),
                                      threshold_g=args.threshold)
@@ -59,7 +66,10 @@ def run(args: argparse.Namespace) -> int:
                        sources=[f'model: {args.model}', f'recording: {args.bag}',
                                 *(f'after: {p}' for p in args.after),
                                 *(f'warning: {line}' for line in warnings)])
-    write_report(args.output, text)
+    try:
+        write_report(args.output, text)
+    except OSError as exc:
+        raise OutputError(f'cannot write report {args.output}: {exc.strerror or exc}') from None
     if not args.quiet:
         verdict = f' (verdict: {diagnosis["verdict"]})' if diagnosis else ''
         print(f'wrote {args.output}{verdict}')

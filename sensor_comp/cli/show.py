@@ -8,9 +8,11 @@ import json
 import numpy as np
 
 from .identify import describe_model
-from .sources import load_model
+from .sources import add_force, load_model
 from ..core.ident.polynomials import max_root_radius
 from ..core.model import frequency_response, step_response
+from ..errors import SensorCompError
+from ..files import check_output, save_figure
 
 __all__ = ['register', 'run']
 
@@ -31,24 +33,32 @@ def register(subparsers) -> None:
     parser.add_argument('--step-plot', metavar='OUT.png', help='write the step response')
     parser.add_argument('--step-ms', type=float, default=2.0,
                         help='step response length in ms (default %(default)s)')
+    add_force(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Show the models; return the exit code."""
+    plots = {flag: str(check_output(getattr(args, flag), inputs=args.models, kind='png',
+                                    force=args.force))
+             for flag in ('response_plot', 'step_plot') if getattr(args, flag)}
+    if len(set(plots.values())) < len(plots):
+        raise SensorCompError(f'--response-plot and --step-plot both name '
+                              f'{plots["step_plot"]}; give them different names')
     models = {path: load_model(path) for path in args.models}
     responses = {path: frequency_response(m) for path, m in models.items()}
     steps = {path: step_response(m, duration_s=args.step_ms / 1e3) for path, m in models.items()}
-    if args.response_plot or args.step_plot:
+    if plots:
         from ..core.plots import frequency_response_figure, step_response_figure
-        if args.response_plot:
+        if 'response_plot' in plots:
             first = next(iter(responses.values()))[0]
-            frequency_response_figure(
-                first, {p: frequency_response(m, f_hz=first)[1][0] for p, m in models.items()},
-                path=args.response_plot)
-        if args.step_plot:
-            step_response_figure(next(iter(steps.values()))[0],
-                                 {p: y[0] for p, (_, y) in steps.items()}, path=args.step_plot)
+            save_figure(frequency_response_figure(
+                first, {p: frequency_response(m, f_hz=first)[1][0] for p, m in models.items()}),
+                plots['response_plot'])
+        if 'step_plot' in plots:
+            save_figure(step_response_figure(next(iter(steps.values()))[0],
+                                             {p: y[0] for p, (_, y) in steps.items()}),
+                        plots['step_plot'])
     if args.json:
         print(json.dumps({path: _document(m, responses[path], steps[path])
                           for path, m in models.items()}, indent=2))
@@ -72,9 +82,8 @@ def run(args: argparse.Namespace) -> int:
         for source in model.provenance:
             print(f'  from {source.path} (sha256 {source.sha256[:12]}…, '
                   f'{len(source.shots)} shots)')
-    for plot in (args.response_plot, args.step_plot):
-        if plot:
-            print(f'wrote {plot}')
+    for plot in plots.values():
+        print(f'wrote {plot}')
     return 0
 
 

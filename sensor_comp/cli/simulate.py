@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
+from .sources import add_force
 from ..errors import SensorCompError
+from ..files import check_output
 from ..sim import (describe_effects, parse_effect, random_shots, RigConfig, SensorConfig,
                    simulate, TABLE2)
 from ..sim.shots import PEAK_G_RANGE, WIDTH_S_RANGE
@@ -38,6 +40,7 @@ def register(subparsers) -> None:
                     'pressure (Pa) and acceleration (m/s²) as an MCAP bag. Physical effects '
                     'are switched on with --effect (see --list-effects).')
     parser.add_argument('-o', '--output', metavar='BAG', help='MCAP file to write')
+    add_force(parser)
     parser.add_argument('--shots', type=_shots_arg, default='table2', metavar='table2|N',
                         help='the seed paper\'s ten Table-2 shots (default), or N random '
                              'shots (harder blows are shorter, as on the rig)')
@@ -135,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.output:
         raise SensorCompError('simulate needs an output bag: -o BAG.mcap')
+    args.output = str(check_output(args.output, kind='bag', force=args.force))
     config = build_config(args)
     sim = simulate(config)
     from ..io.bag_writer import write_recording

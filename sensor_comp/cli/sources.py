@@ -1,4 +1,4 @@
-"""Load recordings and models named on the command line, with clear errors."""
+"""Load recordings and models named on the command line, with clear errors; ``--force``."""
 
 from __future__ import annotations
 
@@ -10,7 +10,18 @@ from ..core.model import load, Model
 from ..errors import SensorCompError
 from ..streams import Recording
 
-__all__ = ['load_model', 'load_recording', 'load_shots', 'progress_factory']
+__all__ = ['add_force', 'load_model', 'load_recording', 'load_shots', 'progress_factory']
+
+
+def add_force(parser, *, help: str = 'replace an existing output file even if it is of '
+                                     'another kind (never an input)') -> None:
+    """
+    Add ``--force``: replace an existing output file of another kind.
+
+    Without it, :func:`~sensor_comp.files.check_output` refuses to replace, say, a bag with
+    a model; an input is never replaced, whatever the flag.
+    """
+    parser.add_argument('--force', action='store_true', help=help)
 
 
 def load_recording(path: str) -> Recording:
