@@ -1,0 +1,603 @@
+"""
+Generalisation benchmark (issue 11): the diagnosis loop on independent random rigs.
+
+Every case is a rig of :mod:`bench.independent_rig` (a simulator written apart from
+``sensor_comp.sim``) with one hidden effect at an effect-to-noise ratio R, or none. Its
+shots are cut into two recordings, as a user would record a calibration and a validation
+bag (the first half of the shots and the rest), and the loop runs as the CLI runs it with
+its defaults:
+
+1. ``sensor-comp identify A --validate B`` (:func:`~sensor_comp.core.identify.identify`,
+   structure ``auto``, EMD, BIC): the base model and its worst validation peak residual;
+2. ``sensor-comp diagnose base.json B`` (:func:`~sensor_comp.core.diagnose.diagnose` with
+   the model as base and A as calibration): verdict and ranking;
+3. ``identify A --validate B --effect TOP`` with the top-ranked effect, and with the TRUE
+   effect when the rig hides a catalogue one: the worst peak residual after, the
+   recovered parameters and their stated uncertainty.
+
+The noise ceiling is the worst peak residual a perfect model would leave on B's shots: the
+white pressure noise alone (the generator's clean pressure subtracted), in % of the shot's
+measured peak, windows and baselines as the comparison takes them.
+
+Cases run in a pool of ``--workers`` processes (one process per case, killed after
+``--timeout`` s); any exception is a ``crash`` row with its stage and message. Rows go to a
+JSON lines file as they finish (default ``bench/out/generalise.jsonl``); the summary is
+printed at the end, or from a file with ``--summarise FILE``.
+
+The plan (``--seed``): catalogue effects × R = 0.5, 1.5, 5, out-of-catalogue effects at
+R = 1.5 and 5, and clean rigs in every rate band, cycled (each cycle moves every combination
+to the next rate band) until ``--cases`` rigs; ``--quick`` is the first cycle, 35 rigs.
+``--budget MIN`` stops launching cases after that many minutes (the rows so far count).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+import json
+import math
+import multiprocessing
+from multiprocessing.connection import wait
+import os
+from pathlib import Path
+import re
+import statistics
+import sys
+import tempfile
+import time
+import traceback
+
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+import numpy as np  # noqa: E402 (after the BLAS thread limit)
+
+from bench.independent_rig import (CATALOGUE, CLEAN, draw_spec, OUT_OF_CATALOGUE,  # noqa: E402
+                                   RATE_BANDS, simulate, write_csv)
+
+__all__ = ['CRITERIA', 'DEFAULT_OUT', 'R_VALUES', 'main', 'plan', 'run_case', 'summarise']
+
+#: Effect-to-noise ratios of the catalogue effects.
+R_VALUES = (0.5, 1.5, 5.0)
+#: Effect-to-noise ratios of the out-of-catalogue effects.
+R_OUTSIDE = (1.5, 5.0)
+#: Default JSON lines file (bench/out/ is git-ignored).
+DEFAULT_OUT = Path(__file__).resolve().parent / 'out' / 'generalise.jsonl'
+#: Verdicts that admit the residual is not (fully) explained by a catalogue name.
+HONEST = ('unexplained', 'partly_explained')
+#: A parameter is "within its stated uncertainty" when its error is at most this many std.
+PARAMETER_Z = 2.0
+#: The product's targets (issue 11), as printed under the summary.
+CRITERIA = (
+    'clean rigs: verdict adequate in >= 95 % at every rate band',
+    'catalogue effects at R >= 1.5: rank 1 and significant in >= 90 %, parameters within '
+    f'their stated uncertainty ({PARAMETER_Z:g} std)',
+    'out-of-catalogue effects: unexplained/partly_explained, never a confident catalogue name',
+    'after adding the named effect: worst peak residual <= 1.5x the noise ceiling',
+    'identify + diagnose <= 10 s for 10 shots at 1 MS/s')
+
+
+def _cycle() -> list[tuple[str, float, int]]:
+    """Return one cycle of the plan: ``(effect, R, index)``, clean rigs spread over it."""
+    combos = [(e, r) for r in R_VALUES for e in CATALOGUE]
+    combos += [(e, r) for r in R_OUTSIDE for e in OUT_OF_CATALOGUE]
+    step = len(combos) / len(RATE_BANDS)
+    marks = {round(step * (b + 1)) - 1: b for b in range(len(RATE_BANDS))}
+    cycle = []
+    for j, (effect, R) in enumerate(combos):
+        cycle.append((effect, R, j))
+        if j in marks:
+            cycle.append((CLEAN, 0.0, marks[j]))
+    return cycle
+
+
+def plan(count: int, seed: int) -> list[dict]:
+    """
+    Return ``count`` cases: effect, R, rate band and the rig's seed, in run order.
+
+    One cycle holds every catalogue effect at every R, every out-of-catalogue effect at
+    every R of :data:`R_OUTSIDE` and one clean rig per rate band; cycle ``k`` moves each
+    combination ``k`` bands on, so that a few cycles put every combination in every band.
+    """
+    cycle = _cycle()
+    cases = []
+    for i in range(count):
+        k, (effect, R, j) = i // len(cycle), cycle[i % len(cycle)]
+        band = RATE_BANDS[(j + k) % len(RATE_BANDS)]
+        rig_seed = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+        cases.append({'case': i, 'effect': effect, 'R': R, 'band': band[0],
+                      'rate_range': [band[1], min(band[2], 2e6)], 'seed': rig_seed})
+    return cases
+
+
+# One case (runs in a worker process).
+
+def _split(case, *, via_csv: bool, folder: str | None):
+    """Return the calibration and validation sources: the shots' first half and the rest."""
+    from sensor_comp.cli.sources import load_shots
+    from sensor_comp.core.identify import ShotSource
+    windows = case.truth['windows']
+    half = len(windows) // 2
+    cut = (windows[half - 1][1] + windows[half][0]) // 2
+    recording = case.recording
+    parts = (recording.slice(0, cut), recording.slice(cut, recording.n_samples))
+    if not via_csv:
+        return [ShotSource.detect(r) for r in parts], cut
+    paths = [write_csv(r, os.path.join(folder, f'{name}.csv'))
+             for r, name in zip(parts, ('calib', 'valid'))]
+    return [load_shots(str(p)) for p in paths], cut
+
+
+def _ceiling(case, cut: int, validation) -> float:
+    """Return the worst peak residual (%) a perfect model leaves on the validation shots."""
+    worst = 0.0
+    for source in validation:
+        clean = case.clean_pressure[cut:cut + source.recording.n_samples]
+        noise = source.recording.pressure - clean
+        for shot in source.shots:
+            r = noise[shot.window] - float(np.mean(noise[shot.baseline_window]))
+            y = source.recording.pressure[shot.window] - shot.baseline_pa
+            worst = max(worst, 100 * float(np.max(np.abs(r)) / np.max(np.abs(y))))
+    return worst
+
+
+def _angle_error(a: float, b: float) -> float:
+    return (a - b + 180.0) % 360.0 - 180.0
+
+
+def _parameter_check(entry: dict | None, truth: dict) -> dict:
+    """Return per parameter: value, std, truth, error in std and whether within PARAMETER_Z."""
+    out = {}
+    values = (entry or {}).get('parameters', {}) or {}
+    stds = (entry or {}).get('std', {}) or {}
+    for name, true in truth.items():
+        value, std = values.get(name), stds.get(name)
+        row = {'value': value, 'std': std, 'truth': true, 'z': None, 'ok': False}
+        if value is not None and math.isfinite(value):
+            error = _angle_error(value, true) if name.endswith('_deg') else value - true
+            row['relative_error'] = error / true if true else None
+            if std is not None and math.isfinite(std) and std > 0:
+                row['z'] = abs(error) / std
+                row['ok'] = row['z'] <= PARAMETER_Z
+            else:
+                row['ok'] = error == 0
+        out[name] = row
+    return out
+
+
+def _with_effect(row: dict, key: str, calibration, validation, effect: str) -> None:
+    """Identify again with ``effect`` added; record time, peak residual and parameters."""
+    from sensor_comp.core.identify import identify
+    began = time.perf_counter()
+    result = identify(calibration, validation=validation, effects=(effect,))
+    entry = next((e for e in result.model.effects if e.get('id') == effect), None)
+    row[key] = {'effect': effect, 'seconds': time.perf_counter() - began,
+                'peak_residual_percent': result.model.fit['validation_peak_residual_percent'],
+                'validation_fit_percent': result.validation_fit_percent,
+                'parameters': (entry or {}).get('parameters'), 'std': (entry or {}).get('std')}
+    if effect == row['effect']:
+        row[key]['check'] = _parameter_check(entry, row['truth']['parameters'])
+
+
+def _ranking(diagnosis) -> list[dict]:
+    return [{'effect': r.effect, 'score': r.score, 'significant': r.significant,
+             'p_value': r.p_value, 'peak_residual_percent': r.peak_residual_percent,
+             'parameters': {k: [v, s] for k, (v, s) in r.parameters.items()}}
+            for r in diagnosis.ranking]
+
+
+def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str]) -> None:
+    """Run identify, diagnose and the re-identifications, filling ``row``."""
+    from sensor_comp.core.diagnose import diagnose
+    from sensor_comp.core.identify import identify
+    stage[0] = 'detect'
+    (calib, valid), cut = _split(case, via_csv=via_csv, folder=folder)
+    row['shots_detected'] = [len(calib.shots), len(valid.shots)]
+    stage[0] = 'identify'
+    began = time.perf_counter()
+    base = identify([calib], validation=[valid])
+    row['identify_s'] = time.perf_counter() - began
+    row['base'] = {'orders': base.model.orders, 'nk': base.model.nk,
+                   'explanation': base.explanation[:400],
+                   'validation_fit_percent': base.validation_fit_percent,
+                   'excluded': list(base.excluded)}
+    row['before_percent'] = base.model.fit['validation_peak_residual_percent']
+    row['ceiling_percent'] = _ceiling(case, cut, base.validation)
+    stage[0] = 'diagnose'
+    began = time.perf_counter()
+    diagnosis = diagnose([calib], [valid], base=base.model)
+    row['diagnose_s'] = time.perf_counter() - began
+    row['verdict'] = diagnosis.verdict
+    row['explanation'] = diagnosis.explanation[:400]
+    row['ranking'] = _ranking(diagnosis)
+    row['skipped'] = [[s.effect, s.reason[:200]] for s in diagnosis.skipped]
+    top = diagnosis.ranking[0].effect if diagnosis.ranking else None
+    if top is not None:
+        stage[0] = 'identify_top'
+        _with_effect(row, 'top', [calib], [valid], top)
+    if row['effect'] in CATALOGUE:
+        stage[0] = 'identify_true'
+        if top == row['effect']:
+            row['true'] = row['top']
+        else:
+            _with_effect(row, 'true', [calib], [valid], row['effect'])
+
+
+def run_case(task: dict, *, via_csv: bool = False) -> dict:
+    """
+    Simulate one rig and run the loop on it; never raises.
+
+    Args:
+        task: A case of :func:`plan`.
+        via_csv: Write the two recordings as CSV and read them as the CLI does.
+
+    Returns:
+        The JSON-ready row (``status`` ``'ok'`` or ``'crash'`` with ``crash`` = stage,
+        exception type and message).
+
+    """
+    began = time.perf_counter()
+    row = dict(task, status='ok')
+    stage = ['simulate']
+    try:
+        spec = draw_spec(task['seed'], effect=task['effect'], R=task['R'],
+                         rate_range=tuple(task['rate_range']))
+        case = simulate(spec)
+        row['truth'] = case.truth
+        row['fs'] = spec.fs
+        with tempfile.TemporaryDirectory(prefix='generalise-') as folder:
+            _loop(row, case, via_csv=via_csv, folder=folder, stage=stage)
+    except Exception as exc:  # every failure is a result
+        row['status'] = 'crash'
+        row['crash'] = {'stage': stage[0], 'type': type(exc).__name__,
+                        'message': str(exc)[:1000],
+                        'where': traceback.format_exc().strip().splitlines()[-3:-1]}
+    row['seconds'] = time.perf_counter() - began
+    return json.loads(json.dumps(row, default=_json_default))
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
+
+# The pool: one process per case, at most ``workers`` at a time, each with a deadline.
+
+def _child(task: dict, via_csv: bool, conn) -> None:
+    conn.send(run_case(task, via_csv=via_csv))
+    conn.close()
+
+
+def _lost(task: dict, why: str, seconds: float) -> dict:
+    return dict(task, status='crash', seconds=seconds,
+                crash={'stage': 'worker', 'type': why, 'message': why})
+
+
+def run_pool(tasks: list[dict], *, workers: int, timeout: float, via_csv: bool,
+             budget_s: float | None, on_row) -> int:
+    """
+    Run the cases, ``workers`` at a time; call ``on_row(row)`` as each finishes.
+
+    A case over ``timeout`` s is killed (a ``crash`` row, type ``timeout``); after
+    ``budget_s`` no new case starts. Returns the number of cases run.
+    """
+    context = multiprocessing.get_context('fork')
+    pending, running, started = list(tasks), {}, time.perf_counter()
+    done = 0
+    while pending or running:
+        in_budget = budget_s is None or time.perf_counter() - started < budget_s
+        while pending and in_budget and len(running) < workers:
+            task = pending.pop(0)
+            receive, send = context.Pipe(duplex=False)
+            process = context.Process(target=_child, args=(task, via_csv, send), daemon=True)
+            process.start()
+            send.close()
+            running[process.sentinel] = (process, receive, task, time.perf_counter())
+        if not running:
+            break
+        wait(list(running), timeout=1.0)
+        for sentinel, (process, receive, task, t0) in list(running.items()):
+            elapsed = time.perf_counter() - t0
+            row = None
+            if receive.poll():
+                try:
+                    row = receive.recv()
+                except EOFError:
+                    row = None
+            if row is None and not process.is_alive():
+                row = _lost(task, f'worker died (exit code {process.exitcode})', elapsed)
+            if row is None and elapsed > timeout:
+                process.kill()
+                row = _lost(task, 'timeout', elapsed)
+                row['crash']['message'] = f'no result after {timeout:g} s: killed'
+            if row is not None:
+                process.join(5)
+                receive.close()
+                del running[sentinel]
+                done += 1
+                on_row(row)
+    return done
+
+
+# The summary.
+
+def _table(headers: list[str], rows: list[list[object]]) -> str:
+    """Return rows as an aligned text table (text left, numbers right)."""
+    cells = [[str(c) for c in row] for row in rows]
+    widths = [max([len(h)] + [len(r[i]) for r in cells]) for i, h in enumerate(headers)]
+    numeric = [all(re.fullmatch(r'[-+0-9.,/ %x()nae—]*', r[i]) for r in cells)
+               for i in range(len(headers))]
+
+    def line(values):
+        return '  '.join(v.rjust(w) if num else v.ljust(w)
+                         for v, w, num in zip(values, widths, numeric)).rstrip()
+
+    return '\n'.join([line(headers), '  '.join('-' * w for w in widths)]
+                     + [line(r) for r in cells])
+
+
+def _rate(hits: int, n: int) -> str:
+    return f'{hits}/{n} ({100 * hits / n:.0f} %)' if n else '—'
+
+
+def _median(values) -> str:
+    values = [v for v in values if v is not None and math.isfinite(v)]
+    return f'{statistics.median(values):.2f}' if values else '—'
+
+
+def _detected(row: dict) -> bool:
+    ranking = row.get('ranking') or []
+    return bool(ranking) and ranking[0]['effect'] == row['effect'] and \
+        ranking[0]['significant']
+
+
+def _params_ok(row: dict) -> bool:
+    check = (row.get('true') or {}).get('check') or {}
+    return bool(check) and all(c['ok'] for c in check.values())
+
+
+def _ratio(row: dict, key: str, over: str) -> float | None:
+    after = (row.get(key) or {}).get('peak_residual_percent')
+    below = row.get(over)
+    return after / below if after is not None and below else None
+
+
+def _named(row: dict) -> str | None:
+    """Return the confidently named effect: rank 1 and significant, else None."""
+    ranking = row.get('ranking') or []
+    return ranking[0]['effect'] if ranking and ranking[0]['significant'] else None
+
+
+def _catalogue_table(rows: list[dict]) -> tuple[str, dict]:
+    out, rates = [], {}
+    for effect in CATALOGUE:
+        for R in R_VALUES:
+            group = [r for r in rows if r['effect'] == effect and r['R'] == R]
+            ok = [r for r in group if r['status'] == 'ok']
+            hits = sum(_detected(r) for r in ok)
+            params = sum(_params_ok(r) for r in ok)
+            rates[effect, R] = (hits, len(group), params)
+            named = Counter(_named(r) or r.get('verdict', '?') for r in ok if not _detected(r))
+            out.append([effect, f'{R:g}', len(group), _rate(hits, len(group)),
+                        _rate(params, len(group)),
+                        _median(_ratio(r, 'true', 'before_percent') for r in ok),
+                        _median(_ratio(r, 'true', 'ceiling_percent') for r in ok),
+                        _median(_ratio(r, 'top', 'ceiling_percent') for r in ok),
+                        len(group) - len(ok),
+                        ', '.join(f'{k} {v}' for k, v in named.most_common(3))])
+    headers = ['effect', 'R', 'n', 'rank 1 + significant', 'params ok', 'true: after/before',
+               'true: after/ceiling', 'named: after/ceiling', 'crash',
+               'otherwise (named or verdict)']
+    return _table(headers, out), rates
+
+
+def _clean_table(rows: list[dict]) -> tuple[str, dict]:
+    out, rates = [], {}
+    for band, _, _ in RATE_BANDS:
+        group = [r for r in rows if r['effect'] == CLEAN and r['band'] == band]
+        ok = [r for r in group if r['status'] == 'ok']
+        adequate = sum(r.get('verdict') == 'adequate' for r in ok)
+        rates[band] = (adequate, len(group))
+        verdicts = Counter(r.get('verdict') for r in ok)
+        named = Counter(_named(r) for r in ok if _named(r))
+        out.append([band, len(group), _rate(adequate, len(group)),
+                    _rate(len(ok) - adequate, len(group)),
+                    ', '.join(f'{k} {v}' for k, v in sorted(verdicts.items())),
+                    ', '.join(f'{k} {v}' for k, v in named.most_common(3)) or '—',
+                    _median(r.get('before_percent', math.nan) / r['ceiling_percent']
+                            for r in ok if r.get('ceiling_percent')),
+                    len(group) - len(ok)])
+    headers = ['rate band', 'n', 'adequate', 'false alarm', 'verdicts', 'named',
+               'base: peak/ceiling', 'crash']
+    return _table(headers, out), rates
+
+
+def _outside_table(rows: list[dict]) -> tuple[str, dict]:
+    out, rates = [], {}
+    for effect in OUT_OF_CATALOGUE:
+        for R in R_OUTSIDE:
+            group = [r for r in rows if r['effect'] == effect and r['R'] == R]
+            ok = [r for r in group if r['status'] == 'ok']
+            honest = sum(r.get('verdict') in HONEST for r in ok)
+            confident = [r for r in ok if r.get('verdict') not in HONEST + ('adequate',)]
+            rates[effect, R] = (honest, len(group), len(confident))
+            named = Counter(_named(r) for r in confident)
+            out.append([effect, f'{R:g}', len(group), _rate(honest, len(group)),
+                        _rate(len(confident), len(group)),
+                        _rate(sum(r.get('verdict') == 'adequate' for r in ok), len(group)),
+                        ', '.join(f'{k} {v}' for k, v in named.most_common(3)) or '—',
+                        _median(_ratio(r, 'top', 'ceiling_percent') for r in ok),
+                        len(group) - len(ok)])
+    headers = ['effect', 'R', 'n', 'unexplained/partly', 'confident name', 'adequate',
+               'names given', 'named: after/ceiling', 'crash']
+    return _table(headers, out), rates
+
+
+def _crash_table(rows: list[dict]) -> str:
+    crashes = Counter()
+    example = {}
+    for r in rows:
+        if r['status'] != 'ok':
+            key = (r['crash']['stage'], r['crash']['type'])
+            crashes[key] += 1
+            example.setdefault(key, f"case {r['case']} ({r['effect']}): "
+                                    f"{r['crash']['message'][:110]}")
+    if not crashes:
+        return 'crashes: none'
+    return _table(['stage', 'exception', 'count', 'first'],
+                  [[s, t, n, example[s, t]] for (s, t), n in crashes.most_common()])
+
+
+def _normalised_s(row: dict) -> float | None:
+    """Return identify + diagnose seconds scaled to 10 shots at 1 MS/s (linear in samples)."""
+    if row.get('diagnose_s') is None or not row.get('shots_detected'):
+        return None
+    shots = sum(row['shots_detected'])
+    return (row['identify_s'] + row['diagnose_s']) * 10 / shots * 1e6 / row['fs']
+
+
+def _time_table(rows: list[dict]) -> tuple[str, list[float]]:
+    out = []
+
+    def stat(name, values):
+        values = [v for v in values if v is not None]
+        if values:
+            out.append([name, len(values), f'{statistics.median(values):.1f}',
+                        f'{max(values):.1f}'])
+        return values
+
+    stat('case (all stages)', [r.get('seconds') for r in rows])
+    stat('identify (base)', [r.get('identify_s') for r in rows])
+    stat('diagnose', [r.get('diagnose_s') for r in rows])
+    stat('identify + effect', [(r.get('top') or {}).get('seconds') for r in rows])
+    for band, lo, hi in RATE_BANDS:
+        stat(f'identify + diagnose, {band}',
+             [r['identify_s'] + r['diagnose_s'] for r in rows
+              if r.get('diagnose_s') is not None and lo <= r['fs'] < hi])
+    normalised = stat('identify + diagnose per 10 shots at 1 MS/s',
+                      [_normalised_s(r) for r in rows])
+    return _table(['time (s)', 'n', 'median', 'max'], out), normalised
+
+
+def _criteria(clean: dict, catalogue: dict, outside: dict, rows: list[dict],
+              normalised: list[float]) -> list[str]:
+    lines = []
+    bands = {b: v for b, v in clean.items() if v[1]}
+    worst = min(bands.items(), key=lambda kv: kv[1][0] / kv[1][1], default=None)
+    if worst:
+        share = worst[1][0] / worst[1][1]
+        lines.append(f'[{"PASS" if share >= 0.95 else "FAIL"}] {CRITERIA[0]}: worst band '
+                     f'{worst[0]} {_rate(*worst[1])}')
+    strong = {k: v for k, v in catalogue.items() if k[1] >= 1.5 and v[1]}
+    if strong:
+        key = min(strong, key=lambda k: (min(strong[k][0], strong[k][2]) / strong[k][1]))
+        hits, n, params = strong[key]
+        passed = all(v[0] >= 0.9 * v[1] and v[2] >= 0.9 * v[1] for v in strong.values())
+        lines.append(f'[{"PASS" if passed else "FAIL"}] {CRITERIA[1]}: worst {key[0]} at R = '
+                     f'{key[1]:g}: found {_rate(hits, n)}, parameters {_rate(params, n)}')
+    n = sum(v[1] for v in outside.values())
+    if n:
+        confident = sum(v[2] for v in outside.values())
+        honest = sum(v[0] for v in outside.values())
+        lines.append(f'[{"PASS" if confident == 0 and honest == n else "FAIL"}] {CRITERIA[2]}: '
+                     f'honest {_rate(honest, n)}, confident name {_rate(confident, n)}')
+    ratios = [_ratio(r, 'top', 'ceiling_percent') for r in rows
+              if r['effect'] in CATALOGUE and r['R'] >= 1.5 and r['status'] == 'ok']
+    ratios = [x for x in ratios if x is not None]
+    if ratios:
+        within = sum(x <= 1.5 for x in ratios)
+        lines.append(f'[{"PASS" if within == len(ratios) else "FAIL"}] {CRITERIA[3]} '
+                     f'(catalogue rigs at R >= 1.5): {_rate(within, len(ratios))}, median '
+                     f'{statistics.median(ratios):.2f}x')
+    if normalised:
+        within = sum(x <= 10 for x in normalised)
+        lines.append(f'[{"PASS" if within == len(normalised) else "FAIL"}] {CRITERIA[4]} '
+                     f'(scaled by samples): {_rate(within, len(normalised))}, median '
+                     f'{statistics.median(normalised):.1f} s, max {max(normalised):.1f} s')
+    return lines
+
+
+def summarise(rows: list[dict]) -> str:
+    """Return the summary tables and the criteria of a benchmark's rows."""
+    catalogue, catalogue_rates = _catalogue_table(rows)
+    clean, clean_rates = _clean_table(rows)
+    outside, outside_rates = _outside_table(rows)
+    times, normalised = _time_table(rows)
+    crashed = sum(r['status'] != 'ok' for r in rows)
+    parts = [
+        f'{len(rows)} rigs, {crashed} crashed',
+        '', 'Catalogue effects (rank 1 + significant = detected; params ok = every parameter '
+            f'of the TRUE effect, added, within {PARAMETER_Z:g} std of the truth; ratios are '
+            'medians of the worst validation peak residual):', catalogue,
+        '', 'Clean rigs (false alarm = any verdict but adequate):', clean,
+        '', 'Out-of-catalogue effects (honest = unexplained/partly_explained; confident = '
+            'missing_effect with a catalogue name):', outside,
+        '', _crash_table(rows),
+        '', times,
+        '', 'Criteria:'] + _criteria(clean_rates, catalogue_rates, outside_rates, rows,
+                                     normalised)
+    return '\n'.join(parts)
+
+
+def read_rows(path: str | Path) -> list[dict]:
+    """Return the rows of a JSON lines file."""
+    with open(path, encoding='utf-8') as stream:
+        return [json.loads(line) for line in stream if line.strip()]
+
+
+def _progress(row: dict, done: int, total: int, began: float) -> str:
+    verdict = row.get('verdict') or f"CRASH in {row['crash']['stage']}"
+    named = _named(row) or '-'
+    return (f"[{done}/{total} {time.perf_counter() - began:6.0f} s] case {row['case']:3d} "
+            f"{row['effect']:23s} R={row['R']:<3g} {row.get('fs', 0) / 1e6:5.2f} MS/s "
+            f"{verdict:15s} named {named:23s} {row['seconds']:5.0f} s")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark (or ``--summarise`` a file); return the exit code."""
+    parser = argparse.ArgumentParser(prog='python -m bench --only generalise --',
+                                     description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--quick', action='store_true',
+                        help=f'one cycle of the plan ({len(_cycle())} rigs)')
+    parser.add_argument('--cases', type=int, default=300, help='rigs to draw (default 300)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the plan (default 0)')
+    parser.add_argument('--workers', type=int, default=2, help='processes (default 2)')
+    parser.add_argument('--timeout', type=float, default=900.0,
+                        help='seconds per case before it is killed (default 900)')
+    parser.add_argument('--budget', type=float, metavar='MIN',
+                        help='start no case after this many minutes')
+    parser.add_argument('--start', type=int, default=0, help='skip the first cases of the plan')
+    parser.add_argument('--out', default=str(DEFAULT_OUT), help='JSON lines file of the rows')
+    parser.add_argument('--append', action='store_true', help='append to --out')
+    parser.add_argument('--via-csv', action='store_true',
+                        help='write each recording as CSV and read it as the CLI does')
+    parser.add_argument('--summarise', metavar='FILE', nargs='+',
+                        help='print the summary of JSON lines files and exit')
+    args = parser.parse_args(argv)
+    if args.summarise:
+        print(summarise([row for path in args.summarise for row in read_rows(path)]))
+        return 0
+    count = len(_cycle()) if args.quick else args.cases
+    tasks = plan(count, args.seed)[args.start:]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows, began = [], time.perf_counter()
+    print(f'{len(tasks)} rigs, {args.workers} workers, rows to {out}', flush=True)
+    with open(out, 'a' if args.append else 'w', encoding='utf-8') as stream:
+        def on_row(row):
+            rows.append(row)
+            stream.write(json.dumps(row) + '\n')
+            stream.flush()
+            print(_progress(row, len(rows), len(tasks), began), flush=True)
+        run_pool(tasks, workers=args.workers, timeout=args.timeout, via_csv=args.via_csv,
+                 budget_s=None if args.budget is None else 60 * args.budget, on_row=on_row)
+    rows.sort(key=lambda r: r['case'])
+    print(f'\n{len(rows)} of {len(tasks)} rigs in {time.perf_counter() - began:.0f} s\n')
+    print(summarise(rows))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
