@@ -31,6 +31,14 @@ and decay after each impact), ``accel_resonance`` (a resonance in the accelerome
 channel only), ``cable_bursts`` (band-limited triboelectric noise bursts at the impacts,
 not through the anti-alias filter) and ``cubic_nonlinearity`` (drive ``a + κ a³/g²``).
 
+Effect-to-noise ratio: the rms of the effect's contribution over the shot windows after
+the best gain and baseline per window are removed, over the noise σ (:func:`ratio`). The
+strength is solved for R at the drawn noise; where the strength has a physical range
+(:data:`BOUNDS`; the nonlinear effects change the sensitivity by at most
+:data:`NONLINEAR_LIMIT` at the hardest shot) it is clipped and the noise σ chosen to give R
+instead. The per-window gain hides what a sensitivity change does across shots, so the
+nonlinear effects need large strengths for a given R and often sit at the limit.
+
 :func:`draw_spec` draws a rig from a seed, :func:`simulate` makes the
 :class:`~sensor_comp.streams.Recording` and the truth, :func:`write_csv` writes it in the
 public CSV import format.
@@ -71,6 +79,9 @@ PRE_MS, POST_MS = 5.0, 20.0
 BOUNDS = {'amplifier_highpass': (5.0, 200.0), 'channel_delay': (2.0, 60.0),
           'transverse_sensitivity': (0.02, 0.2), 'second_resonance': (0.0, 1.0),
           'accel_resonance': (0.0, 1.0)}
+#: Largest relative change of sensitivity at the rig's hardest shot for the nonlinear
+#: effects (``|β|·max|a|`` and ``|κ|·max|a|²``).
+NONLINEAR_LIMIT = 0.5
 
 
 def rate_band(fs: float) -> str:
@@ -585,15 +596,26 @@ def _build(effect: str, grid: _Grid, base: _Base, shape: dict) -> _Effect:
     return _outside(effect, grid, base, shape)
 
 
+def _bounds(effect: str, spec: RigSpec) -> tuple[float, float]:
+    """Return the range of the strength: :data:`BOUNDS`, or a physical limit of the rig."""
+    top_g = max(abs(s.z.peak) for s in spec.shots) / G0
+    if effect == 'nonlinear_sensitivity':  # the sensitivity changes by at most half
+        return 0.0, NONLINEAR_LIMIT / top_g
+    if effect == 'cubic_nonlinearity':
+        return 0.0, NONLINEAR_LIMIT / top_g ** 2
+    return BOUNDS.get(effect, (0.0, math.inf))
+
+
 def _strength(effect: str, built: _Effect, R: float, sigma: float, induced: np.ndarray,
-              windows: list[tuple[int, int]]) -> tuple[float, float]:
+              windows: list[tuple[int, int]], bounds: tuple[float, float]
+              ) -> tuple[float, float]:
     """
     Return the strength giving ``R`` at noise ``sigma``, and the noise σ to use.
 
-    Within :data:`BOUNDS` the noise stays; a strength outside them is clipped and the
-    noise set so that R holds.
+    Within ``bounds`` the noise stays; a strength outside them is clipped and the noise
+    set so that R holds.
     """
-    lo, hi = BOUNDS.get(effect, (0.0, math.inf))
+    lo, hi = bounds
 
     def rms(x):
         return project_rms(built.contribution(x), induced, windows)
@@ -642,7 +664,8 @@ def simulate(spec: RigSpec) -> Case:
     clean = base.sampled.copy()
     if spec.effect != CLEAN:
         built = _build(spec.effect, grid, base, spec.shape)
-        x, sigma = _strength(spec.effect, built, spec.R, spec.noise_pa, base.sampled, windows)
+        x, sigma = _strength(spec.effect, built, spec.R, spec.noise_pa, base.sampled, windows,
+                             _bounds(spec.effect, spec))
         effect_pressure = built.contribution(x)
         parameters = built.truth(x)
         if built.in_pressure:
