@@ -80,6 +80,9 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
     if not str(path) or str(path).endswith(os.sep) and kind != 'directory':
         raise OutputError(f'output {str(path)!r} is not a file name; give a name like '
                           f'out{_example_suffix(kind)}')
+    if kind != 'directory' and os.path.isdir(path):  # before a plot name gets its suffix
+        raise OutputError(f'output {path} is a folder; give a file name in it, like '
+                          f'{Path(path) / ("out" + _example_suffix(kind))}')
     path = _with_plot_suffix(Path(path)) if kind == 'png' else Path(path)
     _check_folder(path.parent)
     try:
@@ -98,9 +101,6 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
             raise OutputError(f'output folder {path} is {KINDS.get(found, "a file")}; choose '
                               f'another folder name')
         _check_folder(path)
-    elif found == 'directory':
-        raise OutputError(f'output {path} is a folder; give a file name in it, like '
-                          f'{path / ("out" + _example_suffix(kind))}')
     elif found not in (kind, None, 'empty') and not force:
         what = KINDS.get(found, 'a file of another kind')
         raise OutputError(f'output {path} exists and is {what}, not {KINDS[kind]}; choose '

@@ -116,14 +116,15 @@ class BagWriter:
         if exc is None:
             self.close()
             return
-        try:
-            self._finish()
-        finally:
-            self._discard()
         if self.atomic:
+            # No summary for a file about to be removed: a Ctrl-C exits at once.
+            self._closed = True
+            self._file.close()
+            self._discard()
             exc.add_note(f'bag {self.path} was not written (its unfinished temporary file '
                          f'was removed)')
         else:
+            self._finish()
             exc.add_note(f'bag {self.path} was closed early; it holds only the messages '
                          f'written before the error')
 
