@@ -4,25 +4,34 @@ The identification node's fits, run in a worker process.
 A fit (EMD, the output-error search) and its diagnosis take seconds to minutes of Python
 and numpy. Run in a thread of the node, they held the GIL for long stretches and starved
 block reception: in the soak the node fell behind by 0.3-0.5 s per second of fit, the
-backlog sitting in its DDS queue. Here they run in the one process of a
-:class:`~concurrent.futures.ProcessPoolExecutor` started with ``spawn``: a fresh
-interpreter, because forking a process that runs rclpy and DDS threads copies locks held
-by other threads. This module imports no ROS; what crosses the process boundary is
-picklable (numpy arrays, frozen dataclasses, option dicts), and errors of the core come
-back as text, so a worker never needs the node's classes.
+backlog sitting in its DDS queue. Here they run in a :class:`FitWorker`: a fresh
+interpreter started by ``subprocess`` (forking a process that runs rclpy and DDS threads
+copies locks held by other threads), which imports this module and nothing else; calls
+and their results travel pickled over two pipes. Unlike ``multiprocessing``'s ``spawn``
+(used before), it never imports the user's ``__main__`` script, so a rig script needs no
+``if __name__ == '__main__':`` guard: with one missing, the worker used to start a second
+acquisition and recorder of its own and die. The worker gets the parent's ``sys.path``
+(as ``spawn`` does), so it runs the same ``sensor_comp``.
 
-The worker ignores SIGINT: a Ctrl-C reaches the whole process group, and the node itself
-decides when to stop its worker (:meth:`Identification.destroy_node
-<sensor_comp.nodes.identification.Identification.destroy_node>`).
+This module imports no ROS; what crosses the process boundary is picklable (numpy
+arrays, frozen dataclasses, option dicts), and errors of the core come back as text, so
+a worker never needs the node's classes.
+
+The worker ignores SIGINT from its first statement on: a Ctrl-C reaches the whole process
+group, and the node itself decides when to stop its worker (:meth:`Identification.destroy_node
+<sensor_comp.nodes.identification.Identification.destroy_node>`). It exits when its request
+pipe closes (the node retired it, or the node process died).
 """
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-import multiprocessing
 import os
+import pickle
 import signal
+import subprocess
+import sys
+import traceback
 
 from ..core.diagnose import diagnose
 from ..core.identify import identify, ShotSource
@@ -31,7 +40,18 @@ from ..core.shots import Shot
 from ..errors import SensorCompError
 from ..streams import Recording
 
-__all__ = ['Diagnosis', 'Fitted', 'diagnose_fit', 'fit_shots', 'start_pool']
+__all__ = ['Diagnosis', 'FitWorker', 'Fitted', 'WorkerDied', 'diagnose_fit', 'fit_shots',
+           'serve', 'start_worker']
+
+# Run by the worker interpreter: ignore SIGINT first, then take the parent's module path.
+_BOOTSTRAP = ('import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); import sys; '
+              'sys.path[:] = {path!r}; from {module} import serve; serve({read}, {write})')
+# How long a retired worker may take to exit before it is killed.
+_EXIT_WAIT_S = 5.0
+
+
+class WorkerDied(Exception):
+    """The worker process ended before it answered (killed, out of memory, stopped)."""
 
 
 @dataclass(frozen=True)
@@ -72,26 +92,151 @@ class Diagnosis:
     explanation: str = ''
 
 
-def _ignore_sigint() -> None:
+class FitWorker:
+    """
+    One worker process that runs calls one at a time (see the module documentation).
+
+    Use it from one thread; :meth:`terminate` may come from any thread.
+
+    Attributes:
+        pid: The worker's process id.
+
+    """
+
+    def __init__(self):
+        read, child_write = os.pipe()
+        child_read, write = os.pipe()
+        code = _BOOTSTRAP.format(path=list(sys.path), module=__name__, read=child_read,
+                                 write=child_write)
+        try:
+            self._process = subprocess.Popen([sys.executable, '-c', code],
+                                             stdin=subprocess.DEVNULL,
+                                             pass_fds=(child_read, child_write))
+        except BaseException:
+            for fd in (read, write):
+                os.close(fd)
+            raise
+        finally:
+            os.close(child_read)
+            os.close(child_write)
+        self.pid = self._process.pid
+        self._requests = os.fdopen(write, 'wb')
+        self._replies = os.fdopen(read, 'rb')
+
+    @property
+    def alive(self) -> bool:
+        """Whether the process is still running."""
+        return self._process.poll() is None
+
+    def describe_exit(self) -> str:
+        """Return how the process ended (``'exit status 1'``, ``'killed by SIGTERM'``...)."""
+        code = self._process.poll()
+        if code is None:
+            return 'running'
+        if code >= 0:
+            return f'exit status {code}'
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f'signal {-code}'
+        # The kernel's out-of-memory killer sends SIGKILL.
+        return f'killed by {name}' + (': out of memory?' if -code == signal.SIGKILL else '')
+
+    def call(self, function, *args):
+        """
+        Return ``function(*args)`` run in the worker (a module-level function).
+
+        Raises:
+            WorkerDied: If the process ended before it answered.
+            Exception: What the call raised in the worker (its traceback in the message).
+
+        """
+        try:
+            pickle.dump((function, args), self._requests, protocol=pickle.HIGHEST_PROTOCOL)
+            self._requests.flush()
+            ok, value = pickle.load(self._replies)
+        except (OSError, EOFError, pickle.UnpicklingError):
+            if self.alive:  # a broken reply from a live worker: it is no use either
+                self._process.kill()
+            self._process.wait()
+            raise WorkerDied(f'the fit worker process {self.pid} died '
+                             f'({self.describe_exit()})') from None
+        if not ok:
+            raise value
+        return value
+
+    def terminate(self) -> None:
+        """Stop the process now (a running call then raises :class:`WorkerDied`)."""
+        if self.alive:
+            self._process.terminate()
+
+    def close(self) -> None:
+        """Let the process exit (it sees its request pipe close), wait for it; idempotent."""
+        for pipe in (self._requests, self._replies):
+            try:
+                pipe.close()
+            except OSError:  # a request half-written to a dead worker
+                pass
+        try:
+            self._process.wait(_EXIT_WAIT_S)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait()
+
+
+def start_worker() -> FitWorker:
+    """
+    Return a new worker process.
+
+    The node starts one for each fit and its diagnosis and retires it after them: a fit
+    allocates hundreds of MB (EMD, the search), and a long-lived interpreter keeps some of
+    it (the 10-minute soak measured its node plus worker growing by 4 MB/min with one
+    worker for every fit); a fresh interpreter costs about a second against fits of tens
+    of seconds.
+    """
+    return FitWorker()
+
+
+def _reply(ok: bool, value) -> bytes:
+    """Pickle a reply; an unpicklable result or error comes back as a RuntimeError."""
+    try:
+        return pickle.dumps((ok, value), protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as exc:  # whatever pickling raises: sent back as text
+        text = (''.join(traceback.format_exception(value)) if isinstance(value, BaseException)
+                else repr(value))
+        return pickle.dumps((False, RuntimeError(f'fit worker: cannot send back {text} '
+                                                 f'({exc})')))
+
+
+def serve(read_fd: int, write_fd: int) -> None:
+    """
+    Answer calls from the node until the request pipe closes (the worker's main loop).
+
+    Args:
+        read_fd: The pipe the pickled ``(function, args)`` requests come on.
+        write_fd: The pipe the pickled ``(ok, result or exception)`` replies go on.
+
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-#: Tasks (a fit and its diagnosis) a worker process runs before a fresh one replaces it.
-TASKS_PER_WORKER = 2
-
-
-def start_pool() -> ProcessPoolExecutor:
-    """
-    Return a pool of one spawned worker process that ignores SIGINT.
-
-    The worker is replaced after every fit and its diagnosis: a fit allocates hundreds of
-    MB (EMD, the search), and a long-lived interpreter keeps some of it (the 10-minute soak
-    measured its node plus worker growing by 4 MB/min with one worker for every fit); a
-    fresh interpreter costs about a second against fits of tens of seconds.
-    """
-    return ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context('spawn'),
-                               initializer=_ignore_sigint,
-                               max_tasks_per_child=TASKS_PER_WORKER)
+    with os.fdopen(read_fd, 'rb') as requests:
+        try:
+            while True:
+                try:
+                    function, args = pickle.load(requests)
+                except EOFError:
+                    return
+                try:
+                    reply = _reply(True, function(*args))
+                except Exception as exc:  # re-raised in the node, with the traceback from here
+                    exc.add_note(''.join(traceback.format_exception(exc)))
+                    reply = _reply(False, exc)
+                view = memoryview(reply)
+                while view:
+                    view = view[os.write(write_fd, view):]
+        except BrokenPipeError:  # the node is gone
+            return
+        finally:
+            os.close(write_fd)
 
 
 def fit_shots(recording: Recording, shots: tuple[Shot, ...], options: dict) -> Fitted:

@@ -82,13 +82,15 @@ paired_samples + unpaired_pressure_samples + overlapping_samples`` (blocks still
 for their partner aside).
 
 Threads and processes: identification (EMD, the output-error fit) and the diagnosis run in
-a worker **process** (:mod:`sensor_comp.nodes._fit_worker`: one spawned process, started
-at the first fit, ~1-2 s of imports), fed with a snapshot of the kept windows; a thread
-of the node waits for it and publishes the result. So the callbacks that receive blocks
-return at once, never wait for a fit, and never compete with it for the GIL (in a thread,
-a fit starved reception: 0.3-0.5 s behind per second of fit in the soak). A worker that
-dies (killed, out of memory) fails the fit it was running with a logged error; the next
-fit starts a new worker. Destroying the node stops the worker, a running fit included.
+a worker **process** (:mod:`sensor_comp.nodes._fit_worker`: a fresh interpreter started
+for each fit and ended after its diagnosis, ~1-2 s of imports; it never imports the
+caller's ``__main__``, so scripts need no ``if __name__ == '__main__':`` guard), fed with
+a snapshot of the kept windows; a thread of the node waits for it and publishes the
+result. So the callbacks that receive blocks return at once, never wait for a fit, and
+never compete with it for the GIL (in a thread, a fit starved reception: 0.3-0.5 s
+behind per second of fit in the soak). A worker that dies (killed, out of memory) fails
+the call it was running with a logged error saying how it ended; the next call starts a
+new worker. Destroying the node stops the worker, a running fit included.
 The ``~/fit`` service waits for its fit in the service callback, which has a callback
 group of its own: with a ``MultiThreadedExecutor`` (what :func:`main` and
 :mod:`sensor_comp.nodes.pipeline` use) the blocks keep coming in on the other thread
@@ -100,7 +102,6 @@ from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError as FutureTimeout
-from concurrent.futures.process import BrokenProcessPool, ProcessPoolExecutor
 from dataclasses import dataclass, replace
 import hashlib
 import inspect
@@ -130,7 +131,7 @@ from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTIC
                       diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
                       merge_stream_infos, message_class, NodeError, publish_raw, run_main,
                       spin_until, subscribe_blocks, take_queued)
-from ._fit_worker import diagnose_fit, fit_shots, start_pool
+from ._fit_worker import diagnose_fit, fit_shots, FitWorker, start_worker, WorkerDied
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
@@ -384,8 +385,8 @@ class Identification(Node):
         self._last_error: str | None = None
         self._stop = threading.Event()
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='identification')
-        self._pool: ProcessPoolExecutor | None = None  # the fit process, from the first fit
-        self._pool_lock = threading.Lock()
+        self._process: FitWorker | None = None  # the fit process, during a fit
+        self._process_lock = threading.Lock()
         self._block_subscriptions, self._takers = subscribe_blocks(
             self, (PRESSURE_RAW, ACCELERATION), self._on_block, self._take_queued)
         self.create_subscription(message_class(DIAGNOSTIC_ARRAY), STREAM_INFO,
@@ -617,6 +618,12 @@ class Identification(Node):
             self._submit()
 
     def _fit(self, windows: tuple[ShotWindow, ...]) -> _Outcome:
+        try:
+            return self._fit_and_diagnose(windows)
+        finally:
+            self._retire_process()
+
+    def _fit_and_diagnose(self, windows: tuple[ShotWindow, ...]) -> _Outcome:
         began = time.monotonic()
         recording, shots = self._concatenate(windows)
         options = {'structure': self.structure, 'orders': self.orders, 'delay': self.delay,
@@ -625,12 +632,11 @@ class Identification(Node):
             options['effects'] = tuple(self.effects)
         try:
             fitted = self._in_process(fit_shots, recording, shots, options)
-        except BrokenProcessPool:
+        except WorkerDied as exc:
             if self._stop.is_set():
                 return _Outcome(False, 'the node stopped during the fit')
             fitted = None
-            error = ('the fit worker process died (killed? out of memory?); the next fit '
-                     'starts a new one')
+            error = f'{exc}; the next fit starts a new one'
         else:
             error = fitted.error
         if error is not None:
@@ -660,50 +666,52 @@ class Identification(Node):
 
     def _in_process(self, function, *args):
         """
-        Run ``function(*args)`` in the fit process and return its result.
+        Run ``function(*args)`` in the fit process (started if needed) and return its result.
 
         A worker found dead before the call (it died while idle) is replaced at once.
 
         Raises:
-            BrokenProcessPool: If the worker died during the call (the next call starts a
-                new one), or the node is being destroyed.
+            WorkerDied: If the worker died during the call (the next call starts a new
+                one), or the node is being destroyed.
 
         """
-        with self._pool_lock:
+        with self._process_lock:
             if self._stop.is_set():
-                raise BrokenProcessPool('the node is being destroyed')
-            if self._pool is None:
-                self._pool = start_pool()
-            try:
-                future = self._pool.submit(function, *args)
-            except BrokenProcessPool:
-                self.get_logger().error('the fit worker process had died (killed? out of '
-                                        'memory?); starting a new one')
-                self._pool.shutdown(wait=False)
-                self._pool = start_pool()
-                future = self._pool.submit(function, *args)
-            pool = self._pool
+                raise WorkerDied('the node is being destroyed')
+            worker = self._process
+            if worker is not None and not worker.alive:
+                self.get_logger().error(f'the fit worker process {worker.pid} had died '
+                                        f'({worker.describe_exit()}); starting a new one')
+                worker.close()
+                worker = None
+            if worker is None:
+                worker = self._process = start_worker()
         try:
-            return future.result()
-        except BrokenProcessPool:
-            with self._pool_lock:
-                if self._pool is pool:
-                    self._pool = None
-            pool.shutdown(wait=False)
+            return worker.call(function, *args)
+        except WorkerDied:
+            with self._process_lock:
+                if self._process is worker:
+                    self._process = None
+            worker.close()
             raise
+
+    def _retire_process(self) -> None:
+        """End the worker after a fit and its diagnosis: the next fit gets a fresh one."""
+        with self._process_lock:
+            worker, self._process = self._process, None
+        if worker is not None:
+            worker.close()
 
     def _diagnose(self, fitted, model: Model) -> None:
         # After the model is out: the diagnosis (seconds) never delays compensation.
         try:
             found = self._in_process(diagnose_fit, fitted.calibration, fitted.validation,
                                      model)
-        except BrokenProcessPool:
+        except WorkerDied as exc:
             if self._stop.is_set():
                 return
-            verdict = {'diagnosis_verdict': 'failed',
-                       'diagnosis_error': 'the fit worker process died'}
-            self.get_logger().error('diagnosis failed: the fit worker process died (killed? '
-                                    'out of memory?); the next fit starts a new one')
+            verdict = {'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)}
+            self.get_logger().error(f'diagnosis failed: {exc}; the next fit starts a new one')
         else:
             verdict = found.verdict
             if found.explanation:
@@ -812,16 +820,13 @@ class Identification(Node):
 
     def destroy_node(self) -> None:
         """Stop the fit process (a running fit too, queued ones are dropped), then destroy."""
-        with self._pool_lock:
+        with self._process_lock:
             self._stop.set()
-            pool, self._pool = self._pool, None
-        if pool is not None:
-            # A fit can take minutes: a stop must not wait for it. The pool has no public
-            # way to end a running call; its worker processes are in ``_processes``.
-            for process in list((getattr(pool, '_processes', None) or {}).values()):
-                process.terminate()
-            pool.shutdown(wait=True, cancel_futures=True)
+            worker = self._process
+        if worker is not None:
+            worker.terminate()  # a fit can take minutes: a stop must not wait for it
         self._worker.shutdown(wait=True, cancel_futures=True)
+        self._retire_process()  # the fit thread has retired it, unless it never ran
         super().destroy_node()
 
 

@@ -1,6 +1,5 @@
 """The identification node: live shots from a replayed bag, the same model as offline."""
 
-from concurrent.futures import ThreadPoolExecutor
 import json
 import os
 import signal
@@ -186,6 +185,22 @@ def test_automatic_fit_at_min_shots_and_refit_after_more(context, calibration_ba
     assert [entry['index'] for entry in node.model.provenance[0].shots] == [0, 1, 2, 3]
 
 
+class _InProcess:
+    """Stands in for the fit worker process: runs the calls in the node's fit thread."""
+
+    pid = os.getpid()
+    alive = True
+
+    def call(self, function, *args):
+        return function(*args)
+
+    def terminate(self):
+        pass
+
+    def close(self):
+        pass
+
+
 def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkeypatch, params,
                                                 play, spin, wait):
     started, release = threading.Event(), threading.Event()
@@ -195,11 +210,9 @@ def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkey
         assert release.wait(20.0)
         return identify(*args, **kwargs)
 
-    # The fit held in this process, where the test can hold it: a thread stands in for
-    # the worker process.
+    # The fit held in this process, where the test can hold it.
     monkeypatch.setattr(fit_worker, 'identify', slow_identify)
-    monkeypatch.setattr(identification_module, 'start_pool',
-                        lambda: ThreadPoolExecutor(max_workers=1))
+    monkeypatch.setattr(identification_module, 'start_worker', _InProcess)
     node = Identification(context=context, parameter_overrides=params(**FIT, min_shots=2))
     stop = spin(node)
     try:
@@ -218,16 +231,20 @@ def test_blocks_keep_coming_in_while_a_fit_runs(context, calibration_bag, monkey
     node.destroy_node()
 
 
-def _worker_pids(node) -> list[int]:
-    return list(node._pool._processes)
-
-
-def test_fits_run_in_a_worker_process_that_is_replaced_when_it_dies(
-        context, calibration_bag, monkeypatch, params, node_log):
+@pytest.fixture
+def four_shots(context, calibration_bag, monkeypatch, params):
+    """Return an identification node holding four shots, and the fit workers it starts."""
     def in_this_process(*args, **kwargs):
         raise AssertionError('the fit ran in the node process')
 
     monkeypatch.setattr(fit_worker, 'identify', in_this_process)
+    workers = []
+
+    def start_worker():
+        workers.append(fit_worker.start_worker())
+        return workers[-1]
+
+    monkeypatch.setattr(identification_module, 'start_worker', start_worker)
     rec = read_recording(calibration_bag)
     accel, press = rec.streams()
     node = Identification(context=context, parameter_overrides=params(
@@ -236,33 +253,72 @@ def test_fits_run_in_a_worker_process_that_is_replaced_when_it_dies(
     for (stamp, a), (_, p) in zip(iter_blocks(accel, width=1000), iter_blocks(press, width=1000)):
         node._handle('acceleration', encode_block(a, stamp_ns=stamp, frame_id='s'))
         node._handle('pressure/raw', encode_block(p, stamp_ns=stamp, frame_id='s'))
+    assert len(node.windows) == 4 and node.fits == 0  # below min_shots: no automatic fit
+    yield node, workers
+    node.destroy_node()
+    assert node._process is None and not any(w.alive for w in workers)
+
+
+def test_each_fit_runs_in_a_fresh_worker_process_replaced_when_it_dies(four_shots, wait,
+                                                                       node_log):
+    node, workers = four_shots
+    first = node.fit().result(60)
+    assert first.success, first.message
+    assert len(workers) == 1 and workers[0].pid != os.getpid()
+    assert node._process is None and not workers[0].alive  # retired after the fit
+    # Killed between the fit and its diagnosis (idle): the diagnosis starts a new one.
+    node.diagnose = True
+    fit_then_diagnose = node._diagnose
+
+    def kill_first(fitted, model):
+        assert fitted.pid == workers[-1].pid
+        os.kill(fitted.pid, signal.SIGKILL)
+        wait(lambda: not workers[-1].alive, what='the worker to die')
+        fit_then_diagnose(fitted, model)
+
+    node._diagnose = kill_first
+    second = node.fit().result(120)
+    assert second.success, second.message
+    np.testing.assert_array_equal(second.model.b, first.model.b)
+    assert len(workers) == 3 and node.verdict['diagnosis_verdict'] != 'failed'
+    assert len(node_log.matching(f'the fit worker process {workers[1].pid} had died (killed '
+                                 f'by SIGKILL: out of memory?); starting a new one')) == 1
+    node.diagnose = False
+    # Killed during a fit: that fit fails with a logged error, the next one works.
+    during = node.fit()
+    wait(lambda: len(workers) == 4, what='the fit to start a worker')
+    os.kill(workers[3].pid, signal.SIGKILL)
+    failed = during.result(60)
+    assert not failed.success and f'worker process {workers[3].pid} died' in failed.message
+    assert len(node_log.matching('failed: the fit worker process', 'died (killed by SIGKILL',
+                                 'the next fit starts a new one')) == 1
+    third = node.fit().result(60)
+    assert third.success, third.message
+    assert len(workers) == 5 and node.fits == 4
+    np.testing.assert_array_equal(third.model.a, first.model.a)
+
+
+def test_destroying_the_node_stops_a_running_fit(four_shots, wait):
+    node, workers = four_shots
+    during = node.fit()
+    wait(lambda: workers and workers[0].alive, what='the fit to start a worker')
+    node.destroy_node()
+    assert during.result(10).message == 'the node stopped during the fit'
+    assert workers[0].describe_exit() == 'killed by SIGTERM'
+
+
+def test_the_worker_ignores_sigint_and_reports_errors_with_their_traceback():
+    worker = fit_worker.start_worker()
     try:
-        assert len(node.windows) == 4 and node.fits == 0  # below min_shots: no automatic fit
-        first = node.fit().result(60)
-        assert first.success, first.message
-        [pid] = _worker_pids(node)
-        assert pid != os.getpid()
-        # Killed while idle: the next fit notices and starts a new worker at once.
-        os.kill(pid, signal.SIGKILL)
-        node._pool._processes[pid].join(10)
-        second = node.fit().result(60)
-        assert second.success, second.message
-        np.testing.assert_array_equal(second.model.b, first.model.b)
-        assert len(node_log.matching('the fit worker process had died')) == 1
-        [pid] = _worker_pids(node)
-        # Killed during a fit: that fit fails with a logged error, the next one works.
-        during = node.fit()
-        os.kill(pid, signal.SIGKILL)
-        failed = during.result(60)
-        assert not failed.success and 'worker process died' in failed.message
-        assert len(node_log.matching('failed: the fit worker process died')) == 1
-        third = node.fit().result(60)
-        assert third.success, third.message
-        assert _worker_pids(node) != [pid] and node.fits == 4
-        np.testing.assert_array_equal(third.model.a, first.model.a)
+        assert worker.call(os.getpid) == worker.pid
+        os.kill(worker.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
+        with pytest.raises(ValueError, match='invalid literal') as raised:
+            worker.call(int, 'x')
+        assert 'Traceback' in raised.value.__notes__[0]
+        assert worker.alive
     finally:
-        node.destroy_node()
-    assert node._pool is None
+        worker.close()
+    assert worker.describe_exit() == 'exit status 0'
 
 
 def test_identification_process_writes_the_model(node_process, calibration_bag, tmp_path,

@@ -1,6 +1,9 @@
 """Launch-free composition: acquisition, identification, compensation and recorder."""
 
+import ast
+import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 
@@ -19,6 +22,8 @@ from sensor_comp.nodes.identification import provenance_shots
 from sensor_comp.nodes.pipeline import pipeline, PipelineTimeout
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
+ROOT = Path(__file__).resolve().parents[2]
+RIG_HEADING = '### A rig script: several nodes in one process, no launch file'
 FS = 2e5
 #: The acquisition simulates five shots at 200 kS/s; the node keeps four (the last one's
 #: post-trigger runs past the end of the recording).
@@ -108,4 +113,57 @@ def test_core_import_does_not_load_ros():
     code = ('import sys, sensor_comp, sensor_comp.core.identify; '
             'assert "rclpy" not in sys.modules; '
             'assert callable(sensor_comp.pipeline); assert "rclpy" in sys.modules')
-    subprocess.run([sys.executable, '-c', code], check=True, cwd=Path(__file__).parents[2])
+    subprocess.run([sys.executable, '-c', code], check=True, cwd=ROOT)
+
+
+def _readme_rig_script() -> str:
+    """Return the python code block under the README's rig-script heading."""
+    text = (ROOT / 'README.md').read_text(encoding='utf-8')
+    assert RIG_HEADING in text, f'README.md has no heading {RIG_HEADING!r}'
+    section = text.split(RIG_HEADING, 1)[1]
+    block = re.search(r'^```python\n(.*?)^```', section, re.MULTILINE | re.DOTALL)
+    assert block and not re.search(r'^#+ ', section[:block.start()], re.MULTILINE), (
+        f'no python code block under {RIG_HEADING!r} in README.md')
+    return block.group(1)
+
+
+@pytest.mark.slow
+def test_the_readme_rig_script_runs_as_written(ros_domain, tmp_path):
+    # As a user runs it: the README's code saved as a script (no __main__ guard) and run
+    # in its own folder; only the import path points at this checkout.
+    script = tmp_path / 'rig.py'
+    script.write_text(_readme_rig_script(), encoding='utf-8')
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    try:
+        run = subprocess.run([sys.executable, script.name], cwd=tmp_path, env=env,
+                             capture_output=True, text=True, timeout=420)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f'the rig script did not finish:\n{exc.stdout}\n{exc.stderr}')
+    assert run.returncode == 0, f'{run.stdout}\n{run.stderr}'
+    # Its prints: the fit, then the compensation's accounting, every sample compensated.
+    printed = re.search(r'^model: ([\d.]+) % fit on (\d+) validation shots$', run.stdout,
+                        re.MULTILINE)
+    assert printed, run.stdout
+    fit_percent, validation_shots = float(printed.group(1)), int(printed.group(2))
+    assert 75 < fit_percent < 100 and validation_shots >= 2
+    accounting = ast.literal_eval(run.stdout.strip().splitlines()[-1])
+    truth = simulate(RigConfig(fs=1e6, shots=random_shots(6, seed=0), seed=0))
+    n = truth.recording.n_samples
+    assert accounting['pressure_samples'] == accounting['output_samples'] == n
+    assert accounting['unpaired_pressure_samples'] == accounting['gaps'] == 0
+
+    # sensor.json: the simulated sensor (5 kHz, 1.4e-4 MPa/g), with the printed fit.
+    model = load(tmp_path / 'sensor.json')
+    assert f'{model.fit["validation_fit_percent"]:.1f}' == printed.group(1)
+    view = model.continuous()
+    assert view.natural_frequency_hz == pytest.approx(5000, rel=0.05)
+    assert view.sensitivity_MPa_per_g == pytest.approx(1.4e-4, rel=0.1)
+
+    # run.mcap: the simulated samples, and a compensated stream that removed the
+    # acceleration-induced pressure (what is left of it: under 5 % rms).
+    recording = read_recording(tmp_path / 'run.mcap')
+    np.testing.assert_array_equal(recording.pressure, truth.recording.pressure)
+    compensated = read_streams(tmp_path / 'run.mcap')['pressure/compensated']
+    assert compensated.n_samples == n and not compensated.gaps
+    left = compensated.data[0] - (recording.pressure - truth.induced)
+    assert np.sqrt(np.mean(left ** 2)) < 0.05 * np.sqrt(np.mean(truth.induced ** 2))
