@@ -1,0 +1,191 @@
+"""
+Where a campaign's tasks run: a Dask cluster (local or remote), or this process.
+
+- **local** (default): a :class:`distributed.LocalCluster` of worker *processes* with one
+  thread each (the analysis is numpy/scipy code that holds the GIL between calls, so
+  processes, not threads, use the cores), BLAS limited to one thread per worker
+  (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` = 1: small solves
+  slow down 30× when BLAS threads fight for the cores). Its size: one worker per core
+  available to this process, fewer when memory is short (:data:`MEMORY_PER_WORKER`).
+- **distributed**: ``scheduler='tcp://host:8786'`` (or ``DASK_SCHEDULER_ADDRESS``) runs the
+  same tasks on a running Dask cluster, e.g. one started by ``dask-jobqueue`` on SLURM or
+  PBS. The workers must have sensor_comp installed and see the recordings under the same
+  paths (a shared file system); results come back to this process, which writes every
+  output file.
+- **synchronous**: every task runs in this process when submitted, without Dask: for
+  tests, debugging and profiling.
+
+All three offer ``submit`` and ``completed`` (futures in the order they finish, including
+futures submitted while iterating), so the campaign streams results as they come.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Iterator
+import concurrent.futures
+import logging
+import os
+import resource
+
+from .discover import CampaignError
+
+__all__ = ['BLAS_ENV', 'MEMORY_PER_WORKER', 'SYNCHRONOUS', 'DaskPool', 'InlinePool',
+           'default_workers', 'open_pool']
+
+#: Environment of every local worker process: one BLAS/OpenMP thread.
+BLAS_ENV = {'OPENBLAS_NUM_THREADS': '1', 'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
+#: Memory a local worker is sized for, bytes: a 30-s recording at 1 MS/s (4 channels of
+#: float64, 1 GB) while its blocks are being joined.
+MEMORY_PER_WORKER = 2 << 30
+#: The ``scheduler`` value that runs every task in this process.
+SYNCHRONOUS = 'synchronous'
+
+
+def default_workers() -> int:
+    """Return the local worker count: the cores this process may use, bounded by memory."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
+    try:
+        memory = os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES')
+    except (ValueError, OSError):
+        memory = MEMORY_PER_WORKER * (cores or 1)
+    return max(1, min(cores or 1, memory // MEMORY_PER_WORKER))
+
+
+def _peak_rss_mb() -> float:
+    """Return this process's peak resident memory in MB (Linux reports kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+class InlinePool:
+    """Run each task in this process as it is submitted (``scheduler='synchronous'``)."""
+
+    engine = SYNCHRONOUS
+    address = None
+
+    def __init__(self):
+        self._done: deque = deque()
+
+    def __enter__(self) -> InlinePool:
+        return self
+
+    def __exit__(self, *_) -> None:
+        self._done.clear()
+
+    @property
+    def workers(self) -> int:
+        """Return 1: this process."""
+        return 1
+
+    def share(self, value):
+        """Return ``value`` (nothing to send anywhere)."""
+        return value
+
+    def submit(self, fn: Callable, *args, **kwargs) -> concurrent.futures.Future:
+        """Run ``fn`` now; return its finished future."""
+        future = concurrent.futures.Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except Exception as exc:  # delivered by future.result(), as Dask does
+            future.set_exception(exc)
+        self._done.append(future)
+        return future
+
+    def completed(self) -> Iterator[concurrent.futures.Future]:
+        """Yield the finished futures, including those submitted meanwhile."""
+        while self._done:
+            yield self._done.popleft()
+
+    def peak_memory_mb(self) -> float:
+        """Return this process's peak memory in MB."""
+        return _peak_rss_mb()
+
+
+class DaskPool:
+    """
+    Run tasks on a Dask cluster: a new local one, or the one at ``scheduler``.
+
+    Args:
+        scheduler: Address of a running scheduler (``tcp://host:8786``); None for a local
+            cluster.
+        workers: Local workers to start (default :func:`default_workers`); with a
+            scheduler, the workers to wait for before starting (default 1).
+
+    Raises:
+        CampaignError: If the scheduler cannot be reached or no worker joins in time.
+
+    """
+
+    def __init__(self, *, scheduler: str | None = None, workers: int | None = None):
+        from distributed import as_completed, Client, LocalCluster
+        logging.getLogger('distributed').setLevel(logging.ERROR)
+        self.address, self._cluster = scheduler, None
+        try:
+            if scheduler:
+                self.engine = 'distributed'
+                self._client = Client(scheduler, timeout='20s')
+                self._client.wait_for_workers(workers or 1, timeout=300)
+            else:
+                self.engine = 'local'
+                self._cluster = LocalCluster(
+                    n_workers=workers or default_workers(), threads_per_worker=1,
+                    processes=True, dashboard_address=None, silence_logs=logging.ERROR,
+                    env=dict(BLAS_ENV))
+                self._client = Client(self._cluster)
+        except (OSError, TimeoutError) as exc:
+            self.close()
+            where = f'the Dask scheduler at {scheduler}' if scheduler else 'a local cluster'
+            raise CampaignError(f'cannot start on {where}: {exc}') from None
+        self._pending = as_completed([])
+
+    def __enter__(self) -> DaskPool:
+        return self
+
+    def __exit__(self, *_) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Disconnect, and stop the local cluster."""
+        for part in (getattr(self, '_client', None), self._cluster):
+            if part is not None:
+                part.close()
+
+    @property
+    def workers(self) -> int:
+        """Return the number of workers now."""
+        return len(self._client.scheduler_info().get('workers', {}))
+
+    def share(self, value):
+        """Send ``value`` to every worker once; return the future that stands for it."""
+        return self._client.scatter([value], broadcast=True)[0]
+
+    def submit(self, fn: Callable, *args, **kwargs):
+        """Submit ``fn(*args, **kwargs)``; return its future."""
+        future = self._client.submit(fn, *args, pure=False, **kwargs)
+        self._pending.add(future)
+        return future
+
+    def completed(self) -> Iterator:
+        """Yield futures as they finish, including those submitted meanwhile."""
+        yield from self._pending
+
+    def peak_memory_mb(self) -> float | None:
+        """Return the largest peak memory of a worker process in MB."""
+        try:
+            return max(self._client.run(_peak_rss_mb).values(), default=None)
+        except Exception:  # a worker that left; the figure is informative only
+            return None
+
+
+def open_pool(*, scheduler: str | None = None, workers: int | None = None):
+    """
+    Return the pool for ``scheduler``: :data:`SYNCHRONOUS`, an address, or None (local).
+
+    ``DASK_SCHEDULER_ADDRESS`` stands for the address when ``scheduler`` is None.
+    """
+    if workers is not None and workers < 1:
+        raise CampaignError(f'workers must be at least 1, got {workers}')
+    scheduler = scheduler or os.environ.get('DASK_SCHEDULER_ADDRESS') or None
+    if scheduler == SYNCHRONOUS:
+        return InlinePool()
+    return DaskPool(scheduler=scheduler, workers=workers)

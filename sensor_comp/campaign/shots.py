@@ -1,0 +1,187 @@
+"""
+One recording of a campaign → its rows of the per-shot table (the task each worker runs).
+
+The numbers are the single-recording commands' own: shots detected by
+:meth:`~sensor_comp.core.identify.ShotSource.detect` (peak g, pulse width, peak pressure,
+MPa/g, mode and defects as in the shot table of ``identify``) and, with a model, the usable
+shots compared by :func:`~sensor_comp.core.compare.compare` as ``sensor-comp compare`` does
+(fit %, peak residual %). Two columns are added per compared shot:
+
+- the compensated peak: the largest-magnitude value of measured − modelled pressure in the
+  window, in MPa;
+- the model-based sensitivity: the model's static sensitivity (MPa/g) times the
+  least-squares gain ``⟨y, ŷ⟩ / ⟨ŷ, ŷ⟩`` that scales the simulated shot onto the measured
+  one. Unlike the peak ratio MPa/g, which depends on the pulse width (a short pulse rings
+  the sensor's resonance), it measures the same quantity on every shot, so its drift over
+  a campaign is the sensor's.
+
+A recording that does not read, or holds no shot, gives one ``failed`` row with the reason;
+the task never raises, so one bad file never stops a campaign.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+import hashlib
+import json
+import time
+
+import numpy as np
+
+from .discover import FRAME_ID, load_recording, sensor_of
+from .models import model_for, ModelFile
+from .table import failure_row, TABLE_VERSION
+from .. import __version__
+from ..core.compare import compare
+from ..core.identify import ShotSource
+from ..core.shots import Shot
+from ..errors import SensorCompError
+from ..streams import Recording
+
+__all__ = ['BagResult', 'ShotOptions', 'analyse_bag']
+
+
+@dataclass(frozen=True, kw_only=True)
+class ShotOptions:
+    """
+    How shots are found and named (everything a recording's rows depend on besides the model).
+
+    Args:
+        threshold_g: Shot trigger level in g; None for the automatic one.
+        sensor_key: Where a recording names its sensor: ``'frame_id'`` or a metadata key.
+
+    """
+
+    threshold_g: float | None = None
+    sensor_key: str = FRAME_ID
+
+    def key(self) -> str:
+        """Return a short hash of the options, the table layout and the sensor_comp version."""
+        text = json.dumps([self.threshold_g, self.sensor_key, TABLE_VERSION, __version__])
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+@dataclass(frozen=True)
+class BagResult:
+    """
+    What one recording gave.
+
+    Args:
+        path: The recording.
+        rows: Its rows of the per-shot table.
+        sensor: The sensor the rows name.
+        bag_sensor: The sensor the recording names itself ('' when it did not read).
+        model: SHA-256 of the model file compared with, or '' without one.
+        failed: Whether the recording could not be analysed (one ``failed`` row).
+        reason: Why it failed.
+        cacheable: Whether the result follows from the file's bytes alone (a file that does
+            not read fails again; a worker that ran out of memory may not).
+        notes: Recording-level notes (units warning, comparison not possible).
+        seconds: Time the task took.
+
+    """
+
+    path: str
+    rows: tuple[dict, ...]
+    sensor: str
+    bag_sensor: str = ''
+    model: str = ''
+    failed: bool = False
+    reason: str = ''
+    cacheable: bool = True
+    notes: tuple[str, ...] = field(default=())
+    seconds: float = 0.0
+
+
+def analyse_bag(path: str, *, sha256: str, sensor: str | None,
+                models: Mapping[str, ModelFile], options: ShotOptions) -> BagResult:
+    """
+    Return the rows of one recording (a worker task; never raises).
+
+    Args:
+        path: The recording, as the workers can open it.
+        sha256: SHA-256 of its bytes (a column of the table).
+        sensor: Its sensor from the sensor map, or None to take the recording's own.
+        models: ``{sensor: model}`` (see :func:`~sensor_comp.campaign.models.model_for`).
+        options: Shot detection and sensor naming.
+
+    Returns:
+        The rows and what they depend on; a ``failed`` result with the reason when the
+        recording does not read, holds no shot, or the analysis broke.
+
+    """
+    began = time.perf_counter()
+    try:
+        result = _analyse(path, sha256=sha256, sensor=sensor, models=models, options=options)
+    except SensorCompError as exc:
+        result = _failed(path, sha256, sensor, str(exc), cacheable=True)
+    except Exception as exc:  # a broken analysis is one row, not a dead campaign
+        result = _failed(path, sha256, sensor, f'analysis failed: {type(exc).__name__}: {exc}',
+                         cacheable=False)
+    return replace(result, seconds=time.perf_counter() - began)
+
+
+def _failed(path: str, sha256: str, sensor: str | None, reason: str, *,
+            cacheable: bool) -> BagResult:
+    row = failure_row(bag=path, sensor=sensor or '', reason=reason, sha256=sha256)
+    return BagResult(path, (row,), sensor or '', failed=True, reason=reason,
+                     cacheable=cacheable)
+
+
+def _analyse(path: str, *, sha256: str, sensor: str | None, models: Mapping[str, ModelFile],
+             options: ShotOptions) -> BagResult:
+    recording = load_recording(path)
+    bag_sensor, note = sensor_of(recording, key=options.sensor_key)
+    sensor = sensor or bag_sensor
+    notes = [note] if note else []
+    source = ShotSource.detect(recording, path=path, threshold_g=options.threshold_g)
+    rows = {shot.index: _shot_row(recording, shot, bag=path, sensor=sensor, sha256=sha256)
+            for shot in source.shots}
+    chosen = model_for(models, sensor)
+    usable = [shot for shot in source.shots if shot.usable]
+    try:
+        units = ShotSource(recording, tuple(usable), path).check_units()
+    except SensorCompError as exc:
+        units = str(exc)
+    notes += [units] if units else []
+    if chosen is not None and usable:
+        problem = _compare(recording, usable, chosen, rows)
+        if problem:
+            notes.append(f'not compared with {chosen.path}: {problem}')
+    return BagResult(path, tuple(rows.values()), sensor, bag_sensor,
+                     model=chosen.sha256 if chosen else '', notes=tuple(notes))
+
+
+def _shot_row(recording: Recording, shot: Shot, *, bag: str, sensor: str, sha256: str) -> dict:
+    return {
+        'bag': bag, 'sensor': sensor, 'shot': shot.index,
+        'stamp': recording.t0_ns + round(shot.onset * 1e9 / recording.fs),
+        'offset_s': shot.onset_s, 'fs_hz': recording.fs, 'peak_g': shot.peak_g,
+        'width_ms': shot.width_ms, 'peak_pressure_mpa': shot.peak_pressure_mpa,
+        'mpa_per_g': shot.mpa_per_g, 'charge_pc': shot.charge_pc, 'mode': shot.mode,
+        'reason': '; '.join(shot.defects), 'notes': '; '.join(shot.notes), 'model': '',
+        'bag_sha256': sha256,
+    }
+
+
+def _compare(recording: Recording, usable: list[Shot], chosen: ModelFile,
+             rows: dict[int, dict]) -> str | None:
+    """Fill the model columns of the usable shots' rows; return why not, if not."""
+    model = chosen.model
+    try:
+        model.check_rate(recording.fs, model_name=f'model {chosen.name}')
+        comparison = compare([model], recording, usable, labels=[chosen.name])[0]
+        sensitivity = model.continuous().sensitivity_MPa_per_g
+    except SensorCompError as exc:
+        return str(exc)
+    for shot in comparison.shots:
+        residual = shot.measured - shot.simulated
+        power = float(np.dot(shot.simulated, shot.simulated))
+        gain = float(np.dot(shot.measured, shot.simulated)) / power if power > 0 else np.nan
+        rows[shot.index].update(
+            model=chosen.path, fit_percent=shot.fit_percent,
+            peak_residual_percent=shot.peak_residual_percent,
+            compensated_peak_mpa=float(residual[np.argmax(np.abs(residual))]) / 1e6,
+            sensitivity_mpa_per_g=gain * sensitivity)
+    return None

@@ -1,0 +1,137 @@
+"""
+The campaign's per-shot table: its columns, and writers that stream it to Parquet and CSV.
+
+One row per detected shot of every recording, in recording order, plus one row for each
+recording that could not be analysed (``mode = 'failed'``, the reason in ``reason``). The
+columns that need a model (fit, peak residual, compensated peak, model-based sensitivity)
+are null without one. Tables are written a recording at a time, so a campaign of millions
+of shots never sits in one process's memory; files appear under their final names only
+when complete.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+import os
+from pathlib import Path
+import tempfile
+
+import pyarrow as pa
+import pyarrow.csv as pa_csv
+import pyarrow.parquet as pq
+
+__all__ = ['COLUMNS', 'SCHEMA', 'TABLE_VERSION', 'TableWriter', 'failure_row', 'rows_table',
+           'write_records']
+
+#: Version of the row layout; part of every cache key, so a new layout recomputes.
+TABLE_VERSION = 1
+
+#: ``(name, type, meaning)`` of every column, in order (the README lists them).
+COLUMNS = (
+    ('bag', pa.string(), 'the recording (MCAP bag or CSV), as discovered'),
+    ('sensor', pa.string(), 'the sensor it holds (sensor map, or the bag\'s metadata)'),
+    ('shot', pa.int32(), 'shot index within the recording; null for a failed recording'),
+    ('stamp', pa.timestamp('ns', tz='UTC'), 'acquisition time of the pulse onset'),
+    ('offset_s', pa.float64(), 'pulse onset in s since the recording start'),
+    ('fs_hz', pa.float64(), 'sample rate'),
+    ('peak_g', pa.float64(), 'peak axial acceleration, baseline removed (sign kept)'),
+    ('width_ms', pa.float64(), 'half-sine pulse width'),
+    ('peak_pressure_mpa', pa.float64(), 'peak pressure from the onset on (sign kept)'),
+    ('mpa_per_g', pa.float64(), 'peak pressure / peak acceleration'),
+    ('charge_pc', pa.float64(), 'peak charge, when the charge sensitivity is known'),
+    ('mode', pa.string(), 'normal, clipped, excluded (another defect) or failed'),
+    ('reason', pa.string(), 'why the shot is not usable or the recording failed'),
+    ('notes', pa.string(), 'shortened windows, merged crossings and the like'),
+    ('model', pa.string(), 'the model file compared with, as given (empty without one)'),
+    ('fit_percent', pa.float64(), 'fit of the simulated model in the shot window'),
+    ('peak_residual_percent', pa.float64(), 'peak |measured - model| in % of the peak'),
+    ('compensated_peak_mpa', pa.float64(), 'peak of the compensated pressure (sign kept)'),
+    ('sensitivity_mpa_per_g', pa.float64(),
+     'the model\'s static sensitivity scaled by the least-squares gain of the shot'),
+    ('bag_sha256', pa.string(), 'SHA-256 of the recording\'s bytes'),
+)
+
+#: The Arrow schema of the table.
+SCHEMA = pa.schema([pa.field(name, kind) for name, kind, _ in COLUMNS])
+
+
+def failure_row(*, bag: str, sensor: str, reason: str, sha256: str = '') -> dict:
+    """Return the one row of a recording that could not be analysed."""
+    row = dict.fromkeys(SCHEMA.names)
+    row.update(bag=bag, sensor=sensor, mode='failed', reason=reason, notes='', model='',
+               bag_sha256=sha256)
+    return row
+
+
+def rows_table(rows: Iterable[Mapping]) -> pa.Table:
+    """Return rows (dicts keyed by column name, missing keys null) as a table of :data:`SCHEMA`."""
+    return pa.Table.from_pylist([dict(row) for row in rows], schema=SCHEMA)
+
+
+def write_records(path: str | os.PathLike, records: Sequence[Mapping]) -> None:
+    """Write a small table (one dict per row, columns from the keys) as CSV, atomically."""
+    path = Path(path)
+    table = pa.Table.from_pylist(list(records)) if records else pa.table({})
+    temp = _temporary(path)
+    try:
+        pa_csv.write_csv(table, temp)
+        _publish(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+
+
+class TableWriter:
+    """
+    Write tables of :data:`SCHEMA` to a Parquet and a CSV file, piece by piece.
+
+    Both files are filled under temporary names in their folder and renamed on a clean
+    exit of the ``with`` block; on an error both are removed and existing files are left.
+
+    Args:
+        parquet: The Parquet file to write.
+        csv: The CSV file to write (same rows; timestamps in ISO 8601).
+
+    """
+
+    def __init__(self, parquet: str | os.PathLike, csv: str | os.PathLike):
+        self._targets = (Path(parquet), Path(csv))
+        self._temps = [_temporary(p) for p in self._targets]
+        self._parquet = pq.ParquetWriter(self._temps[0], SCHEMA, compression='zstd')
+        self._csv = pa_csv.CSVWriter(self._temps[1], SCHEMA)
+        self.rows = 0
+
+    def __enter__(self) -> TableWriter:
+        return self
+
+    def __exit__(self, kind, *_) -> None:
+        self._parquet.close()
+        self._csv.close()
+        if kind is None:
+            for temp, target in zip(self._temps, self._targets):
+                _publish(temp, target)
+        else:
+            for temp in self._temps:
+                temp.unlink(missing_ok=True)
+
+    def write(self, table: pa.Table) -> None:
+        """Append ``table``'s rows to both files."""
+        table = table.cast(SCHEMA)
+        self._parquet.write_table(table)
+        self._csv.write_table(table)
+        self.rows += table.num_rows
+
+
+def _publish(temp: Path, path: Path) -> None:
+    """Rename a finished temporary file to ``path``, with the permissions ``open`` gives."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(temp, 0o666 & ~umask)  # not the temporary file's 0600
+    os.replace(temp, path)
+
+
+def _temporary(path: Path) -> Path:
+    """Return a fresh temporary file name next to ``path``."""
+    fd, name = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=path.parent)
+    os.close(fd)
+    return Path(name)
