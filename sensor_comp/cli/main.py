@@ -18,7 +18,7 @@ __all__ = ['main', 'Terminated']
 
 #: Sub-command modules of :mod:`sensor_comp.cli`, in the order ``--help`` lists them.
 COMMANDS = ('simulate', 'import_csv', 'info', 'repair', 'identify', 'show', 'compare',
-            'diagnose', 'report', 'compensate', 'demo')
+            'diagnose', 'report', 'compensate', 'demo', 'campaign')
 
 
 def build_parser() -> argparse.ArgumentParser:
