@@ -17,9 +17,13 @@ from scipy import linalg, signal
 
 from .data import IdentError
 
-__all__ = ['LeastSquares', 'check_orders', 'delayed_numerator', 'equation_error',
-           'filter_each', 'lagged_regression', 'scaled_qr', 'solve_least_squares',
-           'triangular_inverse']
+__all__ = ['RANK_TOLERANCE', 'LeastSquares', 'check_orders', 'delayed_numerator', 'equation_error',
+           'filter_each', 'lagged_regression', 'normal_equations', 'scaled_qr',
+           'solve_least_squares', 'triangular_inverse']
+
+#: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
+#: still counts as full rank (below it a column lies within 1e-10 of the others' span).
+RANK_TOLERANCE = 1e-10
 
 
 def check_orders(**orders: int) -> None:
@@ -194,7 +198,9 @@ def scaled_qr(phi: np.ndarray, *,
     Uses Cholesky QR applied twice (CholeskyQR2: ``R₁ = chol(ΦᵀΦ)``, ``Q₁ = Φ R₁⁻¹``, then
     the same on ``Q₁``), which is as accurate as Householder QR for condition numbers below
     ~1e8 and runs on matrix products only: LAPACK's Householder QR of a tall matrix costs
-    10–100× more when OpenBLAS threads compete for busy cores.
+    10–100× more when OpenBLAS threads compete for busy cores. Beyond that condition (the
+    lags of a smooth output at a high sample rate, nearly collinear but not dependent) it
+    falls back to Householder QR, which is accurate to a condition of ~1e15.
 
     Args:
         phi: ``(rows, p)`` matrix.
@@ -205,7 +211,8 @@ def scaled_qr(phi: np.ndarray, *,
         the column norms ``scale`` ``(p,)``.
 
     Raises:
-        IdentError: When a column is zero or the columns are (nearly) linearly dependent.
+        IdentError: When a column is zero or the columns are linearly dependent to within
+            :data:`RANK_TOLERANCE`.
 
     """
     names = list(names) or [f'column {j}' for j in range(phi.shape[1])]
@@ -218,16 +225,48 @@ def scaled_qr(phi: np.ndarray, *,
     r = np.eye(phi.shape[1])
     for _ in range(2):
         factor, info = linalg.lapack.dpotrf(q.T @ q, lower=0)
-        if info != 0:
-            raise IdentError(f'regressor {names[abs(info) - 1]} is (nearly) a linear '
-                             f'combination of the others: the input does not excite this '
-                             f'model structure; lower the orders')
+        if info != 0:  # condition beyond ~1e8: Householder is accurate to ~1e15
+            return _householder(phi / scale, names) + (scale,)
         factor = np.triu(factor)
         # (R⁻ᵀ Φᵀ)ᵀ rather than Φ R⁻¹: OpenBLAS runs the tall-times-small product 30×
         # slower in C order when its threads compete for busy cores.
         q = (triangular_inverse(factor).T @ q.T).T
         r = factor @ r
     return q, r, scale
+
+
+def _householder(phi: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(Q, R)`` of the unit-norm columns by Householder QR, refusing a lost rank."""
+    q, r = np.linalg.qr(phi)
+    diagonal = np.abs(np.diag(r))
+    worst = int(np.argmin(diagonal))
+    if not diagonal[worst] > RANK_TOLERANCE * diagonal.max():
+        raise IdentError(f'regressor {names[worst]} is (nearly) a linear combination of the '
+                         f'others: the input does not excite this model structure; lower the '
+                         f'orders')
+    return q, r
+
+
+def normal_equations(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """
+    Return the least-squares solution from the column-scaled normal equations (Cholesky).
+
+    About one pass over ``phi``: the cheapest solve for the many evaluations of a search,
+    accurate while ``phi`` is conditioned better than ~1e6 (callers recompute the residual,
+    so round-off can only raise their loss).
+
+    Raises:
+        IdentError: When the scaled Gram matrix is not positive definite.
+
+    """
+    gram = phi.T @ phi
+    scale = np.sqrt(np.diag(gram))
+    scale[~(scale > 0)] = 1.0
+    try:
+        factor = linalg.cho_factor(gram / np.outer(scale, scale))
+    except linalg.LinAlgError:
+        raise IdentError('singular normal equations') from None
+    return linalg.cho_solve(factor, (phi.T @ target) / scale) / scale
 
 
 def triangular_inverse(r: np.ndarray) -> np.ndarray:

@@ -22,13 +22,19 @@ import numpy as np
 from scipy import signal
 
 from .arx import fit_arx
-from .data import as_segments, Segment
+from .data import as_segments, IdentError, Segment
 from .estimate import Estimate
-from .least_squares import check_orders, filter_each, lagged_regression, solve_least_squares
+from .least_squares import (check_orders, delayed_numerator, filter_each, lagged_regression,
+                            normal_equations, solve_least_squares)
 from .levenberg_marquardt import levenberg_marquardt, scaled_normal_equations
 from .polynomials import is_stable, reflect_unstable
 
-__all__ = ['SteiglitzMcBride', 'fit_oe', 'steiglitz_mcbride']
+__all__ = ['ARX_MARGIN', 'OutputErrorProblem', 'SteiglitzMcBride', 'fit_oe',
+           'steiglitz_mcbride']
+
+#: An ARX start whose simulation error exceeds the minimum found from Steiglitz-McBride by
+#: more than this fraction is not descended from (its bias puts it in the same basin).
+ARX_MARGIN = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,51 +112,145 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
                             iterations, converged)
 
 
-def _shift(x: np.ndarray, lag: int) -> np.ndarray:
-    out = np.zeros_like(x)
-    if lag < x.size:
-        out[lag:] = x[:x.size - lag]
-    return out
+class OutputErrorProblem:
+    """
+    The simulation error of ``y = Σ B_i/F q^-nk u_i + D d`` over segments, and its Jacobian.
 
+    One object per set of windows and orders, shared by :func:`fit_oe` and the extended
+    fits (:mod:`sensor_comp.core.extended`). The parameters are ``θ = (f1..fnf, b row by
+    row, d)``; ``d`` multiplies optional additive regressors (disturbances) that bypass the
+    dynamics. Every segment is simulated from rest. The Jacobian is built column by column
+    into one Fortran-ordered array and the normal equations come from one product, so an
+    evaluation costs a few passes over the samples.
 
-class _OutputError:
-    """Simulation error and its Jacobian over the segments."""
+    Args:
+        us: Inputs per segment, ``(n_inputs, n)``.
+        ys: Outputs per segment, ``(n,)``.
+        nf: Order of ``F``.
+        nb: Coefficients per numerator.
+        nk: Input delay in samples.
+        extra: Additive regressors per segment, ``(k, n)``, or None.
 
-    def __init__(self, segments: Sequence[Segment], nf: int, nb: int, nk: int):
-        self.segments, self.nf, self.nb, self.nk = segments, nf, nb, nk
-        self.y = np.concatenate([s.y for s in segments])
+    """
 
-    def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def __init__(self, us: Sequence[np.ndarray], ys: Sequence[np.ndarray], nf: int, nb: int,
+                 nk: int, extra: Sequence[np.ndarray] | None = None):
+        self.us = [np.atleast_2d(np.asarray(u, dtype=np.float64)) for u in us]
+        self.ys = [np.asarray(y, dtype=np.float64) for y in ys]
+        self.nf, self.nb, self.nk = nf, nb, nk
+        self.n_inputs = self.us[0].shape[0]
+        self.y = np.concatenate(self.ys)
+        self.offsets = np.concatenate([[0], np.cumsum([y.size for y in self.ys])])
+        self.extra = None if extra is None else np.concatenate(
+            [np.asarray(c, dtype=np.float64).T for c in extra])
+        self.n_extra = 0 if self.extra is None else self.extra.shape[1]
+        self.n_parameters = nf + self.n_inputs * nb + self.n_extra
+
+    def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return ``(F, B (n_inputs, nb), d)`` of the parameters ``theta``."""
+        nbt = self.n_inputs * self.nb
         return (np.concatenate([[1.0], theta[:self.nf]]),
-                theta[self.nf:].reshape(self.segments[0].n_inputs, self.nb))
+                np.asarray(theta[self.nf:self.nf + nbt]).reshape(self.n_inputs, self.nb),
+                np.asarray(theta[self.nf + nbt:]))
 
-    def _columns(self, f: np.ndarray, seg: Segment) -> list[np.ndarray]:
-        x = signal.lfilter([1.0], f, seg.u, axis=-1)
-        return [_shift(x[i], self.nk + j) for i in range(seg.n_inputs) for j in range(self.nb)]
+    def _fill_lags(self, out: np.ndarray, column: int, x: Sequence[np.ndarray], first: int,
+                   count: int) -> None:
+        """Write each row of ``x`` (per segment) delayed by ``first … first+count−1``."""
+        for s, xs in enumerate(x):
+            start, stop = self.offsets[s], self.offsets[s + 1]
+            n = stop - start
+            for i in range(xs.shape[0]):
+                for j in range(count):
+                    lag, col = first + j, column + i * count + j
+                    if lag < n:
+                        out[start:start + lag, col] = 0.0
+                        out[start + lag:stop, col] = xs[i, :n - lag]
+                    else:
+                        out[start:stop, col] = 0.0
 
-    def numerators(self, f: np.ndarray) -> np.ndarray:
-        """Return the least-squares numerators for a fixed denominator ``f``."""
-        phi = np.concatenate([np.column_stack(self._columns(f, seg)) for seg in self.segments])
-        b, *_ = np.linalg.lstsq(phi, self.y, rcond=None)
-        return b.reshape(self.segments[0].n_inputs, self.nb)
+    def regression(self, f: np.ndarray) -> np.ndarray:
+        """
+        Return the regressors at a fixed ``F``: ``q^-(nk+j) u_i/F``, then the extra ones.
 
-    def residual(self, theta: np.ndarray, *, jacobian: bool = False):
-        f, b = self.unpack(theta)
-        yhats, jacs = [], []
-        for seg in self.segments:
-            cols_b = self._columns(f, seg)
-            yhat = np.column_stack(cols_b) @ b.ravel()
-            yhats.append(yhat)
-            if jacobian:
-                z = signal.lfilter([1.0], f, yhat)
-                cols_f = [-_shift(z, j) for j in range(1, self.nf + 1)]
-                jacs.append(np.column_stack(cols_f + cols_b))
-        e = self.y - np.concatenate(yhats)
-        return (e, np.concatenate(jacs)) if jacobian else e
+        An ``(n, n_inputs·nb + k)`` Fortran-ordered array over all segments; the outputs
+        are :attr:`y`.
+        """
+        q = self.n_inputs * self.nb
+        out = np.empty((self.y.size, q + self.n_extra), order='F')
+        self._fill_lags(out, 0, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us],
+                        self.nk, self.nb)
+        if self.extra is not None:
+            out[:, q:] = self.extra
+        return out
+
+    def linear(self, f: np.ndarray) -> np.ndarray:
+        """
+        Return the least-squares numerators and extra coefficients at a fixed ``F``.
+
+        Raises:
+            IdentError: When the regressors are linearly dependent.
+
+        """
+        return solve_least_squares(self.regression(f), self.y).theta
+
+    def profile_sse(self, f: np.ndarray) -> float:
+        """
+        Return the least sum of squares over numerators (and extra coefficients) at ``F``.
+
+        The coefficients come from the column-scaled normal equations (Cholesky: the
+        cheapest for the many evaluations of a search), the residual is then computed, so
+        round-off can only raise the loss, never fake a low one; least squares by QR when
+        the normal equations are singular.
+        """
+        phi = self.regression(f)
+        try:
+            theta = normal_equations(phi, self.y)
+        except IdentError:
+            theta = solve_least_squares(phi, self.y).theta
+        e = self.y - phi @ theta
+        return float(e @ e)
+
+    def simulate(self, theta: np.ndarray) -> np.ndarray:
+        """Return the model output over all segments (concatenated), from rest."""
+        f, b, d = self.unpack(theta)
+        bk = delayed_numerator(b, self.nk)
+        out = np.empty(self.y.size)
+        for s, u in enumerate(self.us):
+            part = out[self.offsets[s]:self.offsets[s + 1]]
+            part[:] = signal.lfilter(bk[0], f, u[0])
+            for i in range(1, self.n_inputs):
+                part += signal.lfilter(bk[i], f, u[i])
+        if self.extra is not None:
+            out += self.extra @ d
+        return out
+
+    def residual(self, theta: np.ndarray, jacobian: bool = False):
+        """
+        Return the simulation error ``e = y − ŷ``; with ``jacobian``, ``(e, ∂ŷ/∂θ)``.
+
+        ``∂ŷ/∂f_j = −q^-j ŷ_u/F`` (``ŷ_u`` the input-driven part), ``∂ŷ/∂b_ij =
+        q^-(nk+j) u_i/F``, ``∂ŷ/∂d = extra``.
+        """
+        if not jacobian:
+            return self.y - self.simulate(theta)
+        f, b, d = self.unpack(theta)
+        nf, q = self.nf, self.n_inputs * self.nb
+        jac = np.empty((self.y.size, self.n_parameters), order='F')
+        self._fill_lags(jac, nf, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us],
+                        self.nk, self.nb)
+        induced = jac[:, nf:nf + q] @ b.ravel()
+        z = [-signal.lfilter([1.0], f, induced[self.offsets[s]:self.offsets[s + 1]])[None]
+             for s in range(len(self.us))]
+        self._fill_lags(jac, 0, z, 1, nf)
+        e = self.y - induced
+        if self.extra is not None:
+            jac[:, nf + q:] = self.extra
+            e -= self.extra @ d
+        return e, jac
 
 
 def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, nk: int = 1,
-           max_iter: int = 100, tol: float = 1e-8) -> Estimate:
+           max_iter: int = 100, tol: float = 1e-8, start: np.ndarray | None = None) -> Estimate:
     """
     Estimate a MISO output-error model ``y = Σ B_i/F q^-nk u_i + e``.
 
@@ -167,6 +267,9 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         nk: Input delay in samples.
         max_iter: Most Levenberg–Marquardt iterations.
         tol: Relative decrease of the squared error below which the iteration stops.
+        start: A stable start denominator ``[1, f1..fnf]`` (e.g. the fit of a neighbouring
+            delay): Levenberg–Marquardt from it alone, numerators solved at it, without the
+            Steiglitz–McBride and ARX starts (a local refinement, several times cheaper).
 
     Returns:
         The ``'oe'`` estimate; ``loss`` is the mean squared simulation error.
@@ -177,25 +280,46 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     """
     check_orders(nf=nf, nb=nb, nk=nk, max_iter=max_iter)
     segs = as_segments(segments)
-    problem = _OutputError(segs, nf, nb, nk)
-    sm = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, max_iter=15, tol=1e-6)
-    # Two starts: Steiglitz-McBride can drift to a degenerate minimum (poles on 1 with a
-    # differentiating numerator) when the data are far from linear; the ARX poles, biased
-    # but in the right place, then start Levenberg-Marquardt in the right basin.
-    starts = [np.concatenate([sm.a[1:], sm.b.ravel()])]
-    arx = fit_arx(segs, na=nf, nb=nb, nk=nk)
-    f0 = reflect_unstable(arx.a)
-    starts.append(np.concatenate([f0[1:], problem.numerators(f0).ravel()]))
-    best = None
-    for theta in starts:
-        result = levenberg_marquardt(
-            lambda th, jacobian: problem.residual(th, jacobian=jacobian), theta,
-            stable=lambda th: is_stable(problem.unpack(th)[0]), max_iter=max_iter, tol=tol)
-        if best is None or result.cost < best.cost:
-            best = result
+    problem = OutputErrorProblem([s.u for s in segs], [s.y for s in segs], nf, nb, nk)
+
+    def descend(theta):
+        return levenberg_marquardt(problem.residual, theta, max_iter=max_iter, tol=tol,
+                                   stable=lambda th: is_stable(problem.unpack(th)[0]))
+
+    if start is not None:
+        f0 = reflect_unstable(np.asarray(start, dtype=np.float64))
+        if f0.size != nf + 1:
+            raise IdentError(f'start denominator of order {f0.size - 1} for nf={nf}')
+        return _estimate(problem, descend(np.concatenate([f0[1:], problem.linear(f0)])), 0,
+                         'a given start denominator')
+
+    try:
+        sm = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, max_iter=15, tol=1e-6)
+    except IdentError as exc:  # e.g. prefiltered regressors that lost their rank
+        sm, failed = None, str(exc)
+    best = None if sm is None else descend(np.concatenate([sm.a[1:], sm.b.ravel()]))
+    # Steiglitz-McBride can drift to a degenerate minimum (poles on 1 with a differentiating
+    # numerator) when the data are far from linear, or to a poor basin of a first-order
+    # model; the ARX poles, biased but in the right place, then start better. Where the ARX
+    # start is far worse than the minimum found (the usual case: its bias), it is skipped.
+    f0 = reflect_unstable(fit_arx(segs, na=nf, nb=nb, nk=nk).a)
+    arx = np.concatenate([f0[1:], problem.linear(f0)])
+    e = problem.residual(arx)
+    if best is None or float(e @ e) < (1 + ARX_MARGIN) * best.cost:
+        other = descend(arx)
+        start = ('an ARX start (Steiglitz-McBride failed: ' + failed + ')' if best is None
+                 else 'the better of a Steiglitz-McBride and an ARX start')
+        best = other if best is None or other.cost < best.cost else best
+    else:
+        start = 'a Steiglitz-McBride start'
+    return _estimate(problem, best, 0 if sm is None else sm.iterations, start)
+
+
+def _estimate(problem: OutputErrorProblem, best, passes: int, start: str) -> Estimate:
+    """Return the ``'oe'`` estimate at a Levenberg-Marquardt minimum, with its covariance."""
     theta, cost, e, jac, iterations, converged = (best.theta, best.cost, best.e, best.jac,
                                                   best.iterations, best.converged)
-    f, b = problem.unpack(theta)
+    f, b, _ = problem.unpack(theta)
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
     gram, _, scale = scaled_normal_equations(jac, e)
@@ -203,8 +327,8 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         covariance = variance * np.linalg.inv(gram) / np.outer(scale, scale)
     else:  # over-parameterised (e.g. a pole cancels a zero): not identifiable
         covariance = np.full((p, p), np.inf)
-    return Estimate(structure='oe', a=f, b=b, nk=nk, covariance=covariance,
+    return Estimate(structure='oe', a=f, b=b, nk=problem.nk, covariance=covariance,
                     noise_variance=variance, loss=cost / n, n_samples=n,
-                    iterations=sm.iterations + iterations, converged=converged,
-                    method=f'Levenberg-Marquardt ({iterations} iterations) from the better of '
-                           f'a Steiglitz-McBride ({sm.iterations} passes) and an ARX start')
+                    iterations=passes + iterations, converged=converged,
+                    method=f'Levenberg-Marquardt ({iterations} iterations) from {start} '
+                           f'({passes} Steiglitz-McBride passes)')
