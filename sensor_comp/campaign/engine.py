@@ -103,6 +103,8 @@ class _Run:
         return chosen.sha256 if chosen else ''
 
     def _analyse(self, bag: _Bag) -> None:
+        if self._shared is None:  # the models go to the workers once, with the first task
+            self._shared = self.pool.share(self.models)
         self._submit(('analyse', bag), analyse_bag, bag.full, sha256=bag.sha256,
                      sensor=bag.mapped, models=self._shared, options=self.options)
 
@@ -155,7 +157,6 @@ class _Run:
 
     def analyse(self) -> None:
         """Hash, look up and analyse every recording, streaming results to the cache."""
-        self._shared = self.pool.share(self.models)
         with self.progress('shots', len(self.bags)) as progress_bar:
             bar = _ShotBar(progress_bar, len(self.bags))
             for bag in self.bags:
@@ -194,7 +195,7 @@ class _Run:
             self.models[sensor] = self.folder.save_identified(sensor, options.key(), model)
             redo += by_sensor[sensor]
         if redo:
-            self._shared = self.pool.share(self.models)
+            self._shared = None  # with the new models
             with self.progress('compare', sum(b.info.shots for b in redo)) as progress_bar:
                 for bag in redo:
                     self._analyse(bag)
@@ -249,7 +250,8 @@ def _write_tables(folder: CampaignFolder, bags: Sequence[_Bag],
                             'usable_shots': getattr(info, 'usable', 0),
                             'model': model.path if model and info.model == model.sha256
                             else '', 'notes': '; '.join(info.notes), 'sha256': bag.sha256,
-                            'cached': bag.cached, 'seconds': round(info.seconds, 3)})
+                            'cached': bag.cached, 'seconds': round(info.seconds, 3),
+                            'cpu_seconds': round(info.cpu_seconds, 3)})
     write_records(folder.file('bags.csv'), records)
 
 

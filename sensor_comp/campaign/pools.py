@@ -16,7 +16,9 @@ Where a campaign's tasks run: a Dask cluster (local or remote), or this process.
   tests, debugging and profiling.
 
 All three offer ``submit`` and ``completed`` (futures in the order they finish, including
-futures submitted while iterating), so the campaign streams results as they come.
+futures submitted while iterating), so the campaign streams results as they come. A
+cluster is started (or connected to) at the first task only: a re-run whose recordings all
+come from the cache starts none.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import resource
 
 from .discover import CampaignError
 
-__all__ = ['BLAS_ENV', 'MEMORY_PER_WORKER', 'SYNCHRONOUS', 'DaskPool', 'InlinePool',
+__all__ = ['BLAS_ENV', 'MEMORY_PER_WORKER', 'SYNCHRONOUS', 'DaskPool', 'InlinePool', 'LazyPool',
            'default_workers', 'open_pool']
 
 #: Environment of every local worker process: one BLAS/OpenMP thread.
@@ -177,15 +179,68 @@ class DaskPool:
             return None
 
 
-def open_pool(*, scheduler: str | None = None, workers: int | None = None):
+class LazyPool:
+    """
+    A pool started at its first task (a cluster costs seconds to start, or to reach).
+
+    Args:
+        engine: What the pool will be: ``'local'``, ``'distributed'`` or ``'synchronous'``.
+        start: Returns the pool.
+
+    """
+
+    def __init__(self, engine: str, start: Callable):
+        self.engine, self._start, self._pool = engine, start, None
+
+    def __enter__(self) -> LazyPool:
+        return self
+
+    def __exit__(self, *_) -> None:
+        if self._pool is not None:
+            self._pool.__exit__(None, None, None)
+
+    def _started(self):
+        if self._pool is None:
+            self._pool = self._start()
+        return self._pool
+
+    @property
+    def workers(self) -> int:
+        """Return the workers, 0 when no task ran."""
+        return self._pool.workers if self._pool is not None else 0
+
+    def share(self, value):
+        """Start the pool; send ``value`` to its workers (see the pools' ``share``)."""
+        return self._started().share(value)
+
+    def submit(self, fn: Callable, *args, **kwargs):
+        """Start the pool; submit ``fn(*args, **kwargs)``."""
+        return self._started().submit(fn, *args, **kwargs)
+
+    def completed(self) -> Iterator:
+        """Yield finished futures (none before the first task)."""
+        return self._pool.completed() if self._pool is not None else iter(())
+
+    def peak_memory_mb(self) -> float | None:
+        """Return the largest peak memory of a worker in MB, None when no task ran."""
+        return self._pool.peak_memory_mb() if self._pool is not None else None
+
+
+def open_pool(*, scheduler: str | None = None, workers: int | None = None) -> LazyPool:
     """
     Return the pool for ``scheduler``: :data:`SYNCHRONOUS`, an address, or None (local).
 
-    ``DASK_SCHEDULER_ADDRESS`` stands for the address when ``scheduler`` is None.
+    ``DASK_SCHEDULER_ADDRESS`` stands for the address when ``scheduler`` is None. The pool
+    starts at its first task.
+
+    Raises:
+        CampaignError: If ``workers`` is below 1.
+
     """
     if workers is not None and workers < 1:
         raise CampaignError(f'workers must be at least 1, got {workers}')
     scheduler = scheduler or os.environ.get('DASK_SCHEDULER_ADDRESS') or None
     if scheduler == SYNCHRONOUS:
-        return InlinePool()
-    return DaskPool(scheduler=scheduler, workers=workers)
+        return LazyPool(SYNCHRONOUS, InlinePool)
+    return LazyPool('distributed' if scheduler else 'local',
+                    lambda: DaskPool(scheduler=scheduler, workers=workers))

@@ -78,7 +78,8 @@ class BagResult:
         cacheable: Whether the result follows from the file's bytes alone (a file that does
             not read fails again; a worker that ran out of memory may not).
         notes: Recording-level notes (units warning, comparison not possible).
-        seconds: Time the task took.
+        seconds: Wall time the task took.
+        cpu_seconds: CPU time it took (the worker runs one task at a time).
 
     """
 
@@ -92,6 +93,7 @@ class BagResult:
     cacheable: bool = True
     notes: tuple[str, ...] = field(default=())
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
 
 
 def analyse_bag(path: str, *, sha256: str, sensor: str | None,
@@ -111,7 +113,7 @@ def analyse_bag(path: str, *, sha256: str, sensor: str | None,
         recording does not read, holds no shot, or the analysis broke.
 
     """
-    began = time.perf_counter()
+    began, cpu = time.perf_counter(), time.process_time()
     try:
         result = _analyse(path, sha256=sha256, sensor=sensor, models=models, options=options)
     except SensorCompError as exc:
@@ -119,7 +121,8 @@ def analyse_bag(path: str, *, sha256: str, sensor: str | None,
     except Exception as exc:  # a broken analysis is one row, not a dead campaign
         result = _failed(path, sha256, sensor, f'analysis failed: {type(exc).__name__}: {exc}',
                          cacheable=False)
-    return replace(result, seconds=time.perf_counter() - began)
+    return replace(result, seconds=time.perf_counter() - began,
+                   cpu_seconds=time.process_time() - cpu)
 
 
 def _failed(path: str, sha256: str, sensor: str | None, reason: str, *,

@@ -70,6 +70,7 @@ class CachedBag:
         self.shots = meta['shots']
         self.usable = meta['usable']
         self.seconds = meta.get('seconds', 0.0)
+        self.cpu_seconds = meta.get('cpu_seconds', 0.0)
 
 
 class CampaignFolder:
@@ -196,7 +197,7 @@ class CampaignFolder:
                 'model': result.model, 'failed': result.failed, 'reason': result.reason,
                 'notes': list(result.notes),
                 'shots': 0 if result.failed else len(result.rows), 'usable': usable,
-                'seconds': result.seconds}
+                'seconds': result.seconds, 'cpu_seconds': result.cpu_seconds}
         table = rows_table(result.rows).replace_schema_metadata({_META: json.dumps(meta)})
         part = self._part(sha256, result.model)
         temp = part.with_name(f'.{part.name}.partial')

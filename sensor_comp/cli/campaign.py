@@ -102,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     print(f'{summary.bags} recordings ({summary.failed} failed), {summary.shots} shots '
           f'({summary.usable_shots} usable), {len(summary.sensors)} sensor(s); '
           f'{summary.processed} analysed, {summary.cached} from the cache; '
-          f'{summary.workers} worker(s) ({summary.engine}), {summary.seconds:.1f} s')
+          + (f'{summary.workers} worker(s) ({summary.engine})' if summary.workers else
+             'no task to run') + f', {summary.seconds:.1f} s')
     for s in summary.sensors:
         t = s.trend
         drift = ('drift not measured (too few shots)' if t is None else
