@@ -1,6 +1,8 @@
 """
-Campaign benchmark (issue 13): shots per second on Dask with 1 and 2 workers, scaling,
-memory per worker, and the cost per shot against the single-recording command.
+Campaign benchmark (issue 13): shots/s on Dask with 1 and 2 workers, memory, cost per shot.
+
+Shots per second with one and two local workers and the scaling ratio, the peak memory of
+a worker, and the cost per shot against the single-recording command.
 
 Data: a synthetic campaign from the rig simulator, written as bags the way the recorder
 writes them: ``--bags`` recordings (200; 12 with ``--quick``) of the ten Table-2 shots at
