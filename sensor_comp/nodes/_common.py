@@ -37,6 +37,7 @@ A second signal interrupts that with ``KeyboardInterrupt``.
 
 from __future__ import annotations
 
+import difflib
 import functools
 import hashlib
 import importlib
@@ -63,6 +64,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
 from ..errors import SensorCompError
+from ..files import check_output, OutputError
 from ..io.messages import IMAGE
 from ..streams import ACCELERATION, PRESSURE_RAW, STREAM_INFO, StreamInfo
 
@@ -74,6 +76,7 @@ __all__ = [
     'LATCHED_QOS',
     'NodeError',
     'check',
+    'check_output_parameter',
     'declare',
     'diagnostics',
     'finish_publishing',
@@ -89,6 +92,7 @@ __all__ = [
     'take_queued',
     'use_fastdds_profile',
     'wait_for_subscribers',
+    'warn_unknown_parameters',
 ]
 
 #: Namespace of the rig's topics when none is given (``--ros-args -r __ns:=/x`` overrides).
@@ -193,6 +197,51 @@ def check(node: Node, name: str, value, ok: bool, expected: str):
         raise NodeError(f'{node.get_fully_qualified_name()}: parameter {name!r} must be '
                         f'{expected}, got {value!r}')
     return value
+
+
+def check_output_parameter(node: Node, name: str, path: str, *, kind: str,
+                           inputs: Sequence[str] = ()) -> Path:
+    """
+    Check an output file parameter with :func:`sensor_comp.files.check_output`.
+
+    Its folder must exist and be writable; an existing file must be of ``kind`` and none of
+    ``inputs``. Nothing is created.
+
+    Returns:
+        The path.
+
+    Raises:
+        NodeError: Naming the node, the parameter and the reason.
+
+    """
+    check(node, name, path, bool(path), 'the name of a file to write')
+    try:
+        return check_output(path, inputs=inputs, kind=kind)
+    except OutputError as exc:
+        # A node has no --force: its only way out is another name.
+        reason = str(exc).replace(', or pass --force to replace it', '')
+        raise NodeError(f'{node.get_fully_qualified_name()}: parameter {name!r}: '
+                        f'{reason}') from None
+
+
+def warn_unknown_parameters(node: Node) -> None:
+    """
+    Log a warning for each parameter given to ``node`` that it does not declare.
+
+    Call it once the node has declared all of its parameters. A misspelt name (``sorce``)
+    would otherwise be dropped without a word and its parameter keep its default; the
+    warning names the closest declared parameter.
+    """
+    # rclpy 7.1 has no public getter for the values given to a node: Node.__init__ merges
+    # --ros-args -p, parameter files and ``parameter_overrides`` into this dict, which
+    # declare_parameter reads.
+    given = getattr(node, '_parameter_overrides', {})
+    declared = sorted(node.get_parameters_by_prefix(''))
+    for name in sorted(set(given) - set(declared)):
+        close = difflib.get_close_matches(name, declared, n=1)
+        hint = (f'did you mean {close[0]!r}?' if close
+                else f'this node has {", ".join(declared)}')
+        node.get_logger().warning(f'unknown parameter {name!r} ({hint}) is ignored')
 
 
 def message_class(msgtype: str, *, topic: str = ''):

@@ -19,7 +19,8 @@ QoS: blocks are reliable, volatile, keep-all (a slow reader slows the node down,
 dropped; see :mod:`sensor_comp.nodes._common`); ``stream_info`` is reliable,
 transient-local, depth 1 so that late subscribers get it.
 
-Parameters (read once at start; invalid values stop the node with a message naming them):
+Parameters (read once at start; invalid values stop the node with a message naming them, a
+parameter it does not have is logged with the closest name it has):
 
 - ``source`` (``sim``, ``bag`` or ``csv``; default ``sim``) and ``path`` (the bag or CSV
   file for ``bag`` and ``csv``).
@@ -59,11 +60,11 @@ from ..blocks import iter_blocks
 from ..io.bag_reader import read_recording
 from ..io.csv_import import read_csv
 from ..io.messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info, IMAGE
-from ..sim import random_shots, RigConfig, simulate, TABLE2
+from ..sim import parse_effect, random_shots, RigConfig, SimConfigError, simulate, TABLE2
 from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO
 from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, finish_publishing,
-                      LATCHED_QOS, message_class, publish_raw, run_main, sleep_until,
-                      wait_for_subscribers)
+                      LATCHED_QOS, message_class, NodeError, publish_raw, run_main,
+                      sleep_until, wait_for_subscribers, warn_unknown_parameters)
 
 __all__ = ['Acquisition', 'SOURCES', 'main']
 
@@ -118,6 +119,8 @@ class Acquisition(Node):
                                     'seconds to wait for the subscribers')
         self.ack_timeout = declare(self, 'ack_timeout', 10.0,
                                    'seconds to wait for the last acknowledgements')
+        sim = self._declare_sim()
+        warn_unknown_parameters(self)
         check(self, 'source', source, source in SOURCES, f'one of {", ".join(SOURCES)}')
         check(self, 'block_size', self.block_size, self.block_size > 0,
               'a positive number of samples')
@@ -130,7 +133,6 @@ class Acquisition(Node):
                   'a number of seconds >= 0')
         self.speed = self._parse_pacing(pacing)
         self._restamp = stamp_origin == 'now'
-        sim = self._declare_sim()
         if source == 'sim':
             self.recording = self._simulate(**sim)
         else:
@@ -174,9 +176,20 @@ class Acquisition(Node):
     def _simulate(self, *, shots: int, spacing: float, **config) -> Recording:
         check(self, 'sim_shots', shots, shots >= 0, '0 (Table 2) or a number of shots')
         check(self, 'sim_spacing', spacing, spacing >= 0, 'a number of seconds >= 0')
+        check(self, 'sim_seed', config['seed'], config['seed'] >= 0, 'an integer >= 0')
+        for spec in config['effects']:
+            try:
+                parse_effect(spec)
+            except SimConfigError as exc:
+                raise NodeError(f'{self.get_fully_qualified_name()}: parameter '
+                                f'\'sim_effects\': {exc}') from None
         chosen = random_shots(shots, seed=config['seed']) if shots else TABLE2
-        return simulate(RigConfig(shots=chosen, spacing_s=spacing or None,
-                                  effects=tuple(config.pop('effects')), **config)).recording
+        try:
+            return simulate(RigConfig(shots=chosen, spacing_s=spacing or None,
+                                      effects=tuple(config.pop('effects')), **config)).recording
+        except SimConfigError as exc:  # names the setting without its sim_ prefix
+            raise NodeError(f'{self.get_fully_qualified_name()}: simulator parameters '
+                            f'(sim_*): {exc}') from None
 
     @staticmethod
     def _read(source: str, path: str) -> Recording:

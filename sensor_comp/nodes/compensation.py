@@ -26,10 +26,11 @@ Topics, relative to the node's namespace (default ``/rig``):
   = output_samples + unpaired_pressure_samples + overlapping_samples`` (and likewise for
   acceleration), and samples dropped before a model came are ``unprocessed``.
 
-Parameters (read once at start):
+Parameters (read once at start; a bad value stops the node with a message naming it, a
+parameter it does not have is logged with the closest name it has):
 
-- ``model_file`` (default empty): a model file to start with; a model arriving on
-  ``model`` later replaces it.
+- ``model_file`` (default empty): a model file to start with (it must exist and load as a
+  model this node can run); a model arriving on ``model`` later replaces it.
 - ``max_pending_blocks`` (default 1000): while there is no model (or no ``stream_info``)
   yet, this many blocks per input topic are held (2x as many messages in all, the oldest
   dropped first); when the model comes they are compensated in order, from rest at the
@@ -101,7 +102,8 @@ from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_
 from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
                       DIAGNOSTICS_QOS, diagnostics, finish_publishing, LATCHED_QOS,
                       latched_qos, merge_stream_infos, message_class, NodeError, publish_raw,
-                      run_main, spin_until, subscribe_blocks, take_queued)
+                      run_main, spin_until, subscribe_blocks, take_queued,
+                      warn_unknown_parameters)
 
 __all__ = ['Compensation', 'main']
 
@@ -173,6 +175,7 @@ class Compensation(Node):
         period = declare(self, 'diagnostics_period', 1.0, 'seconds between diagnostics')
         self.ack_timeout = declare(self, 'ack_timeout', 10.0,
                                    'seconds to wait for the last acknowledgements at exit')
+        warn_unknown_parameters(self)
         check(self, 'max_pending_blocks', self.max_pending_blocks,
               self.max_pending_blocks >= 0, 'a number of blocks >= 0')
         check(self, 'max_pairing_wait', self.max_pairing_wait,

@@ -22,13 +22,15 @@ Topics, relative to the node's namespace (default ``/rig``):
   2: one to fit on, one to validate on); the answer is success with a one-line summary
   of the fit, or failure with the reason (e.g. ``1 shot kept, need at least 2``).
 
-Parameters (read once at start):
+Parameters (read once at start; a bad value stops the node with a message naming it, a
+parameter it does not have is logged with the closest name it has):
 
 - ``structure`` (``auto``, ``arx``, ``armax``, ``gls``, ``oe``; default ``auto``),
   ``orders`` (``[na, nb]``, default empty: the structure's default or the ``auto`` grid),
   ``delay`` (samples, default -1: estimated), ``emd`` (bool, default true: EMD-denoise the
   calibration windows), ``effects`` (string array, default empty: extra physical effects
-  to fit, given to ``identify(effects=...)`` when this version of the core has it).
+  to fit, ids of :data:`sensor_comp.core.effects.EFFECTS`, given to
+  ``identify(effects=...)``).
 - ``min_shots`` (default 4): fit automatically once this many shots are kept;
   ``refit_shots`` (default 0 = never): fit again after this many more; ``max_shots``
   (default 20): keep at most the latest this many shot windows.
@@ -36,7 +38,9 @@ Parameters (read once at start):
   peak and 8 noise σ), ``pre_ms`` and ``post_ms`` (window before the pulse onset and after
   the pulse end, default 5 and 20 ms), ``max_pulse_ms`` (longest pulse expected, default
   10 ms; sizes the buffer).
-- ``model_file`` (default empty): also write each model to this file (atomically).
+- ``model_file`` (default empty): also write each model to this file (atomically). Checked
+  at start: its folder must exist and be writable, and a file already there must be a
+  model file (never a bag or another input).
 - ``max_pending_blocks`` (default 1000): blocks per topic held until ``stream_info``
   arrives; older ones are dropped and counted.
 - ``diagnose`` (bool, default true): after each fit, run the diagnosis
@@ -104,7 +108,6 @@ from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError as FutureTimeout
 from dataclasses import dataclass, replace
 import hashlib
-import inspect
 import json
 import math
 import sys
@@ -118,7 +121,8 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from ..core.identify import identify, STRUCTURES
+from ..core.effects import EFFECTS
+from ..core.identify import STRUCTURES
 from ..core.model import Model, Source
 from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
                           mad_sigma, NOISE_FACTOR, Shot, ShotError)
@@ -127,10 +131,10 @@ from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
                            MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
-from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTICS_QOS,
-                      diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
+from ._common import (check, check_output_parameter, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
+                      DIAGNOSTICS_QOS, diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
                       merge_stream_infos, message_class, NodeError, publish_raw, run_main,
-                      spin_until, subscribe_blocks, take_queued)
+                      spin_until, subscribe_blocks, take_queued, warn_unknown_parameters)
 from ._fit_worker import diagnose_fit, fit_shots, FitWorker, start_worker, WorkerDied
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
@@ -428,6 +432,7 @@ class Identification(Node):
                                           'seconds between diagnostics')
         self.fit_timeout = declare(self, 'fit_timeout', 300.0,
                                    'seconds the ~/fit service waits for the fit')
+        warn_unknown_parameters(self)
         check(self, 'structure', self.structure, self.structure in STRUCTURES,
               f'one of {", ".join(STRUCTURES)}')
         check(self, 'orders', orders,
@@ -453,9 +458,12 @@ class Identification(Node):
         for name in ('diagnostics_period', 'fit_timeout'):
             check(self, name, getattr(self, name), getattr(self, name) > 0,
                   'a positive number of seconds')
-        check(self, 'effects', self.effects,
-              not self.effects or 'effects' in inspect.signature(identify).parameters,
-              'empty: this version of sensor_comp identifies no extra effects')
+        unknown = [effect for effect in self.effects if effect not in EFFECTS]
+        check(self, 'effects', self.effects, not unknown,
+              f'effect ids of the catalogue ({", ".join(EFFECTS)}); unknown: '
+              f'{", ".join(map(repr, unknown))}')
+        if self.model_file:
+            check_output_parameter(self, 'model_file', self.model_file, kind='model')
 
     # Reception (executor thread) -------------------------------------------------------
 

@@ -4,7 +4,8 @@ The ``player`` node: publish the messages of a bag with their original timing.
 Run it as ``player --ros-args -p bag:=run.mcap`` (or ``python -m sensor_comp.nodes.player``);
 it exits when the bag has been played (unless ``loop``), so scripts and tests can wait for it.
 
-Parameters (read once at start):
+Parameters (read once at start; a bad value stops the node with a message naming it, a
+parameter it does not have is logged with the closest name it has):
 
 - ``bag`` (string, required): the MCAP file (or rosbag2 directory holding one).
 - ``topics`` (string array, default empty = all): absolute topic names to play.
@@ -46,6 +47,7 @@ installed as rclpy message packages.
 
 from __future__ import annotations
 
+from pathlib import Path
 import sys
 import threading
 import time
@@ -56,7 +58,8 @@ from rclpy.validate_namespace import validate_namespace
 
 from ..io.bag_reader import BagReader
 from ._common import (BLOCK_QOS, check, declare, finish_publishing, latched_qos, message_class,
-                      NodeError, publish_raw, run_main, sleep_until, wait_for_subscribers)
+                      NodeError, publish_raw, run_main, sleep_until, wait_for_subscribers,
+                      warn_unknown_parameters)
 
 __all__ = ['Player', 'main']
 
@@ -101,7 +104,9 @@ class Player(Node):
                         'OLD:=NEW publishes topics under namespace OLD under NEW')
         self.ack_timeout = declare(self, 'ack_timeout', 10.0,
                                    'seconds to wait for the last acknowledgements')
-        check(self, 'bag', bag, bool(bag), 'the path of a bag to play')
+        warn_unknown_parameters(self)
+        check(self, 'bag', bag, bool(bag) and Path(bag).exists(),
+              'an existing bag (MCAP file or rosbag2 folder)')
         check(self, 'rate', self.rate, self.rate > 0, 'a positive time scale')
         check(self, 'start_offset', self.start_offset, self.start_offset >= 0,
               'a number of seconds >= 0')

@@ -4,10 +4,12 @@ The ``recorder`` node: record topics into a rosbag2-layout MCAP file, or a serie
 Run it as ``recorder --ros-args -r __ns:=/rig -p output:=run.mcap`` (or
 ``python -m sensor_comp.nodes.recorder ...``); stop it with Ctrl-C or SIGTERM.
 
-Parameters (read once at start):
+Parameters (read once at start; a bad value stops the node with a message naming it, a
+parameter it does not have is logged with the closest name it has):
 
 - ``output`` (string, default ``recording_<date>-<time>.mcap`` in the working directory):
-  the bag to create; an existing file is never overwritten.
+  the bag to create, in a folder that exists and is writable; an existing file (a bag
+  being played, say) is never overwritten: the node refuses to start.
 - ``topics`` (string array, default empty = every topic under the node's namespace, also
   those that appear later; in namespace ``/`` every topic but ``/rosout`` and
   ``/parameter_events``): topics to record; relative names resolve in the node's namespace.
@@ -81,8 +83,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ..errors import SensorCompError
 from ..io.bag_writer import BagWriter
 from ..io.messages import DIAGNOSTIC_ARRAY
-from ._common import (check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS, DIAGNOSTICS_QOS,
-                      diagnostics, message_class, NodeError, run_main)
+from ._common import (check, check_output_parameter, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
+                      DIAGNOSTICS_QOS, diagnostics, message_class, NodeError, run_main,
+                      warn_unknown_parameters)
 
 __all__ = ['Recorder', 'main', 'split_path']
 
@@ -149,6 +152,7 @@ class Recorder(Node):
         self.max_bag_size = declare(self, 'max_bag_size', 0,
                                     'bytes per file on disk; 0: no limit')
         period = declare(self, 'diagnostics_period', 1.0, 'seconds between diagnostics')
+        warn_unknown_parameters(self)
         check(self, 'chunk_size', chunk_size, chunk_size > 0, 'a positive number of bytes')
         check(self, 'flush_period', flush_period, flush_period >= 0, 'a number of s >= 0')
         for name, value in (('discovery_period', discovery_period),
@@ -198,9 +202,13 @@ class Recorder(Node):
 
     def _check_output(self, output: str) -> None:
         check(self, 'output', output, bool(output), 'the name of a file to create')
+        # The folder exists and is writable, the name is no folder and no file of another kind.
+        check_output_parameter(self, 'output', str(split_path(self.output, 0) if self.splitting
+                                                   else self.output), kind='bag')
         if not self.splitting:
             check(self, 'output', output, not self.output.exists(),
-                  'the name of a file that does not exist yet')
+                  'the name of a file that does not exist yet (a recorder never replaces a '
+                  'file, a bag being played say)')
             return
         series = re.compile(re.escape(self.output.stem) + r'_\d{4,}' +
                             re.escape(self.output.suffix) + '$')

@@ -415,19 +415,14 @@ def test_identification_rejects_bad_parameters(context, params, values, name):
         Identification(context=context, parameter_overrides=params(**values))
 
 
-def test_effects_need_an_identify_that_fits_them(context, monkeypatch, params):
-    def without_effects(calibration, *, structure='auto'):
-        raise AssertionError('not called')
-
-    def with_effects(calibration, *, structure='auto', effects=()):
-        raise AssertionError('not called')
-
-    effects = params(effects=['amplifier_highpass'])
-    monkeypatch.setattr(identification_module, 'identify', without_effects)
-    with pytest.raises(NodeError, match='effects'):
-        Identification(context=context, parameter_overrides=effects)
-    monkeypatch.setattr(identification_module, 'identify', with_effects)
-    node = Identification(context=context, parameter_overrides=effects)
+def test_effects_are_ids_of_the_catalogue(context, params):
+    with pytest.raises(NodeError, match=r"parameter 'effects' must be effect ids of the "
+                                        r"catalogue \(.*amplifier_highpass.*\); unknown: "
+                                        r"'bogus'"):
+        Identification(context=context, parameter_overrides=params(
+            effects=['amplifier_highpass', 'bogus']))
+    node = Identification(context=context, parameter_overrides=params(
+        effects=['amplifier_highpass']))
     assert node.effects == ['amplifier_highpass']
     node.destroy_node()
 
