@@ -152,6 +152,11 @@ class CompensationFilter:
         self.b = b
         self._num = delayed_numerator(b, self.nk)
         self._order = max(self._num.shape[1], a.size) - 1
+        # Plain acceleration rows need no channel computation: the filter reads them as
+        # they are (no copy, no per-block parsing).
+        channels = [parse_channel(name) for name in inputs]
+        self._axes = (tuple(c.axis for c in channels)
+                      if all(c.kind == 'a' and not c.modifiers for c in channels) else None)
         self.disturbances = tuple(disturbances)
         self.reset()
 
@@ -283,9 +288,20 @@ class CompensationFilter:
         if u.ndim != 2 or u.shape[0] != len(self.inputs):
             raise CompensationError(f'inputs must have shape ({len(self.inputs)}, samples), '
                                     f'got {u.shape}')
+        return self._filter_rows(u)
+
+    def _filter_rows(self, rows) -> np.ndarray:
+        """Filter input rows (an array or a list of equal-length rows); see filter_inputs."""
+        if all(np.isfinite(row).all() for row in rows):
+            # The usual case costs one pass of lfilter per row and two finiteness checks.
+            saved = self._zi.copy()
+            out = self._run(rows)
+            if np.isfinite(out).all():
+                return out
+            self._zi[:] = saved  # an overflow: redo the block sample-exactly below
+            return self._run_valid(np.asarray(rows))
+        u = np.asarray(rows)
         finite = np.isfinite(u).all(axis=0)
-        if finite.all():
-            return self._run_valid(u)
         out = np.full(u.shape[1], np.nan)
         # Runs of finite samples are filtered; a non-finite run resets the state to rest.
         edges = np.flatnonzero(np.diff(np.concatenate(([False], finite, [False])).astype(int)))
@@ -313,12 +329,16 @@ class CompensationFilter:
             start = k + 1
             out[start:] = self._run(u[:, start:])
 
-    def _run(self, u: np.ndarray) -> np.ndarray:
-        total = np.zeros(u.shape[1])
-        for i, row in enumerate(u):
+    def _run(self, rows) -> np.ndarray:
+        """Return the sum of every row filtered by its numerator, carrying the state."""
+        total = None
+        for i, row in enumerate(rows):
             y, self._zi[i] = signal.lfilter(self._num[i], self.a, row, zi=self._zi[i])
-            total += y
-        return total
+            if total is None:
+                total = y
+            else:
+                total += y
+        return np.zeros(0) if total is None else total
 
     def induced(self, acceleration: np.ndarray) -> np.ndarray:
         """
@@ -334,8 +354,11 @@ class CompensationFilter:
             InputError: When the block is not ``(3, w)``.
 
         """
-        u = input_channels(self.inputs, acceleration, self._input_state, fs=self.fs)
-        return self.filter_inputs(u)
+        acceleration = np.asarray(acceleration, dtype=np.float64)
+        if self._axes is None or acceleration.ndim != 2 or acceleration.shape[0] != 3:
+            u = input_channels(self.inputs, acceleration, self._input_state, fs=self.fs)
+            return self._filter_rows(u)
+        return self._filter_rows([acceleration[axis] for axis in self._axes])
 
     def process(self, acceleration: np.ndarray,
                 pressure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
