@@ -481,3 +481,41 @@ def test_every_stream_fault_is_one_log_line_and_the_state_survives_it(run):
     assert np.array_equal(np.isnan(compensated), np.isnan(expected_out))
     finite = ~np.isnan(expected_out)
     assert_close(compensated[finite], expected_out[finite])
+
+
+def _file_rss_kb() -> int:
+    """Return this process's resident file-backed memory in kB (Linux)."""
+    for line in open('/proc/self/status'):
+        if line.startswith('RssFile:'):
+            return int(line.split()[1])
+    pytest.skip('no RssFile in /proc/self/status')
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'none'])
+def test_a_pass_over_a_bag_leaves_its_pages_unmapped(tmp_path, monkeypatch, compression):
+    # Compensating a bag reads it once, block by block: what it has read must not stay
+    # resident (the reader maps the file; a 1 GB bag would end with 1 GB resident).
+    import mmap
+    from sensor_comp.io import bag_reader
+    from sensor_comp.io.bag_writer import write_recording
+    from sensor_comp.streams import Recording
+    rng = np.random.default_rng(0)
+    n = 600_000  # ~19 MB of float64 samples: noise does not compress
+    recording = Recording(fs=1e6, t0_ns=0, pressure=rng.standard_normal(n),
+                          acceleration=rng.standard_normal((3, n)))
+    path = tmp_path / 'noise.mcap'
+    write_recording(path, recording, compression=compression, block_width=10_000)
+    size_kb = path.stat().st_size // 1024
+    first = []
+    for release in (1 << 40, mmap.PAGESIZE):  # never, then after every page
+        monkeypatch.setattr(bag_reader, 'RELEASE_BYTES', release)
+        with bag_reader.BagReader(path) as bag:
+            before = _file_rss_kb()
+            datas = [m.data for m in bag.messages()]
+            grown = _file_rss_kb() - before
+        if not first:
+            first = datas
+            assert grown > size_kb // 2
+        else:
+            assert datas == first
+            assert grown < size_kb // 10
