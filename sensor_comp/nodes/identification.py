@@ -478,6 +478,12 @@ class Identification(Node):
         return StreamCounters() if self._pairer is None else self._pairer.counters
 
     @property
+    def last_error(self) -> str | None:
+        """Return why the latest fit failed, or None (no fit yet, or it succeeded)."""
+        with self._lock:
+            return self._last_error
+
+    @property
     def buffer_samples(self) -> int:
         """Return the number of samples in the rolling buffer now."""
         return 0 if self._live is None else self._live.length

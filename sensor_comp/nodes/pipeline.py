@@ -20,7 +20,8 @@ What it does:
   before the acquisition;
 - spins them on one ``MultiThreadedExecutor`` (2 threads) in a background thread: the
   identification's ``~/fit`` service can wait for a fit on one thread while blocks keep
-  flowing on the other (fits themselves run in the identification node's worker thread);
+  flowing on the other (fits themselves run in the identification node's worker process,
+  which never imports the calling script: no ``if __name__ == '__main__':`` guard needed);
 - with a recorder, waits until it has subscribed to every topic the other nodes publish
   under the namespace (volatile block topics are otherwise lost until it discovers them);
 - runs :meth:`Acquisition.run <sensor_comp.nodes.acquisition.Acquisition.run>` in a thread
@@ -186,7 +187,8 @@ class Pipeline:
             what: What is awaited, for the timeout message.
 
         Raises:
-            PipelineTimeout: After ``timeout`` seconds.
+            PipelineTimeout: After ``timeout`` seconds; the message says where the
+                identification stands (shots kept, fits, why the last one failed).
             SensorCompError: The acquisition's error, if it failed meanwhile.
 
         """
@@ -196,8 +198,18 @@ class Pipeline:
                 raise self._acquisition_error
             if time.monotonic() > deadline:
                 raise PipelineTimeout(f'pipeline: waited {timeout:g} s for '
-                                      f'{what or "the condition"} in vain')
+                                      f'{what or "the condition"} in vain{self._state()}')
             time.sleep(poll)
+
+    def _state(self) -> str:
+        """Return where the identification stands, for a timeout message (or '')."""
+        node = self.identification
+        if node is None:
+            return ''
+        state = (f'; identification: {len(node.windows)} of {node.min_shots} shots kept, '
+                 f'{node.fits} fit{"" if node.fits == 1 else "s"}')
+        error = node.last_error
+        return state + (f', the last one failed: {error}' if error else '')
 
     def wait_for_acquisition(self, *, timeout: float) -> None:
         """

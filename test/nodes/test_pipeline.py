@@ -109,6 +109,18 @@ def test_pipeline_errors(context):
     assert p.nodes == {} and context.ok()  # a given context is left running
 
 
+def test_a_timeout_says_where_the_identification_stands(context):
+    with pipeline(context=context, nodes=('identification',)) as p:
+        with pytest.raises(PipelineTimeout, match=r'for the model in vain; identification: 0 '
+                                                  r'of 4 shots kept, 0 fits$'):
+            p.wait_until(lambda p: p.identification.model is not None, timeout=0.05,
+                         what='the model')
+        p.identification._last_error = 'no stable model found'
+        with pytest.raises(PipelineTimeout, match=r'0 fits, the last one failed: no stable '
+                                                  r'model found$'):
+            p.wait_until(lambda p: False, timeout=0.05, what='the model')
+
+
 def test_core_import_does_not_load_ros():
     code = ('import sys, sensor_comp, sensor_comp.core.identify; '
             'assert "rclpy" not in sys.modules; '
