@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import os
 import pickle
 import signal
+import struct
 import subprocess
 import sys
 import traceback
@@ -48,6 +49,9 @@ _BOOTSTRAP = ('import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); impo
               'sys.path[:] = {path!r}; from {module} import serve; serve({read}, {write})')
 # How long a retired worker may take to exit before it is killed.
 _EXIT_WAIT_S = 5.0
+# Each message on a pipe: its length, then a pickle. A message is read whole before it is
+# unpickled, so a pickle that fails to load never leaves the pipe mid-message.
+_LENGTH = struct.Struct('<Q')
 
 
 class WorkerDied(Exception):
@@ -148,19 +152,25 @@ class FitWorker:
 
         Raises:
             WorkerDied: If the process ended before it answered.
-            Exception: What the call raised in the worker (its traceback in the message).
+            Exception: What the call raised in the worker (its traceback in a note), or
+                what pickling the arguments raised here.
 
         """
+        request = pickle.dumps((function, args), protocol=pickle.HIGHEST_PROTOCOL)
         try:
-            pickle.dump((function, args), self._requests, protocol=pickle.HIGHEST_PROTOCOL)
+            self._requests.write(_LENGTH.pack(len(request)))
+            self._requests.write(request)
             self._requests.flush()
-            ok, value = pickle.load(self._replies)
-        except (OSError, EOFError, pickle.UnpicklingError):
-            if self.alive:  # a broken reply from a live worker: it is no use either
+            reply = _read_message(self._replies)
+        except OSError:
+            reply = None
+        if reply is None:
+            if self.alive:  # the pipes broke, yet it runs: it cannot answer any more
                 self._process.kill()
             self._process.wait()
             raise WorkerDied(f'the fit worker process {self.pid} died '
-                             f'({self.describe_exit()})') from None
+                             f'({self.describe_exit()})')
+        ok, value = pickle.loads(reply)
         if not ok:
             raise value
         return value
@@ -197,6 +207,16 @@ def start_worker() -> FitWorker:
     return FitWorker()
 
 
+def _read_message(stream) -> bytes | None:
+    """Return the next message of a pipe, or None if it ends first (the writer is gone)."""
+    header = stream.read(_LENGTH.size)
+    if len(header) < _LENGTH.size:
+        return None
+    (size,) = _LENGTH.unpack(header)
+    data = stream.read(size)
+    return data if len(data) == size else None
+
+
 def _reply(ok: bool, value) -> bytes:
     """Pickle a reply; an unpicklable result or error comes back as a RuntimeError."""
     try:
@@ -220,19 +240,17 @@ def serve(read_fd: int, write_fd: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     with os.fdopen(read_fd, 'rb') as requests:
         try:
-            while True:
+            while (request := _read_message(requests)) is not None:
                 try:
-                    function, args = pickle.load(requests)
-                except EOFError:
-                    return
-                try:
+                    function, args = pickle.loads(request)
                     reply = _reply(True, function(*args))
                 except Exception as exc:  # re-raised in the node, with the traceback from here
                     exc.add_note(''.join(traceback.format_exception(exc)))
                     reply = _reply(False, exc)
-                view = memoryview(reply)
-                while view:
-                    view = view[os.write(write_fd, view):]
+                for chunk in (_LENGTH.pack(len(reply)), reply):
+                    view = memoryview(chunk)
+                    while view:
+                        view = view[os.write(write_fd, view):]
         except BrokenPipeError:  # the node is gone
             return
         finally:
