@@ -120,24 +120,25 @@ def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na:
     names = ([f'y(k-{j})' for j in range(1, na + 1)]
              + [f'u{i}(k-{nk + j})' for i in range(n_inputs) for j in range(nb)]
              + [f'e(k-{j})' for j in range(1, nc + 1)])
-    blocks, targets = [], []
-    for index, (y, u) in enumerate(zip(ys, us)):
-        n = y.size
-        if n <= k0:
-            continue
-        cols = [-y[k0 - j:n - j] for j in range(1, na + 1)]
-        cols += [u[i, k0 - nk - j:n - nk - j] for i in range(n_inputs) for j in range(nb)]
-        if nc:
-            e = es[index]
-            cols += [e[k0 - j:n - j] for j in range(1, nc + 1)]
-        blocks.append(np.column_stack(cols) if cols else np.empty((n - k0, 0)))
-        targets.append(y[k0:])
-    rows = sum(t.size for t in targets)
+    used = [index for index, y in enumerate(ys) if y.size > k0]
+    rows = sum(ys[index].size - k0 for index in used)
     if rows <= len(names):
         raise IdentError(f'the segments give {rows} regression rows for {len(names)} '
                          f'parameters (orders na={na} nb={nb} nk={nk} nc={nc}); use longer '
                          f'segments or lower orders')
-    return np.concatenate(blocks), np.concatenate(targets), names
+    # Column by column into one Fortran-ordered array: no per-segment blocks to stack.
+    phi = np.empty((rows, len(names)), order='F')
+    start = 0
+    for index in used:
+        y, u, n = ys[index], us[index], ys[index].size
+        stop = start + n - k0
+        sources = [-y[k0 - j:n - j] for j in range(1, na + 1)]
+        sources += [u[i, k0 - nk - j:n - nk - j] for i in range(n_inputs) for j in range(nb)]
+        sources += [es[index][k0 - j:n - j] for j in range(1, nc + 1)]
+        for column, values in enumerate(sources):
+            phi[start:stop, column] = values
+        start = stop
+    return phi, np.concatenate([ys[index][k0:] for index in used]), names
 
 
 @dataclass(frozen=True, eq=False)

@@ -66,7 +66,7 @@ def _relative_change(old: np.ndarray, new: np.ndarray) -> float:
 
 def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
                       a0: np.ndarray | None = None, max_iter: int = 30,
-                      tol: float = 1e-7) -> SteiglitzMcBride:
+                      tol: float = 1e-7, exact: bool = True) -> SteiglitzMcBride:
     """
     Iterate least squares on the data prefiltered by ``1/F̂`` (Steiglitz–McBride).
 
@@ -83,6 +83,10 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
         a0: Start denominator; an ARX estimate when None.
         max_iter: Most prefilter passes.
         tol: Relative parameter change that ends the iteration.
+        exact: Solve each pass by QR (the estimate is the result, as in the seed paper's
+            generalised least squares); False solves the normal equations (QR only where
+            they are singular), three times cheaper, for a start value that a
+            Levenberg–Marquardt fit refines; the covariance is then NaN.
 
     Returns:
         The last estimate.
@@ -100,14 +104,26 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
         phi, target, names = lagged_regression(filter_each([1.0], a, ys),
                                                filter_each([1.0], a, us),
                                                na=nf, nb=nb, nk=nk)
-        ls = solve_least_squares(phi, target, names=names)
-        a_new = reflect_unstable(np.concatenate([[1.0], ls.theta[:nf]]))
-        b_new = ls.theta[nf:].reshape(b.shape)
+        ls = None
+        try:
+            theta = None if exact else normal_equations(phi, target)
+        except IdentError:
+            theta = None
+        if theta is None:
+            ls = solve_least_squares(phi, target, names=names)
+            theta = ls.theta
+        a_new = reflect_unstable(np.concatenate([[1.0], theta[:nf]]))
+        b_new = theta[nf:].reshape(b.shape)
         change = max(_relative_change(a, a_new), _relative_change(b, b_new))
         a, b = a_new, b_new
         if change < tol:
             converged = True
             break
+    if ls is None:
+        e = target - phi @ theta
+        variance = float(e @ e) / max(e.size - theta.size, 1)
+        return SteiglitzMcBride(a, b, np.full((theta.size,) * 2, np.nan), variance,
+                                iterations, converged)
     return SteiglitzMcBride(a, b, ls.noise_variance * ls.unit_covariance, ls.noise_variance,
                             iterations, converged)
 
@@ -293,19 +309,26 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         return _estimate(problem, descend(np.concatenate([f0[1:], problem.linear(f0)])), 0,
                          'a given start denominator')
 
+    f0 = reflect_unstable(fit_arx(segs, na=nf, nb=nb, nk=nk).a)
     try:
-        sm = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, max_iter=15, tol=1e-6)
+        sm = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, a0=f0, max_iter=15, tol=1e-6,
+                               exact=False)
     except IdentError as exc:  # e.g. prefiltered regressors that lost their rank
         sm, failed = None, str(exc)
-    best = None if sm is None else descend(np.concatenate([sm.a[1:], sm.b.ravel()]))
-    # Steiglitz-McBride can drift to a degenerate minimum (poles on 1 with a differentiating
-    # numerator) when the data are far from linear, or to a poor basin of a first-order
-    # model; the ARX poles, biased but in the right place, then start better. Where the ARX
-    # start is far worse than the minimum found (the usual case: its bias), it is skipped.
-    f0 = reflect_unstable(fit_arx(segs, na=nf, nb=nb, nk=nk).a)
+    # Steiglitz-McBride can drift to a degenerate minimum (a pole on 1 with a differentiating
+    # numerator) when the data are far from linear or carry a slow tail, or to a poor basin
+    # of a first-order model; the ARX poles, biased but in the right place, then start
+    # better. The ARX start is descended from when Steiglitz-McBride ended worse than it
+    # began (it drifted) or within ARX_MARGIN of the minimum found; otherwise its bias puts
+    # it far above the same minimum and it is skipped.
     arx = np.concatenate([f0[1:], problem.linear(f0)])
-    e = problem.residual(arx)
-    if best is None or float(e @ e) < (1 + ARX_MARGIN) * best.cost:
+    arx_cost = _cost(problem, arx)
+    best = drifted = None
+    if sm is not None:
+        theta = np.concatenate([sm.a[1:], sm.b.ravel()])
+        drifted = _cost(problem, theta) > arx_cost
+        best = descend(theta)
+    if best is None or drifted or arx_cost < (1 + ARX_MARGIN) * best.cost:
         other = descend(arx)
         start = ('an ARX start (Steiglitz-McBride failed: ' + failed + ')' if best is None
                  else 'the better of a Steiglitz-McBride and an ARX start')
@@ -313,6 +336,12 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     else:
         start = 'a Steiglitz-McBride start'
     return _estimate(problem, best, 0 if sm is None else sm.iterations, start)
+
+
+def _cost(problem: OutputErrorProblem, theta: np.ndarray) -> float:
+    """Return the sum of squared simulation errors at ``theta``."""
+    e = problem.residual(theta)
+    return float(e @ e)
 
 
 def _estimate(problem: OutputErrorProblem, best, passes: int, start: str) -> Estimate:
