@@ -297,19 +297,72 @@ def _label(c: Candidate, method: str) -> str:
     return f'{"nf" if method == "oe" else "na"}={c.na} nb={c.nb} nk={c.nk}'
 
 
-def _evaluate(segs, valid, method, criterion, na, nb, nk):
+def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
+              known: Mapping[tuple[int, int, int], Estimate]) -> dict:
+    """
+    Return the estimate (or why it failed) of every ``(na, nb, nk)`` of ``grid``.
+
+    Output error is fitted afresh (Steiglitz–McBride and ARX starts) at the middle delay of
+    every order pair, and refined from the best fitted structure it contains (``nb − 1``
+    coefficients at ``nk`` or ``nk + 1``: that minimum is a point of the larger model, so
+    the larger one ends no worse); the better of the two is kept. The other delays are
+    refined from the best of the contained structures and the same orders' fits at other
+    delays (the start with the least loss for this structure). ``known`` fits (the delay
+    search's) are reused.
+    """
+    centre = sorted({nk for _, _, nk in grid})
+    centre = centre[len(centre) // 2]
+    fits: dict = {key: est for key, est in known.items() if key in set(grid)}
+    for na, nb, nk in sorted(grid, key=lambda k: (k[0], k[1], abs(k[2] - centre), k[2])):
+        if (na, nb, nk) in fits:
+            continue
+        if method != 'oe':
+            fits[na, nb, nk] = _attempt(lambda: METHODS[method](segs, na, nb, nk))
+            continue
+        starts = [fits.get(k) for k in [(na, nb - 1, nk), (na, nb - 1, nk + 1)]
+                  + [(na, nb, d) for d in range(nk - 2, nk + 3) if d != nk]]
+        starts = [est.a for est in starts if isinstance(est, Estimate)]
+        tried = []
+        if nk == centre or not starts:
+            tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk)))
+        if starts:
+            problem = OutputErrorProblem([s.u for s in segs], [s.y for s in segs], na, nb, nk)
+            start = min(starts, key=problem.profile_sse)
+            tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk, start=start)))
+        good = [est for est in tried if isinstance(est, Estimate)]
+        fits[na, nb, nk] = min(good, key=lambda e: e.loss) if good else tried[0]
+    return fits
+
+
+def _attempt(fit: Callable[[], Estimate]) -> Estimate | str:
+    """Return ``fit()``, or the text of the :class:`IdentError` it raised."""
     try:
-        est = METHODS[method](segs, na, nb, nk)
+        return fit()
     except IdentError as exc:
-        return None, Candidate(na, nb, nk, 0, np.nan, np.nan, np.nan, None, False, str(exc))
+        return str(exc)
+
+
+def _candidate(est: Estimate | str, key, segs, valid, method, criterion,
+               spread: float) -> Candidate:
+    """
+    Return the table row of one fit.
+
+    The calibration fit of output error is its loss (the mean squared simulation error);
+    ``spread`` is ``Σ (y − ȳ)²`` over the calibration segments.
+    """
+    na, nb, nk = key
+    if not isinstance(est, Estimate):
+        return Candidate(na, nb, nk, 0, np.nan, np.nan, np.nan, None, False, est)
     stable = is_stable(est.a)
     calib = valid_fit = np.nan
     if stable:
-        calib = fit_percent([s.y for s in segs], simulate(est, segs))
+        calib = (100.0 * (1.0 - np.sqrt(est.loss * est.n_samples / spread))
+                 if method == 'oe' and spread > 0
+                 else fit_percent([s.y for s in segs], simulate(est, segs)))
         if valid is not None:
             valid_fit = fit_percent([s.y for s in valid], simulate(est, valid))
-    return est, Candidate(na, nb, nk, est.n_parameters, est.loss, est.criterion(criterion),
-                          calib, None if valid is None else valid_fit, stable)
+    return Candidate(na, nb, nk, est.n_parameters, est.loss, est.criterion(criterion),
+                     calib, None if valid is None else valid_fit, stable)
 
 
 def select_structure(calib_segments: Segment | Iterable[Segment], *,
@@ -363,17 +416,20 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     valid = None if valid_segments is None else as_segments(valid_segments)
     orders = (tuple(itertools.product(range(1, 5), range(1, 4))) if orders is None
               else tuple((int(na), int(nb)) for na, nb in orders))
+    known = {}
     if delays is None:
-        nk0 = estimate_delay(segs, method=method).nk
-        delays = range(max(nk0 - 1, 0), nk0 + 2)
+        search = estimate_delay(segs, method=method)
+        delays = range(max(search.nk - 1, 0), search.nk + 2)
+        known = {(2, 1, nk): est for nk, est in search.estimates.items()}
     delays = tuple(int(d) for d in delays)
     if not orders or not delays:
         raise IdentError('select_structure: the grid of orders and delays is empty')
-    estimates, candidates = [], []
-    for (na, nb), nk in itertools.product(orders, delays):
-        est, cand = _evaluate(segs, valid, method, criterion, na, nb, nk)
-        estimates.append(est)
-        candidates.append(cand)
+    grid = [(na, nb, nk) for (na, nb), nk in itertools.product(orders, delays)]
+    fits = _fit_grid(segs, method, grid, known)
+    spread = sum(float(np.sum((s.y - s.y.mean()) ** 2)) for s in segs)
+    estimates = [fits[key] if isinstance(fits[key], Estimate) else None for key in grid]
+    candidates = [_candidate(fits[key], key, segs, valid, method, criterion, spread)
+                  for key in grid]
     usable = [i for i, c in enumerate(candidates) if c.usable]
     if not usable:
         reasons = '; '.join(f'{_label(c, method)}: {c.error or "unstable"}'
