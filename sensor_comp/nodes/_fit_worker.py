@@ -34,6 +34,7 @@ import subprocess
 import sys
 import traceback
 
+from ..core.denoise import PROCESSES_ENV
 from ..core.diagnose import diagnose
 from ..core.identify import identify, ShotSource
 from ..core.model import Model
@@ -112,8 +113,11 @@ class FitWorker:
         child_read, write = os.pipe()
         code = _BOOTSTRAP.format(path=list(sys.path), module=__name__, read=child_read,
                                  write=child_write)
+        # EMD in this one process: helper processes would take the cores the node
+        # receives blocks on (as when the worker was a multiprocessing child).
+        env = dict(os.environ, **{PROCESSES_ENV: '1'})
         try:
-            self._process = subprocess.Popen([sys.executable, '-c', code],
+            self._process = subprocess.Popen([sys.executable, '-c', code], env=env,
                                              stdin=subprocess.DEVNULL,
                                              pass_fds=(child_read, child_write))
         except BaseException:
