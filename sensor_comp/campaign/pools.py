@@ -3,15 +3,20 @@ Where a campaign's tasks run: a Dask cluster (local or remote), or this process.
 
 - **local** (default): a :class:`distributed.LocalCluster` of worker *processes* with one
   thread each (the analysis is numpy/scipy code that holds the GIL between calls, so
-  processes, not threads, use the cores), BLAS limited to one thread per worker
-  (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` = 1: small solves
-  slow down 30× when BLAS threads fight for the cores). Its size: one worker per core
-  available to this process, fewer when memory is short (:data:`MEMORY_PER_WORKER`).
+  processes, not threads, use the cores), started with :data:`WORKER_ENV`: BLAS limited to
+  one thread per worker (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``,
+  ``MKL_NUM_THREADS`` = 1: small solves slow down 30× when BLAS threads fight for the
+  cores), and glibc's malloc thresholds set so that the arrays of a recording (a few MB
+  each, allocated anew for every recording) come from the heap instead of fresh
+  ``mmap`` pages: Dask's default ``MALLOC_TRIM_THRESHOLD_=65536`` returns every freed array
+  to the system, and the page faults of the next one tripled the CPU time per shot here
+  (0.16 s instead of 0.06 s per recording of ten 1 MS/s shots). Its size: one worker per
+  core available to this process, fewer when memory is short (:data:`MEMORY_PER_WORKER`).
 - **distributed**: ``scheduler='tcp://host:8786'`` (or ``DASK_SCHEDULER_ADDRESS``) runs the
   same tasks on a running Dask cluster, e.g. one started by ``dask-jobqueue`` on SLURM or
   PBS. The workers must have sensor_comp installed and see the recordings under the same
   paths (a shared file system); results come back to this process, which writes every
-  output file.
+  output file. Start those workers with :data:`WORKER_ENV` in their environment.
 - **synchronous**: every task runs in this process when submitted, without Dask: for
   tests, debugging and profiling.
 
@@ -32,11 +37,13 @@ import resource
 
 from .discover import CampaignError
 
-__all__ = ['BLAS_ENV', 'MEMORY_PER_WORKER', 'SYNCHRONOUS', 'DaskPool', 'InlinePool', 'LazyPool',
+__all__ = ['MEMORY_PER_WORKER', 'SYNCHRONOUS', 'WORKER_ENV', 'DaskPool', 'InlinePool', 'LazyPool',
            'default_workers', 'open_pool']
 
-#: Environment of every local worker process: one BLAS/OpenMP thread.
-BLAS_ENV = {'OPENBLAS_NUM_THREADS': '1', 'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
+#: Environment every worker process starts with (see the module docs): one BLAS/OpenMP
+#: thread; arrays up to 32 MiB from the heap, up to 64 MiB of freed heap kept.
+WORKER_ENV = {'OPENBLAS_NUM_THREADS': '1', 'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1',
+              'MALLOC_MMAP_THRESHOLD_': str(32 << 20), 'MALLOC_TRIM_THRESHOLD_': str(64 << 20)}
 #: Memory a local worker is sized for, bytes: a 30-s recording at 1 MS/s (4 channels of
 #: float64, 1 GB) while its blocks are being joined.
 MEMORY_PER_WORKER = 2 << 30
@@ -119,6 +126,7 @@ class DaskPool:
     """
 
     def __init__(self, *, scheduler: str | None = None, workers: int | None = None):
+        import dask
         from distributed import as_completed, Client, LocalCluster
         logging.getLogger('distributed').setLevel(logging.ERROR)
         self.address, self._cluster = scheduler, None
@@ -129,10 +137,11 @@ class DaskPool:
                 self._client.wait_for_workers(workers or 1, timeout=300)
             else:
                 self.engine = 'local'
-                self._cluster = LocalCluster(
-                    n_workers=workers or default_workers(), threads_per_worker=1,
-                    processes=True, dashboard_address=None, silence_logs=logging.ERROR,
-                    env=dict(BLAS_ENV))
+                # Set before the worker processes start (malloc reads it at start).
+                with dask.config.set({'distributed.nanny.pre-spawn-environ': WORKER_ENV}):
+                    self._cluster = LocalCluster(
+                        n_workers=workers or default_workers(), threads_per_worker=1,
+                        processes=True, dashboard_address=None, silence_logs=logging.ERROR)
                 self._client = Client(self._cluster)
         except (OSError, TimeoutError) as exc:
             self.close()

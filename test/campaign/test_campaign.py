@@ -136,6 +136,50 @@ def test_resume_processes_only_what_is_new(campaign, copy_of, tmp_path):
     assert more.shots == first.shots + 3 + 3 + 3
 
 
+class _Bars:
+    """A progress factory that records every bar; optionally interrupts after some shots."""
+
+    def __init__(self, stop_after: int | None = None):
+        self.bars, self.stop_after = [], stop_after
+
+    def __call__(self, label, total):
+        outer = self
+
+        class Bar:
+            def __init__(self):
+                self.label, self.total, self.done = label, total, 0
+
+            def __enter__(self):
+                return self
+
+            def __exit__(self, *_):
+                return None
+
+            def advance(self, units=1):
+                self.done += units
+                if outer.stop_after is not None and self.done >= outer.stop_after:
+                    raise KeyboardInterrupt
+
+        self.bars.append(Bar())
+        return self.bars[-1]
+
+
+def test_progress_counts_shots_and_an_interrupted_run_resumes(campaign, copy_of, tmp_path):
+    folder = copy_of(campaign)
+    models = read_models([campaign.model])
+    output = tmp_path / 'out'
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign([folder], output, models=models, scheduler=SYNCHRONOUS,
+                     progress=_Bars(stop_after=6))
+    assert not (output / 'shots.parquet').exists()
+    bars = _Bars()
+    summary = run_campaign([folder], output, models=models, scheduler=SYNCHRONOUS,
+                           progress=bars, report=False)
+    assert 0 < summary.cached < 6 and summary.processed == 6 - summary.cached
+    (bar,) = bars.bars
+    assert bar.done == bar.total == summary.shots == 15
+
+
 def test_new_model_recomputes(campaign, copy_of, tmp_path):
     folder = copy_of(campaign)
     output = tmp_path / 'out'
@@ -163,6 +207,15 @@ def test_cli_json_on_a_local_cluster(campaign, first_run, capsys, tmp_path):
         for name in _SHOT_COLUMNS + _MODEL_COLUMNS:
             assert other[name] == row[name] or math.isclose(other[name], row[name],
                                                             rel_tol=1e-9), name
+
+
+def test_a_running_cluster_by_address(campaign, first_run, monkeypatch, tmp_path):
+    from distributed import LocalCluster
+    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as cluster:
+        monkeypatch.setenv('DASK_SCHEDULER_ADDRESS', cluster.scheduler_address)
+        summary = _run(campaign, tmp_path / 'out', scheduler=None, report=False)
+    assert (summary.engine, summary.workers) == ('distributed', 1)
+    assert _rows(tmp_path / 'out') == _rows(first_run[1])
 
 
 def test_identify_a_model_per_sensor(campaign, tmp_path):
