@@ -130,6 +130,8 @@ class DaskPool:
         from distributed import as_completed, Client, LocalCluster
         logging.getLogger('distributed').setLevel(logging.ERROR)
         self.address, self._cluster = scheduler, None
+        # Dask's nanny sets its pre-spawn variables in this process too: restored on close.
+        self._environ = {k: os.environ.get(k) for k in (*WORKER_ENV, 'PYTHONHASHSEED')}
         try:
             if scheduler:
                 self.engine = 'distributed'
@@ -156,10 +158,15 @@ class DaskPool:
         self.close()
 
     def close(self) -> None:
-        """Disconnect, and stop the local cluster."""
+        """Disconnect, stop the local cluster, and restore this process's environment."""
         for part in (getattr(self, '_client', None), self._cluster):
             if part is not None:
                 part.close()
+        for key, value in self._environ.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
     @property
     def workers(self) -> int:
