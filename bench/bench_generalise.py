@@ -11,9 +11,10 @@ its defaults:
    structure ``auto``, EMD, BIC): the base model and its worst validation peak residual;
 2. ``sensor-comp diagnose base.json B`` (:func:`~sensor_comp.core.diagnose.diagnose` with
    the model as base and A as calibration): verdict and ranking;
-3. ``identify A --validate B --effect TOP`` with the top-ranked effect, and with the TRUE
-   effect when the rig hides a catalogue one: the worst peak residual after, the
-   recovered parameters and their stated uncertainty.
+3. ``identify A --validate B --effect TOP`` with the top-ranked effect when it is
+   significant (the effect the verdict names), and with the TRUE effect when the rig hides
+   a catalogue one: the worst peak residual after, the recovered parameters and their
+   stated uncertainty.
 
 The noise ceiling is the worst peak residual a perfect model would leave on B's shots: the
 white pressure noise alone (the generator's clean pressure subtracted), in % of the shot's
@@ -214,7 +215,7 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
     row['ranking'] = _ranking(diagnosis)
     row['skipped'] = [[s.effect, s.reason[:200]] for s in diagnosis.skipped]
     top = diagnosis.ranking[0].effect if diagnosis.ranking else None
-    if top is not None:
+    if top is not None and diagnosis.ranking[0].significant:  # a user adds a named effect
         stage[0] = 'identify_top'
         _with_effect(row, 'top', [calib], [valid], top)
     if row['effect'] in CATALOGUE:
@@ -362,6 +363,8 @@ def _params_ok(row: dict) -> bool:
 
 
 def _ratio(row: dict, key: str, over: str) -> float | None:
+    if key == 'top' and not _named(row):  # only a named effect is added by a user
+        return None
     after = (row.get(key) or {}).get('peak_residual_percent')
     below = row.get(over)
     return after / below if after is not None and below else None
