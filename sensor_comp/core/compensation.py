@@ -43,25 +43,38 @@ acceleration-driven ones: their channels (``a_z·|a_z|``, delays, the amplifier 
 a shot-triggered offset...) are named, with their parameters, in the model's inputs, and
 computed here with their own carried state. Disturbances that the acceleration does not
 drive (mains hum) cannot be predicted from it, and their phase in a new recording is
-unknown: they are *estimated* from the compensated pressure itself by streaming trackers
-and removed too (:class:`~sensor_comp.core.effects.mains_hum.LineTracker`, whose
-documentation says when that is not sound: during its settling time after the start of
-a stream or a gap, a drifting mains frequency, intermittent pickup). ``induced`` stays the
-acceleration-driven part; ``compensated`` has the disturbance estimate removed as well.
+unknown: they are *estimated* from the compensated pressure itself and removed too.
+``induced`` stays the acceleration-driven part; ``compensated`` has the disturbance
+estimate removed as well. Two estimators:
+
+- offline, a whole recording at hand (:func:`compensate_recording`, ``sensor-comp
+  compensate`` in two passes): :class:`RecordingDisturbances` fits each disturbance by
+  least squares on the whole recording's residual with the regressors the identification
+  and the diagnosis use, so it is removed from the first sample on, as the diagnosis
+  credits it, however short the recording, down to the limit
+  :func:`disturbance_removal_warnings` states (for mains hum about half a period of the
+  line), below which it is left in with a :class:`DisturbanceWarning`;
+- live (:class:`CompensationFilter` as built by :meth:`~CompensationFilter.from_model`),
+  streaming trackers (:class:`~sensor_comp.core.effects.mains_hum.LineTracker`, whose
+  documentation says when that is not sound: during its settling time, about 0.5 s, after
+  the start of a stream or a gap, a drifting mains frequency, intermittent pickup).
+
 An effect id this version does not know is refused (:class:`CompensationError`): it may
 be a disturbance that compensation would silently leave in.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 import math
 from typing import Protocol, TYPE_CHECKING
+import warnings
 
 import numpy as np
 from scipy import signal
 
-from .effects import disturbance_trackers, EFFECTS
+from .effects import disturbance_trackers, Effect, EFFECTS
+from .extended import Window
 from .ident.least_squares import delayed_numerator
 from .ident.polynomials import max_root_radius
 from .inputs import (fractional_delay, input_channels, InputError, mode_pair, needs_rate,
@@ -72,8 +85,10 @@ from ..streams import Recording
 if TYPE_CHECKING:
     from .shots import Shot
 
-__all__ = ['STATE_TOLERANCE', 'CompensationError', 'CompensationFilter', 'UnstableModelError',
-           'compensate_recording', 'peak_residual_percent', 'shot_residuals']
+__all__ = ['MAX_INFLATION', 'STATE_TOLERANCE', 'CompensationError', 'CompensationFilter',
+           'DisturbanceWarning', 'RecordingDisturbances', 'UnstableModelError',
+           'compensate_recording', 'disturbance_removal_warnings', 'peak_residual_percent',
+           'shot_residuals', 'window_disturbances']
 
 #: Relative size to which the free response of a discarded input history must have decayed
 #: before a new model's state computed from the rest of the history counts as exact.
@@ -86,6 +101,10 @@ class CompensationError(SensorCompError, ValueError):
 
 class UnstableModelError(CompensationError):
     """The model's denominator has a pole on or outside the unit circle."""
+
+
+class DisturbanceWarning(UserWarning):
+    """A disturbance the model names cannot be removed from this recording (too short)."""
 
 
 class LinearModel(Protocol):
@@ -161,12 +180,13 @@ class CompensationFilter:
         self.reset()
 
     @classmethod
-    def from_model(cls, model: LinearModel) -> CompensationFilter:
+    def from_model(cls, model: LinearModel, *, trackers: bool = True) -> CompensationFilter:
         """
         Build the filter of ``model`` (anything with ``b``, ``a``, ``nk``, ``inputs``, ``fs``).
 
         The trackers of the model's disturbance effects (its ``effects`` entries, when it
-        has them) come along.
+        has them) come along, unless ``trackers`` is False (offline compensation, which
+        fits the disturbances on the whole recording: :class:`RecordingDisturbances`).
 
         Raises:
             UnstableModelError: When the model has a pole of magnitude ≥ 1.
@@ -181,9 +201,8 @@ class CompensationFilter:
                 f'(it knows {", ".join(EFFECTS)}): a disturbance among them would be left in '
                 f'the compensated pressure; use the sensor_comp version that identified the '
                 f'model or re-identify it')
-        trackers = disturbance_trackers(effects, fs=model.fs)
         return cls(model.b, model.a, nk=model.nk, inputs=model.inputs, fs=model.fs,
-                   disturbances=trackers)
+                   disturbances=disturbance_trackers(effects, fs=model.fs) if trackers else ())
 
     @property
     def pole_radius(self) -> float:
@@ -416,10 +435,14 @@ def compensate_recording(model: LinearModel,
     Compensate a whole recording offline, from rest at its first sample.
 
     The acceleration is used as recorded (no offset removed): a constant acceleration offset
-    becomes a constant pressure offset through the model's static gain.
+    becomes a constant pressure offset through the model's static gain. The model's
+    disturbances (mains hum) are fitted on the whole recording's residual and removed
+    (:class:`RecordingDisturbances`), as the diagnosis credits them: no tracker has to
+    settle first. One that the recording is too short for is left in, with a
+    :class:`DisturbanceWarning` saying so.
 
     Args:
-        model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``).
+        model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``, optional ``effects``).
         recording: Pressure and acceleration.
 
     Returns:
@@ -434,8 +457,270 @@ def compensate_recording(model: LinearModel,
         raise CompensationError(f'model identified at {model.fs:g} Hz but the recording is '
                                 f'sampled at {recording.fs:g} Hz: resample the recording or '
                                 f'identify a model at its rate')
-    compensation = CompensationFilter.from_model(model)
-    return compensation.process(recording.acceleration, recording.pressure)
+    compensation = CompensationFilter.from_model(model, trackers=False)
+    compensated, induced = compensation.process(recording.acceleration, recording.pressure)
+    disturbances = RecordingDisturbances.of(model)
+    if disturbances is not None:
+        disturbances.add(compensated, 0)
+        for text in disturbances.solve():
+            warnings.warn(text, DisturbanceWarning, stacklevel=2)
+        compensated -= disturbances(0, compensated.size)
+    return compensated, induced
+
+
+# Disturbances (effects the acceleration does not drive) offline: least squares on the
+# residual, with the regressors the identification and the diagnosis fit them with.
+
+#: Largest mean variance inflation of a disturbance's estimate against the pressure offset
+#: (mains hum: 1 over whole periods of the line, 1.2 over 3/4 of a period, 1.3 over 0.6,
+#: 3.3 over half a period, 4e4 over a quarter): beyond it the disturbance cannot be told
+#: from the offset.
+MAX_INFLATION = 2.0
+#: Samples the removal rule looks at (a longer recording only estimates better).
+_RULE_SAMPLES = 1 << 18
+#: Samples per chunk of regressors (memory: a few MB whatever the recording's length).
+_CHUNK = 1 << 16
+
+
+def _disturbances(entries: Iterable[Mapping]) -> list[tuple[Effect, dict]]:
+    """Return ``(effect, choice)`` of the disturbance effects among a model's entries."""
+    out = []
+    for entry in entries:
+        effect = EFFECTS.get(entry.get('id'))
+        if effect is not None and not effect.acceleration_driven:
+            out.append((effect, dict(entry.get('choice') or entry.get('parameters') or {})))
+    return out
+
+
+def _columns(parts: Sequence[tuple[Effect, dict]], start: int, n: int, fs: float, *,
+             baseline: int = 0) -> np.ndarray:
+    """Return the disturbance regressors ``(k, n)`` of samples ``start ...`` of a recording."""
+    window = Window(np.zeros((3, 0)), np.empty(n), start, baseline, 0)
+    return np.concatenate([effect.columns(window, fs=fs, choice=choice)
+                           for effect, choice in parts])
+
+
+def _inflation(gram: np.ndarray, rows: slice) -> float:
+    """Return the mean variance inflation of the ``rows`` regressors (a Gram matrix)."""
+    scale = np.sqrt(np.diag(gram))
+    if not np.all(scale[rows] > 0):
+        return math.inf
+    scale[scale == 0] = 1.0
+    unit = gram / np.outer(scale, scale)
+    try:
+        inverse = np.linalg.inv(unit)
+    except np.linalg.LinAlgError:
+        return math.inf
+    value = float(np.mean(np.diag(inverse)[rows]))
+    return value if math.isfinite(value) and value > 0 else math.inf
+
+
+def _gram(columns: np.ndarray) -> np.ndarray:
+    """Return the Gram matrix of the regressors plus a constant (the pressure offset)."""
+    phi = np.vstack([columns, np.ones(columns.shape[1])])
+    return phi @ phi.T
+
+
+def _warning(effect: Effect, choice: Mapping, samples: int, fs: float,
+             inflation: float) -> str:
+    what = ', '.join(f'{k} = {v:g}' for k, v in choice.items() if isinstance(v, (int, float)))
+    return (f'{effect.title} ({effect.id}{": " + what if what else ""}) cannot be removed: '
+            f'{samples} samples ({1e3 * samples / fs:.3g} ms) are too short to tell it from '
+            f'the pressure offset (its estimate would be {inflation:.3g}× noisier than from a '
+            f'long recording; at most {MAX_INFLATION:g}× is allowed); it is left in the '
+            f'compensated pressure')
+
+
+def disturbance_removal_warnings(entries: Iterable[Mapping], *, samples: int,
+                                 fs: float) -> list[str]:
+    """
+    Return why each disturbance of a model cannot be removed from a recording this short.
+
+    The rule of offline compensation (:class:`RecordingDisturbances`) for a recording of
+    ``samples`` consecutive samples: a disturbance is fitted with the effect's own
+    regressors next to the pressure offset, and left in when the recording is too short to
+    tell the two apart (mean variance inflation above :data:`MAX_INFLATION`; for mains hum,
+    a recording shorter than about 0.55 of a period of the line: 9 ms at 60 Hz, 11 ms at
+    50 Hz). The diagnosis calls it to say so for the recording it scores on.
+
+    Args:
+        entries: The model's ``effects`` entries (acceleration-driven ones are ignored).
+        samples: Length of the recording.
+        fs: Sample rate in Hz.
+
+    Returns:
+        One sentence per disturbance that would be left in; empty when all can be removed.
+
+    """
+    out = []
+    n = min(int(samples), _RULE_SAMPLES)
+    for effect, choice in _disturbances(entries):
+        parts = [(effect, choice)]
+        columns = _columns(parts, 0, n, fs) if n else np.zeros((0, 0))
+        rows = slice(0, columns.shape[0])
+        inflation = _inflation(_gram(columns), rows) if n > columns.shape[0] else math.inf
+        if not inflation <= MAX_INFLATION:
+            out.append(_warning(effect, choice, int(samples), fs, inflation))
+    return out
+
+
+class RecordingDisturbances:
+    """
+    A model's disturbances in one recording, fitted by least squares on its whole residual.
+
+    Offline compensation needs no tracker that settles: the residual (raw minus induced
+    pressure) of the whole recording is regressed on the effects' own regressors (those
+    the identification fits and the diagnosis scores with: :meth:`Effect.columns
+    <sensor_comp.core.effects.base.Effect.columns>`, in recording time) plus a constant
+    for the pressure offset, which is not removed. Stationary disturbances (one amplitude
+    and phase per recording) are then removed from the first sample on. In blocks: a first
+    pass :meth:`add` s every block's residual, :meth:`solve` fits, a second pass subtracts
+    ``self(start, n)`` (what :func:`~sensor_comp.core.streaming.fit_disturbances` and
+    :class:`~sensor_comp.core.streaming.BlockCompensator` do); either way the result equals
+    that of one call. A disturbance the recording is too short for is left in (see
+    :func:`disturbance_removal_warnings`).
+
+    Args:
+        entries: The model's ``effects`` entries.
+        fs: Sample rate in Hz.
+
+    Attributes:
+        coefficients: The fitted coefficients (zero for a disturbance left in), after
+            :meth:`solve`.
+        warnings: What :meth:`solve` could not remove, as sentences.
+        samples: Finite residual samples added.
+
+    """
+
+    def __init__(self, entries: Iterable[Mapping], *, fs: float):
+        self.fs = float(fs)
+        self.parts = _disturbances(entries)
+        self._sizes = [effect.columns(Window(np.zeros((3, 0)), np.empty(2), 0, 0, 0), fs=fs,
+                                      choice=choice).shape[0]
+                       for effect, choice in self.parts]
+        k = sum(self._sizes)
+        self._gram = np.zeros((k + 1, k + 1))
+        self._rhs = np.zeros(k + 1)
+        self._span = [math.inf, -math.inf]
+        self.samples = 0
+        self.coefficients: np.ndarray | None = None
+        self.warnings: list[str] = []
+
+    @classmethod
+    def of(cls, model) -> RecordingDisturbances | None:
+        """Return the disturbances of ``model`` (its ``effects``), or None without any."""
+        entries = list(getattr(model, 'effects', ()))
+        return cls(entries, fs=model.fs) if _disturbances(entries) else None
+
+    def add(self, residual: np.ndarray, start: int) -> None:
+        """
+        Add the residual of samples ``start ...`` of the recording (non-finite ones skipped).
+
+        Args:
+            residual: ``(w,)`` raw minus induced pressure, Pa.
+            start: Recording sample index of its first sample.
+
+        """
+        residual = np.asarray(residual, dtype=np.float64)
+        for offset in range(0, residual.size, _CHUNK):
+            r = residual[offset:offset + _CHUNK]
+            finite = np.isfinite(r)
+            if not finite.any():
+                continue
+            phi = np.vstack([_columns(self.parts, start + offset, r.size, self.fs),
+                             np.ones(r.size)])[:, finite]
+            self._gram += phi @ phi.T
+            self._rhs += phi @ r[finite]
+            self.samples += int(finite.sum())
+            where = np.flatnonzero(finite)
+            self._span = [min(self._span[0], start + offset + where[0]),
+                          max(self._span[1], start + offset + where[-1])]
+
+    def solve(self) -> list[str]:
+        """
+        Fit the coefficients on the residual added; return what cannot be removed.
+
+        Returns:
+            :attr:`warnings`: one sentence per disturbance left in (too short a recording).
+
+        """
+        k = self._rhs.size - 1
+        keep = np.zeros(k, dtype=bool)
+        self.warnings = []
+        position = 0
+        span = int(self._span[1] - self._span[0] + 1) if self.samples else 0
+        for (effect, choice), size in zip(self.parts, self._sizes):
+            rows = list(range(position, position + size)) + [k]
+            inflation = (_inflation(self._gram[np.ix_(rows, rows)], slice(0, size))
+                         if self.samples > size else math.inf)
+            if inflation <= MAX_INFLATION:
+                keep[position:position + size] = True
+            else:
+                self.warnings.append(_warning(effect, choice, span, self.fs, inflation))
+            position += size
+        self.coefficients = np.zeros(k)
+        rows = np.append(np.flatnonzero(keep), k)
+        if keep.any():
+            gram = self._gram[np.ix_(rows, rows)]
+            scale = np.sqrt(np.diag(gram))
+            solution = np.linalg.solve(gram / np.outer(scale, scale), self._rhs[rows] / scale)
+            self.coefficients[keep] = (solution / scale)[:-1]
+        return self.warnings
+
+    def __call__(self, start: int, n: int) -> np.ndarray:
+        """
+        Return the fitted disturbances over samples ``start ... start + n − 1``, Pa.
+
+        Raises:
+            CompensationError: Before :meth:`solve`.
+
+        """
+        if self.coefficients is None:
+            raise CompensationError('the disturbances are not fitted yet: add the residual '
+                                    'and solve first')
+        out = np.zeros(n)
+        if self.coefficients.any():
+            for offset in range(0, n, _CHUNK):
+                m = min(_CHUNK, n - offset)
+                out[offset:offset + m] = self.coefficients @ _columns(
+                    self.parts, start + offset, m, self.fs)
+        return out
+
+
+def window_disturbances(model, starts: Sequence[int], baselines: Sequence[int],
+                        residuals: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """
+    Return the model's disturbances in shot windows of one recording, as the diagnosis does.
+
+    Least squares of the windows' residual (measured minus simulated, baselines removed)
+    on the effects' regressors with each window's pre-trigger mean removed, all windows of
+    the recording together: what :meth:`ExtendedFit.predict
+    <sensor_comp.core.extended.ExtendedFit.predict>` adds to the induced pressure when the
+    diagnosis scores an effect. A comparison that adds it credits the model with the
+    disturbance removal that compensation performs.
+
+    Args:
+        model: The model (``fs`` and ``effects``).
+        starts: Recording sample index of each window's first sample.
+        baselines: Pre-trigger samples of each window (whose mean was removed).
+        residuals: Each window's measured minus simulated pressure, Pa.
+
+    Returns:
+        The disturbance estimate per window (zeros without disturbance effects).
+
+    """
+    parts = _disturbances(getattr(model, 'effects', ()))
+    if not parts:
+        return [np.zeros(np.size(r)) for r in residuals]
+    cols = [_columns(parts, start, np.size(r), model.fs, baseline=baseline)
+            for start, baseline, r in zip(starts, baselines, residuals)]
+    phi = np.concatenate(cols, axis=1).T
+    used = np.flatnonzero(np.any(phi != 0, axis=0))
+    coefficients = np.zeros(phi.shape[1])
+    if used.size:
+        target = np.concatenate([np.asarray(r, dtype=np.float64) for r in residuals])
+        coefficients[used] = np.linalg.lstsq(phi[:, used], target, rcond=None)[0]
+    return [c.T @ coefficients for c in cols]
 
 
 def peak_residual_percent(raw: np.ndarray, compensated: np.ndarray) -> float:

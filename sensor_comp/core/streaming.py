@@ -32,23 +32,32 @@ as ``invalid_samples``), and a model change (:meth:`~BlockCompensator.set_filter
 computes the new filter's state from the recent input history, so that the output changes
 by the change of model only. The compensation node and ``sensor-comp compensate`` share it,
 and the identification node pairs its blocks with :class:`BlockPairer`.
+
+Offline, a whole recording at hand, the model's disturbances (mains hum) are fitted on the
+whole recording instead of tracked (no settling time): :func:`fit_recording_disturbances`
+runs a first pass over the raw blocks, and a :class:`BlockCompensator` given the result
+(``disturbances=``, with a filter built without trackers) subtracts it from every block in
+the second pass, at the block's sample index in recording time (from its stamp, so stamp
+gaps keep the phase). The output equals :func:`~sensor_comp.core.compensation.
+compensate_recording` of the whole recording.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 import heapq
 import math
 
 import numpy as np
 
-from .compensation import CompensationError, CompensationFilter
+from .compensation import CompensationError, CompensationFilter, RecordingDisturbances
 from ..streams import ACCELERATION, Gap, PRESSURE_RAW
 
 __all__ = ['BlockCompensator', 'BlockError', 'BlockPair', 'BlockPairer', 'CompensatedBlock',
-           'MAX_HISTORY', 'MAX_WAIT_S', 'NonFiniteRuns', 'StreamCounters']
+           'MAX_HISTORY', 'MAX_WAIT_S', 'NonFiniteRuns', 'StreamCounters',
+           'fit_recording_disturbances']
 
 #: Most acceleration samples a :class:`BlockCompensator` keeps for a model change (24 MB).
 MAX_HISTORY = 1 << 20
@@ -401,16 +410,34 @@ class BlockCompensator:
         log: Called with one line per event (see :class:`BlockPairer`, plus runs of
             non-finite samples).
         names: How the log lines name the pressure and the acceleration topics.
+        disturbances: Disturbances fitted on the whole recording (the second pass of
+            offline compensation), subtracted from every block; the filter must then have
+            no trackers of its own.
+        fitting: Disturbances to fit (the first pass): every block's residual is added
+            to it.
 
     Attributes:
         counters: The sample accounting (:class:`StreamCounters`).
         samples_since_restart: Samples compensated since the start or the latest stamp gap.
 
+    Raises:
+        CompensationError: With ``disturbances`` or ``fitting`` and a filter that tracks
+            disturbances itself (they would be removed twice).
+
     """
 
     def __init__(self, compensation: CompensationFilter, *, fs: float,
                  max_wait: float = MAX_WAIT_S, log: Callable[[str], None] | None = None,
-                 names: tuple[str, str] = (PRESSURE_RAW, ACCELERATION)):
+                 names: tuple[str, str] = (PRESSURE_RAW, ACCELERATION),
+                 disturbances: RecordingDisturbances | None = None,
+                 fitting: RecordingDisturbances | None = None):
+        if (disturbances is not None or fitting is not None) and compensation.disturbances:
+            raise CompensationError('a filter with disturbance trackers cannot also remove '
+                                    'disturbances fitted on the recording: build it with '
+                                    'CompensationFilter.from_model(model, trackers=False)')
+        self.disturbances = disturbances
+        self.fitting = fitting
+        self._t0_ns: int | None = None
         self.compensation = compensation
         self.pairer = BlockPairer(fs=fs, max_wait=max_wait, log=log, names=names,
                                   gap_note='the compensation filter restarts from rest')
@@ -489,6 +516,8 @@ class BlockCompensator:
                 self._history.clear()
                 self._history_samples = self.samples_since_restart = 0
             compensated, induced = self.compensation.process(pair.acceleration, pair.pressure)
+            if self.disturbances is not None or self.fitting is not None:
+                compensated = self._offline(pair.stamp_ns, compensated)
             self._remember(pair.acceleration)
             width = compensated.size
             self.samples_since_restart += width
@@ -497,6 +526,17 @@ class BlockCompensator:
             self._invalid.update(pair.stamp_ns, bad, width)
             out.append(CompensatedBlock(pair.stamp_ns, compensated, induced))
         return out
+
+    def _offline(self, stamp_ns: int, residual: np.ndarray) -> np.ndarray:
+        """Fit or subtract the recording's disturbances at the block's recording index."""
+        if self._t0_ns is None:
+            self._t0_ns = stamp_ns
+        start = round((stamp_ns - self._t0_ns) * self.fs / 1e9)
+        if self.fitting is not None:
+            self.fitting.add(residual, start)
+        if self.disturbances is not None:
+            residual = residual - self.disturbances(start, residual.size)
+        return residual
 
     def _remember(self, acceleration: np.ndarray) -> None:
         self._history.append(acceleration)
@@ -511,3 +551,40 @@ class BlockCompensator:
             return np.zeros((3, 0))
         joined = np.concatenate(self._history, axis=1)
         return joined[:, max(0, joined.shape[1] - samples):]
+
+
+def fit_recording_disturbances(model, blocks: Iterable[tuple[str, int, np.ndarray]], *,
+                               fs: float) -> RecordingDisturbances | None:
+    """
+    Fit a model's disturbances on a whole recording: the first pass of offline compensation.
+
+    The raw blocks are paired and compensated as the second pass will (a filter without
+    trackers), and every block's residual goes into the fit. Blocks that cannot be paired
+    (wrong shape, no sample) are skipped: the second pass reports them.
+
+    Args:
+        model: The model (its ``effects`` name the disturbances).
+        blocks: ``(kind, stamp_ns, data)`` in stream order, ``kind`` being
+            :data:`~sensor_comp.streams.PRESSURE_RAW` or
+            :data:`~sensor_comp.streams.ACCELERATION`.
+        fs: Sample rate in Hz.
+
+    Returns:
+        The fitted disturbances (:attr:`RecordingDisturbances.warnings` says what cannot be
+        removed), or None when the model has none.
+
+    """
+    disturbances = RecordingDisturbances.of(model)
+    if disturbances is None:
+        return None
+    compensator = BlockCompensator(CompensationFilter.from_model(model, trackers=False), fs=fs,
+                                   fitting=disturbances)
+    for kind, stamp, data in blocks:
+        add = compensator.add_pressure if kind == PRESSURE_RAW else compensator.add_acceleration
+        try:
+            add(stamp, data)
+        except BlockError:
+            continue
+    compensator.flush()
+    disturbances.solve()
+    return disturbances

@@ -275,3 +275,106 @@ def test_an_unknown_effect_is_refused():
                               effects=({'id': 'mains_hum'}, {'id': 'flux_capacitor'}))
     with pytest.raises(CompensationError, match="'flux_capacitor' unknown.*mains_hum"):
         CompensationFilter.from_model(unknown)
+
+
+# Disturbances offline: mains hum fitted on the whole recording.
+
+HUM_HZ = 60.0
+
+
+def hum_model(b=B, a=A, nk=NK):
+    from sensor_comp.core.effects import get_effect
+    from sensor_comp.core.effects.base import effect_entry
+    entry = effect_entry(get_effect('mains_hum'), {'freq_hz': (HUM_HZ, 0.0),
+                                                   'amplitude_pa': (3000.0, 5.0)},
+                         choice={'freq_hz': HUM_HZ})
+    return SimpleNamespace(fs=FS, inputs=('a_z',), b=np.atleast_2d(b), a=np.asarray(a),
+                           nk=nk, effects=(entry,))
+
+
+def hummed(n, *, sigma=800.0, seed=5):
+    """Return a recording with shots, 60 Hz hum (3000 Pa, odd harmonics) and white noise."""
+    rng = np.random.default_rng(seed)
+    acc = acceleration(n, seed=seed)
+    induced = signal.lfilter(np.concatenate([[0.0] * NK, B]), A, acc[2])
+    t = np.arange(n) / FS + 0.0123  # the mains phase is anything at the recording start
+    hum = sum(amp * np.sin(2 * np.pi * k * HUM_HZ * t + phase) for k, amp, phase in
+              ((1, 3000.0, 0.4), (3, 900.0, -1.1), (5, 270.0, 2.0)))
+    noise = rng.standard_normal(n) * sigma
+    rec = Recording(fs=FS, t0_ns=0, pressure=induced + hum + noise + 5e4, acceleration=acc)
+    return rec, hum, noise
+
+
+def line_amplitudes(x):
+    """Return the amplitudes of the 60, 180 and 300 Hz lines in ``x`` (offset fitted too)."""
+    from sensor_comp.core.effects.mains_hum import line_columns
+    cols = line_columns(HUM_HZ, start=0, n=x.size, fs=FS, baseline=0)
+    phi = np.vstack([cols, np.ones(x.size)]).T
+    c = np.linalg.lstsq(phi, x, rcond=None)[0]
+    return np.hypot(c[0:6:2], c[1:6:2])
+
+
+def test_hum_is_removed_from_a_short_recording_from_its_first_sample():
+    # 0.1 s: a fifth of the live tracker's settling time.
+    n = 10_000
+    rec, hum, noise = hummed(n)
+    compensated, induced = compensate_recording(hum_model(), rec)
+    left = compensated - noise - 5e4  # what compensation left of the hum (and induced)
+    # The least-squares estimate of each line's sine and cosine has the standard error
+    # σ·√(2/N); 4 of them bound the amplitude left (Rayleigh: exceeded with p = 3e-4).
+    bound = 4 * 800.0 * np.sqrt(2 / n)
+    assert np.all(line_amplitudes(left) < bound)
+    assert np.all(line_amplitudes(rec.pressure) > 200)  # it was there
+    # The live tracker, still settling, leaves most of it.
+    live = CompensationFilter.from_model(hum_model()).process(rec.acceleration, rec.pressure)
+    assert line_amplitudes(live[0] - noise)[0] > 0.5 * 3000.0
+    # The offset of the pressure is not a disturbance: it stays.
+    assert np.mean(compensated) == pytest.approx(5e4, abs=5 * 800.0 / np.sqrt(n))
+
+
+def test_offline_hum_removal_in_two_passes_of_blocks_equals_one_call():
+    from sensor_comp.core.streaming import BlockCompensator, fit_recording_disturbances
+    from sensor_comp.streams import ACCELERATION, PRESSURE_RAW
+    rec, _, _ = hummed(12_000)
+    whole, induced = compensate_recording(hum_model(), rec)
+    period = 1e9 / FS
+
+    def blocks(drop=()):  # blocks of 1000 with their stamps, some dropped (stamp gaps)
+        for index, start in enumerate(range(0, rec.n_samples, 1000)):
+            if index not in drop:
+                stamp = round(start * period)
+                yield PRESSURE_RAW, stamp, rec.pressure[start:start + 1000]
+                yield ACCELERATION, stamp, rec.acceleration[:, start:start + 1000]
+
+    estimates = []
+    for drop in ((), (3, 4)):
+        fitted = fit_recording_disturbances(hum_model(), blocks(drop), fs=FS)
+        assert fitted.warnings == []
+        estimates.append(fitted(0, rec.n_samples))
+        second = BlockCompensator(CompensationFilter.from_model(hum_model(), trackers=False),
+                                  fs=FS, disturbances=fitted)
+        out = {}
+        for kind, stamp, data in blocks(drop):
+            add = second.add_pressure if kind == PRESSURE_RAW else second.add_acceleration
+            out.update({b.stamp_ns: b.compensated for b in add(stamp, data)})
+        got = np.concatenate([out[s] for s in sorted(out)])
+        if not drop:
+            assert np.allclose(got, whole, rtol=0, atol=1e-9 * np.max(np.abs(induced)))
+    # Across a stamp gap the hum keeps its phase: the same lines, from 2000 fewer samples.
+    assert np.max(np.abs(estimates[1] - estimates[0])) < 3 * 4 * 800.0 * np.sqrt(2 / 10_000)
+    with pytest.raises(CompensationError, match='trackers=False'):
+        BlockCompensator(CompensationFilter.from_model(hum_model()), fs=FS, disturbances=fitted)
+
+
+def test_hum_is_left_in_with_a_warning_when_the_recording_is_too_short():
+    from sensor_comp.core.compensation import disturbance_removal_warnings, DisturbanceWarning
+    short = 400  # 4 ms: a quarter of a 60 Hz period, no telling the hum from the offset
+    rec, _, _ = hummed(short)
+    with pytest.warns(DisturbanceWarning, match='mains hum .*60.* 400 samples .*4 ms'):
+        compensated, induced = compensate_recording(hum_model(), rec)
+    assert np.allclose(compensated, rec.pressure - induced)
+    entries = hum_model().effects
+    [text] = disturbance_removal_warnings(entries, samples=short, fs=FS)
+    assert 'cannot be removed' in text and 'left in the compensated pressure' in text
+    assert disturbance_removal_warnings(entries, samples=1200, fs=FS) == []  # 0.7 period
+    assert disturbance_removal_warnings(({'id': 'zero_shift'},), samples=10, fs=FS) == []
