@@ -13,6 +13,11 @@ Per shot and model:
   in MPa and in % of the measured peak (the seed paper: 0.1448 vs 0.1402 MPa);
 - peak residual: peak ``|y − ŷ|`` in % of peak ``|y|``, the compensated residual of the
   window (the paper's < 11 %); the overall value is the worst shot.
+
+A model with disturbance effects (mains hum) has them in ``ŷ`` too, fitted by least squares
+on the windows' residual, all windows of the recording together
+(:func:`~sensor_comp.core.compensation.window_disturbances`): what the diagnosis credits the
+effect with, and what offline compensation removes.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import math
 import numpy as np
 
 from .compensation import (CompensationError, LinearModel, peak_residual_percent,
-                           UnstableModelError)
+                           UnstableModelError, window_disturbances)
 from .ident.metrics import fit_percent
 from .ident.polynomials import max_root_radius
 from .ident.simulate import simulate
@@ -58,7 +63,7 @@ class ShotComparison:
         peak_residual_percent: Peak ``|y − ŷ|`` in % of peak ``|y|``.
         t: Sample times in s since the recording start (not in :meth:`to_dict`).
         measured: Measured pressure in the window, Pa, baseline removed (denoised if asked).
-        simulated: Simulated induced pressure, Pa.
+        simulated: Simulated induced pressure, Pa (plus the model's disturbances, if any).
 
     """
 
@@ -175,6 +180,10 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
         if inputs not in inputs_cache:
             inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
         simulated = simulate(model, inputs_cache[inputs])
+        disturbances = window_disturbances(
+            model, [s.start for s in shots], [s.baseline_stop - s.start for s in shots],
+            [y - yhat for y, yhat in zip(measured, simulated)])
+        simulated = [yhat + d for yhat, d in zip(simulated, disturbances)]
         rows = []
         for shot, t, y, yhat in zip(shots, times, measured, simulated):
             peak, model_peak = _signed_peak(y) / 1e6, _signed_peak(yhat) / 1e6
