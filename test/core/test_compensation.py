@@ -378,3 +378,24 @@ def test_hum_is_left_in_with_a_warning_when_the_recording_is_too_short():
     assert 'cannot be removed' in text and 'left in the compensated pressure' in text
     assert disturbance_removal_warnings(entries, samples=1200, fs=FS) == []  # 0.7 period
     assert disturbance_removal_warnings(({'id': 'zero_shift'},), samples=10, fs=FS) == []
+
+
+def test_compare_credits_the_hum_as_the_diagnosis_does():
+    from sensor_comp.core.compare import compare
+    from sensor_comp.core.extended import fit_extended, shot_windows
+    from sensor_comp.core.ident import fit_percent
+    from sensor_comp.core.identify import ShotSource
+    rec, _, _ = hummed(30_000)
+    shots = detect_shots(rec, pre_ms=3.0, post_ms=10.0)
+    windows = shot_windows([ShotSource(rec, tuple(shots), 'hummed')])
+    fits = [fit_extended(windows, effects=effects, fs=FS, nf=2, nb=2, nk=1)
+            for effects in ([], ['mains_hum'])]
+    # The diagnosis scores an effect by ExtendedFit.predict on the windows it scores on.
+    predictions = [fit.predict(windows).total for fit in fits]
+    base, hum = (compare(fit.model(), rec, shots)[0] for fit in fits)
+    for shot, predicted in zip(hum.shots, predictions[1]):
+        assert np.allclose(shot.simulated, predicted, rtol=0, atol=1e-9 * np.max(np.abs(
+            predicted)))
+    measured = [w.y for w in windows]
+    assert hum.fit_percent == pytest.approx(fit_percent(measured, predictions[1]), abs=1e-9)
+    assert hum.fit_percent > base.fit_percent + 5  # the hum was most of the base residual
