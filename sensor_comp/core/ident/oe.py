@@ -24,7 +24,7 @@ from scipy import signal
 from .arx import fit_arx
 from .data import as_segments, IdentError, Segment
 from .estimate import Estimate
-from .least_squares import (check_orders, delayed_numerator, filter_each, lagged_regression,
+from .least_squares import (check_orders, filter_each, lagged_regression,
                             normal_equations, solve_least_squares)
 from .levenberg_marquardt import levenberg_marquardt, scaled_normal_equations
 from .polynomials import is_stable, reflect_unstable
@@ -161,6 +161,7 @@ class OutputErrorProblem:
             [np.asarray(c, dtype=np.float64).T for c in extra])
         self.n_extra = 0 if self.extra is None else self.extra.shape[1]
         self.n_parameters = nf + self.n_inputs * nb + self.n_extra
+        self._last: tuple[bytes, list[np.ndarray]] | None = None
 
     def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(F, B (n_inputs, nb), d)`` of the parameters ``theta``."""
@@ -193,8 +194,7 @@ class OutputErrorProblem:
         """
         q = self.n_inputs * self.nb
         out = np.empty((self.y.size, q + self.n_extra), order='F')
-        self._fill_lags(out, 0, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us],
-                        self.nk, self.nb)
+        self._fill_lags(out, 0, self.filtered(f), self.nk, self.nb)
         if self.extra is not None:
             out[:, q:] = self.extra
         return out
@@ -226,16 +226,30 @@ class OutputErrorProblem:
         e = self.y - phi @ theta
         return float(e @ e)
 
+    def filtered(self, f: np.ndarray) -> list[np.ndarray]:
+        """
+        Return the inputs of every segment filtered by ``1/F`` (from rest).
+
+        The last result is kept: Levenberg–Marquardt asks for the Jacobian at the trial it
+        has just simulated, and this filter pass is most of an evaluation's cost.
+        """
+        key = f.tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us])
+        return self._last[1]
+
     def simulate(self, theta: np.ndarray) -> np.ndarray:
         """Return the model output over all segments (concatenated), from rest."""
         f, b, d = self.unpack(theta)
-        bk = delayed_numerator(b, self.nk)
-        out = np.empty(self.y.size)
-        for s, u in enumerate(self.us):
+        out = np.zeros(self.y.size)
+        for s, x in enumerate(self.filtered(f)):
             part = out[self.offsets[s]:self.offsets[s + 1]]
-            part[:] = signal.lfilter(bk[0], f, u[0])
-            for i in range(1, self.n_inputs):
-                part += signal.lfilter(bk[i], f, u[i])
+            n = part.size
+            for i in range(self.n_inputs):
+                for j in range(self.nb):
+                    lag = self.nk + j
+                    if lag < n:
+                        part[lag:] += b[i, j] * x[i, :n - lag]
         if self.extra is not None:
             out += self.extra @ d
         return out
@@ -252,8 +266,7 @@ class OutputErrorProblem:
         f, b, d = self.unpack(theta)
         nf, q = self.nf, self.n_inputs * self.nb
         jac = np.empty((self.y.size, self.n_parameters), order='F')
-        self._fill_lags(jac, nf, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us],
-                        self.nk, self.nb)
+        self._fill_lags(jac, nf, self.filtered(f), self.nk, self.nb)
         induced = jac[:, nf:nf + q] @ b.ravel()
         z = [-signal.lfilter([1.0], f, induced[self.offsets[s]:self.offsets[s + 1]])[None]
              for s in range(len(self.us))]

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import itertools
 
 import numpy as np
+from scipy import signal
 
 from .armax import fit_armax_els, fit_armax_gls
 from .arx import fit_arx
@@ -27,7 +28,7 @@ from .polynomials import is_stable
 from .simulate import simulate
 
 __all__ = ['METHODS', 'Candidate', 'DelayEstimate', 'Selection', 'estimate_delay',
-           'profile_losses', 'select_structure']
+           'lag_gram', 'profile_losses', 'select_structure']
 
 
 def _fit_oe(segs, na, nb, nk):
@@ -86,19 +87,19 @@ def profile_losses(segments: Sequence[Segment], f: np.ndarray, delays: Sequence[
     """
     Return the mean squared simulation error at each delay with the denominator held at ``f``.
 
-    The numerators are solved by least squares at each delay, from one Gram matrix of the
-    inputs filtered by ``1/f`` at every lag: one filter pass for all delays. An upper bound
-    of the output-error loss at each delay (equal to it where ``f`` was fitted); NaN where
-    the numerators are not determined.
+    The numerators are solved by least squares at each delay from one Gram matrix of the
+    inputs filtered by ``1/f`` at every lag (:func:`lag_gram`): one filter pass for all
+    delays. An upper bound of the output-error loss at each delay (equal to it where ``f``
+    was fitted); NaN where the numerators are not determined.
     """
     lags = max(delays) + nb
-    problem = OutputErrorProblem([s.u for s in segments], [s.y for s in segments],
-                                 f.size - 1, lags, 0)
-    x = problem.regression(f)
-    gram, cross, total = x.T @ x, x.T @ problem.y, float(problem.y @ problem.y)
+    xs = [signal.lfilter([1.0], f, s.u, axis=-1) for s in segments]
+    gram, cross = lag_gram(xs, [s.y for s in segments], lags)
+    total = sum(float(s.y @ s.y) for s in segments)
+    n_samples = sum(s.n_samples for s in segments)
     out = np.full(len(delays), np.nan)
     for index, nk in enumerate(delays):
-        cols = [i * lags + nk + j for i in range(problem.n_inputs) for j in range(nb)]
+        cols = [i * lags + nk + j for i in range(xs[0].shape[0]) for j in range(nb)]
         scale = np.sqrt(np.diag(gram)[cols])
         if not np.all(scale > 0):
             continue
@@ -107,44 +108,89 @@ def profile_losses(segments: Sequence[Segment], f: np.ndarray, delays: Sequence[
             theta = np.linalg.solve(gram[np.ix_(cols, cols)] / np.outer(scale, scale), target)
         except np.linalg.LinAlgError:
             continue
-        out[index] = max(total - float(theta @ target), 0.0) / problem.y.size
+        out[index] = max(total - float(theta @ target), 0.0) / n_samples
     return out
 
 
-def _oe_delay_search(segs, delays, na, nb):
+def lag_gram(xs: Sequence[np.ndarray], ys: Sequence[np.ndarray],
+             lags: int) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return ``(ΦᵀΦ, Φᵀy)`` of the regressors ``x_i(k − l)``, ``l < lags``, over segments.
+
+    Each segment starts from rest (zeros before it). Column ``i·lags + l`` is input ``i``
+    delayed by ``l``. The entries come from one dot product per input pair and lag
+    difference, less the few products a delayed column loses at the segment's end, rather
+    than from the ``(n, inputs·lags)`` matrix: a small fraction of its cost.
+
+    Args:
+        xs: Inputs per segment, ``(n_inputs, n)``.
+        ys: Outputs per segment, ``(n,)``.
+        lags: Lags per input.
+
+    """
+    m = xs[0].shape[0]
+    upper = np.zeros((m * lags, m * lags))
+    cross = np.zeros(m * lags)
+    for x, y in zip(xs, ys):
+        n = y.size
+        top = min(lags, n)
+        for i in range(m):
+            for lag in range(top):
+                cross[i * lags + lag] += x[i, :n - lag] @ y[lag:]
+            for j in range(m):
+                for d in range(top):
+                    full = x[i, d:] @ x[j, :n - d]
+                    # What column (j, l2) loses at the end: t from n − l2 to n − 1 − d.
+                    ends = x[i, n - top + d:] * x[j, n - top:n - d]
+                    lost = np.concatenate(([0.0], np.cumsum(ends[::-1])))
+                    for l1 in range(top - d):
+                        upper[i * lags + l1, j * lags + l1 + d] += full - lost[l1]
+    lag_of = np.tile(np.arange(lags), m)
+    first = lag_of[:, None] <= lag_of[None, :]
+    return np.where(first, upper, upper.T), cross
+
+
+def _oe_delay_search(segs, delays, na, nb, start):
     """
     Return ``(losses, fits)`` of output error over ``delays``, fitting only where it counts.
 
-    One full fit at the delay nearest 1 gives a denominator; the losses of every delay with
-    it held (:func:`profile_losses`) show where the minimum lies; the delays next to the
-    best fit and the one with the least held loss are then fitted from the best fit's
-    denominator, until the best fit's neighbours and the held minimum are all fitted.
-    None when the first fit fails.
+    A denominator (of ``start``, else of a full fit at the delay nearest 1) gives the loss
+    of every delay with it held (:func:`profile_losses`), which shows where the minimum
+    lies; the delay with the least held loss and the neighbours of the best fit are fitted
+    from the best denominator so far, until the best fit's neighbours and the held minimum
+    are all fitted. None when no fit succeeds.
     """
     fits: dict[int, Estimate | str] = {}
 
-    def fit(nk, start=None):
+    def fit(nk, a=None):
         try:
-            fits[nk] = fit_oe(segs, nf=na, nb=nb, nk=nk, start=start)
+            fits[nk] = fit_oe(segs, nf=na, nb=nb, nk=nk, start=a)
         except IdentError as exc:
             fits[nk] = f'nk={nk}: {exc}'
 
-    fit(min(delays, key=lambda d: abs(d - 1)))
+    reference = start.a if start is not None and start.na == na else None
+    if reference is None:
+        fit(min(delays, key=lambda d: abs(d - 1)))
     while True:
         good = {nk: est for nk, est in fits.items() if isinstance(est, Estimate)}
-        if not good:
+        todo = set()
+        if good:
+            best = min(good, key=lambda nk: good[nk].loss)
+            reference = good[best].a
+            index = delays.index(best)
+            todo = {delays[i] for i in (index - 1, index + 1) if 0 <= i < len(delays)}
+        elif reference is None or fits:
             return None
-        best = min(good, key=lambda nk: good[nk].loss)
-        held = profile_losses(segs, good[best].a, delays, nb)
-        index = delays.index(best)
-        todo = {delays[i] for i in (index - 1, index + 1) if 0 <= i < len(delays)}
+        held = profile_losses(segs, reference, delays, nb)
         if np.any(np.isfinite(held)):
-            todo.add(delays[int(np.nanargmin(held))])
+            low = int(np.nanargmin(held))
+            if delays[low] not in fits:  # with its neighbours: the next round's bracket
+                todo |= {delays[i] for i in (low - 1, low, low + 1) if 0 <= i < len(delays)}
         todo -= set(fits)
         if not todo:
             break
         for nk in sorted(todo):
-            fit(nk, good[best].a)
+            fit(nk, reference)
     losses = [fits[nk].loss if isinstance(fits.get(nk), Estimate) else float(held[i])
               for i, nk in enumerate(delays)]
     return losses, fits
@@ -152,7 +198,7 @@ def _oe_delay_search(segs, delays, na, nb):
 
 def estimate_delay(segments: Segment | Iterable[Segment], *,
                    delays: Iterable[int] = range(0, 21), na: int = 2, nb: int = 1,
-                   method: str = 'oe') -> DelayEstimate:
+                   method: str = 'oe', start: Estimate | None = None) -> DelayEstimate:
     """
     Estimate the input delay as the one whose fixed-order model has the lowest loss.
 
@@ -177,6 +223,9 @@ def estimate_delay(segments: Segment | Iterable[Segment], *,
         na: Denominator order of the trial models.
         nb: Numerator coefficients of the trial models.
         method: Estimator, a key of :data:`METHODS`.
+        start: A fit of the same segments with ``na`` poles at any delay and numerator
+            length (e.g. the model about to be fitted, at ``nk = 1``): its denominator
+            starts the output-error search instead of a fit of its own.
 
     Returns:
         The delay with the lowest loss and the loss of every delay.
@@ -190,7 +239,7 @@ def estimate_delay(segments: Segment | Iterable[Segment], *,
     delays = tuple(int(d) for d in delays)
     if not delays:
         raise IdentError('estimate_delay: no delays to try')
-    found = _oe_delay_search(segs, delays, na, nb) if method == 'oe' else None
+    found = _oe_delay_search(segs, delays, na, nb, start) if method == 'oe' else None
     if found is None:
         found = {}
         for nk in delays:
