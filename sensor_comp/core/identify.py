@@ -60,11 +60,12 @@ import numpy as np
 
 from .compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
-from .effects import ordered
+from .effects import EffectError, ordered
 from .extended import fit_extended, shot_windows
-from .ident import (DelayEstimate, estimate_delay, fit_armax_els, fit_armax_gls, fit_arx,
-                    fit_oe, fit_percent, IdentError, select_structure, Selection,
-                    simulate)
+from .ident import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
+                    fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
+                    Selection, simulate)
+from .ident.polynomials import max_root_radius
 from .model import Model, sensitivity_problem, Source
 from .progress import ProgressFactory, Silent
 from .shots import (dead_channel, detect_shots, mad_sigma, no_shot_message, segments, Shot,
@@ -72,7 +73,8 @@ from .shots import (dead_channel, detect_shots, mad_sigma, no_shot_message, segm
 from ..streams import Recording
 
 __all__ = ['BASE_INPUTS', 'EXCITATION_BAND', 'MIN_EXCITATION', 'STRUCTURES', 'WEAK_EXCITATION',
-           'Identification', 'ShotSource', 'excitation', 'identify']
+           'Identification', 'ShotSource', 'Sources', 'excitation', 'identify',
+           'prepare_sources']
 
 #: Structures :func:`identify` accepts.
 STRUCTURES = ('auto', 'arx', 'armax', 'gls', 'oe')
@@ -200,6 +202,9 @@ class Identification:
         denoising: One EMD result per calibration window (empty without EMD).
         excluded: Why shots were left out (clipped), one line each.
         explanation: Why this structure, orders and delay.
+        notes: What identification did instead of what was asked, because that failed on
+            these data (lower orders, another start, the measured pressure instead of the
+            denoised one), one line each; also in the model's ``fit['notes']``.
 
     """
 
@@ -213,6 +218,65 @@ class Identification:
     denoising: tuple[DenoiseResult, ...]
     excluded: tuple[str, ...]
     explanation: str
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Sources:
+    """
+    The shots an identification (or a diagnosis) works on: checked, split and of one rate.
+
+    Attributes:
+        calibration: Recordings with the shots to fit on (usable shots only).
+        validation: Recordings with the shots to report on.
+        excluded: Why shots were left out, one line each.
+        warnings: Unit warnings (:meth:`ShotSource.check_units`).
+        fs: The common sample rate, Hz.
+
+    """
+
+    calibration: tuple[ShotSource, ...]
+    validation: tuple[ShotSource, ...]
+    excluded: tuple[str, ...]
+    warnings: tuple[str, ...]
+    fs: float
+
+
+def prepare_sources(calibration: Sequence[ShotSource],
+                    validation: Sequence[ShotSource] = ()) -> Sources:
+    """
+    Leave defective shots out, hold out validation shots and check units and sample rates.
+
+    Args:
+        calibration: Recordings with shots to fit on.
+        validation: Recordings with shots to report on; when empty, every second shot of
+            each calibration recording is held out.
+
+    Returns:
+        The usable calibration and validation shots with what was left out and why.
+
+    Raises:
+        IdentError: Without a calibration recording, without a usable shot in a role, or
+            on mixed sample rates.
+        ShotError: On a dead pressure channel, implausible units, or too few shots to hold
+            some out.
+
+    """
+    if not calibration:
+        raise IdentError('no calibration recording given')
+    excluded: list[str] = []
+    calibration = [_usable(s, excluded) for s in calibration]
+    validation = [_usable(s, excluded) for s in validation]
+    for role, sources in (('calibration', calibration), ('validation', validation)):
+        if sources and not any(s.shots for s in sources):
+            names = ', '.join(s.name for s in sources)
+            why = f' ({"; ".join(excluded)})' if excluded else ''
+            raise IdentError(f'no usable {role} shot in {names}{why}: check the acceleration '
+                             f'channel and the detection threshold')
+    calib, valid = _split(calibration, validation, excluded)
+    warnings = tuple(w for w in (s.check_units() for s in calibration + validation) if w)
+    fs = _check_rates(calib + valid)
+    return Sources(tuple(calib), tuple(valid), tuple(excluded), warnings, fs)
 
 
 def _usable(source: ShotSource, excluded: list[str]) -> ShotSource:
@@ -251,6 +315,153 @@ def _check_rates(sources: Sequence[ShotSource]) -> float:
     return fs
 
 
+@dataclass(eq=False)
+class _Data:
+    """The shot windows of one identification, cut once and shared by every step."""
+
+    measured: list[tuple[np.ndarray, np.ndarray]]
+    valid: list[tuple[np.ndarray, np.ndarray]]
+    fit: list[tuple[np.ndarray, np.ndarray]]
+    denoiser: EmdDenoiser | None
+
+    @classmethod
+    def cut(cls, sources: Sources, *, denoise: bool, progress: ProgressFactory) -> _Data:
+        """Return the calibration and validation windows, EMD-denoised for the fit if asked."""
+        measured = [seg for s in sources.calibration
+                    for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
+        valid = [seg for s in sources.validation
+                 for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
+        denoiser = EmdDenoiser() if denoise else None
+        fit = measured
+        if denoiser is not None:
+            with progress('EMD denoising', len(measured)) as bar:
+                fit = []
+                for u, y in measured:
+                    fit.append((u, denoiser(y)))
+                    bar.advance()
+        return cls(measured, valid, fit, denoiser)
+
+
+@dataclass(eq=False)
+class _Base:
+    """The base model: its estimate and orders, and why (see :func:`_fit_base`)."""
+
+    estimate: Estimate
+    na: int
+    nb: int
+    nk: int
+    selection: Selection | None
+    delay: DelayEstimate | None
+    explanation: str
+    notes: list[str]
+
+
+def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
+              delay: int | None, criterion: str, progress: ProgressFactory) -> _Base:
+    """
+    Choose the structure and delay on the measured pressure and fit the base model.
+
+    Structure and delay are chosen on the measured pressure: information criteria assume
+    white residuals, and EMD leaves coloured ones (BIC then rewards spurious poles). The
+    chosen structure is then fitted to the denoised pressure (:func:`_robust_fit`).
+    """
+    na, nb = orders or DEFAULT_ORDERS
+    selection = search = provisional = None
+    if structure == 'auto':
+        with progress('structure selection', 1) as bar:
+            selection = select_structure(
+                data.measured, valid_segments=data.valid,
+                orders=None if orders is None else [orders],
+                delays=None if delay is None else [delay], criterion=criterion)
+            bar.advance()
+        chosen = selection.candidates[selection.chosen]
+        na, nb, delay = chosen.na, chosen.nb, chosen.nk
+        explanation = f'output error chosen by {criterion.upper()}: {selection.explanation}'
+        provisional = selection.estimate
+    else:
+        if delay is None:
+            with progress('delay search', 1) as bar:
+                # The model's own fit at nk = 1 is the model when the search ends there and
+                # the pressure is not denoised; an output-error one (oe, gls) starts the
+                # search (an equation-error denominator is biased: a worse start).
+                provisional = _attempt(lambda: _FITTERS[structure](data.measured, na, nb, 1))
+                unbiased = provisional is not None and provisional.structure == 'oe'
+                search = estimate_delay(data.measured, start=provisional if unbiased else None)
+                bar.advance()
+            delay = search.nk
+            how = f'delay from the search: {search.explanation}'
+        else:
+            how = 'delay given'
+        explanation = f'{structure} with na={na} nb={nb} nk={delay} as asked; {how}'
+    reuse = (provisional if provisional is not None and data.denoiser is None
+             and (provisional.na, provisional.nb, provisional.nk) == (na, nb, delay) else None)
+    estimate, na, nb, notes = _robust_fit('oe' if structure == 'auto' else structure, data,
+                                          na, nb, delay, fitted=reuse)
+    if data.denoiser is not None and not any('measured pressure' in n for n in notes):
+        explanation += '; fitted to the EMD-denoised pressure'
+    return _Base(estimate, na, nb, delay, selection, search, explanation, notes)
+
+
+def _attempt(fit):
+    """Return ``fit()``, or None when it raises :class:`IdentError`."""
+    try:
+        return fit()
+    except IdentError:
+        return None
+
+
+def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
+                fitted: Estimate | None = None) -> tuple[Estimate, int, int, list[str]]:
+    """
+    Fit ``structure`` to the fit windows; fall back where it fails, saying so.
+
+    In turn: the EMD-denoised pressure as asked; the measured pressure (denoising can make
+    the output lags too collinear); lower orders (``na``, then ``nb``, down to 1); output
+    error when an equation-error estimate is unstable. Each fallback is one note.
+
+    Args:
+        structure: A key of :data:`_FITTERS`.
+        data: The windows.
+        na: Denominator order asked for.
+        nb: Numerator length asked for.
+        nk: Delay.
+        fitted: The fit as asked, when already made (the delay search's start).
+
+    Returns:
+        ``(estimate, na, nb, notes)``.
+
+    Raises:
+        IdentError: When every fallback fails too (naming the first failure).
+
+    """
+    notes: list[str] = []
+    tries = [(data.fit, na, nb, None)]
+    if data.denoiser is not None:
+        tries.append((data.measured, na, nb,
+                      'the measured pressure instead of the EMD-denoised one'))
+    lower = [(na - k, nb) for k in range(1, na)] + [(1, nb - k) for k in range(1, nb)]
+    tries += [(data.measured if data.denoiser is not None else data.fit, a, b,
+               f'na={a} nb={b} instead of na={na} nb={nb}') for a, b in lower]
+    first = None
+    for segs, a, b, what in tries:
+        try:
+            estimate = fitted if what is None and fitted is not None else \
+                _FITTERS[structure](segs, a, b, nk)
+        except IdentError as exc:
+            first = first or f'{structure} na={a} nb={b} nk={nk}: {exc}'
+            continue
+        if what is not None:
+            notes.append(f'fallback: fitted {what}, because {first}')
+        if structure != 'oe' and not is_stable(estimate.a):
+            notes.append(f'fallback: output error instead of {structure}, whose estimate '
+                         f'na={a} nb={b} nk={nk} is unstable (poles up to |z| = '
+                         f'{max_root_radius(estimate.a):.6f})')
+            estimate = fit_oe(segs, nf=a, nb=b, nk=nk)
+        return estimate, a, b, notes
+    raise IdentError(f'no {structure} model could be fitted, at the orders asked or lower: '
+                     f'{first}')
+
+
 def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSource] = (),
              structure: str = 'auto', orders: tuple[int, int] | None = None,
              delay: int | None = None, denoise: bool = True, criterion: str = 'bic',
@@ -276,137 +487,157 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
         progress: Progress bar factory ``progress(label, total)`` for the long steps.
 
     Returns:
-        The model with what it was fitted and validated on, and why this structure.
+        The model with what it was fitted and validated on, why this structure, and the
+        fallbacks taken (``notes``).
 
     Raises:
         IdentError: On an unknown structure, bad orders, mixed sample rates, no usable
-            shots, or when no stable model is found.
+            shots, or when no stable model is found even at lower orders.
         ShotError: On too few shots to hold some out for validation.
-        EffectError: On an unknown effect or one the data cannot support.
+        EffectError: On an unknown effect or one the data cannot support (one line: why).
 
     """
     if structure not in STRUCTURES:
         raise IdentError(f'unknown structure {structure!r}; use one of {", ".join(STRUCTURES)}')
     if orders is not None and (len(orders) != 2 or min(orders) < 1):
         raise IdentError(f'orders must be two integers na nb >= 1, got {orders!r}')
-    if not calibration:
-        raise IdentError('no calibration recording given')
     effects = tuple(e.id for e in ordered(effects))
     progress = progress or Silent
-    excluded: list[str] = []
-    explanation_warnings: list[str] = []
-    calibration = [_usable(s, excluded) for s in calibration]
-    validation = [_usable(s, excluded) for s in validation]
-    for role, sources in (('calibration', calibration), ('validation', validation)):
-        if sources and not any(s.shots for s in sources):
-            names = ', '.join(s.name for s in sources)
-            why = f' ({"; ".join(excluded)})' if excluded else ''
-            raise IdentError(f'no usable {role} shot in {names}{why}: check the acceleration '
-                             f'channel and the detection threshold')
-    calib, valid = _split(calibration, validation, excluded)
-    for source in calibration + validation:
-        warning = source.check_units()
-        if warning:
-            explanation_warnings.append(warning)
-    fs = _check_rates(calib + valid)
-    measured = [seg for s in calib
-                for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
-    valid_segments = [seg for s in valid
-                      for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
-    denoiser = EmdDenoiser() if denoise else None
-    fit_segments = measured
-    if denoiser is not None:
-        with progress('EMD denoising', len(measured)) as bar:
-            fit_segments = []
-            for u, y in measured:
-                fit_segments.append((u, denoiser(y)))
-                bar.advance()
-
-    # Structure and delay are chosen on the measured pressure: information criteria assume
-    # white residuals, and EMD leaves coloured ones (BIC then rewards spurious poles). The
-    # chosen structure is then fitted to the denoised pressure.
-    na, nb = orders or DEFAULT_ORDERS
-    selection = delay_search = None
-    if structure == 'auto':
-        with progress('structure selection', 1) as bar:
-            selection = select_structure(
-                measured, valid_segments=valid_segments,
-                orders=None if orders is None else [orders],
-                delays=None if delay is None else [delay], criterion=criterion)
-            bar.advance()
-        chosen = selection.candidates[selection.chosen]
-        na, nb, delay = chosen.na, chosen.nb, chosen.nk
-        explanation = f'output error chosen by {criterion.upper()}: {selection.explanation}'
-        structure_fitted = 'oe'
-    else:
-        if delay is None:
-            with progress('delay search', 1) as bar:
-                delay_search = estimate_delay(measured)
-                bar.advance()
-            delay = delay_search.nk
-            how = f'delay from the search: {delay_search.explanation}'
-        else:
-            how = 'delay given'
-        explanation = f'{structure} with na={na} nb={nb} nk={delay} as asked; {how}'
-        structure_fitted = structure
-    estimate = (selection.estimate if selection is not None and denoiser is None
-                else _FITTERS[structure_fitted](fit_segments, na, nb, delay))
-    if denoiser is not None:
-        explanation += '; fitted to the EMD-denoised pressure'
-    explanation += ''.join(f'; WARNING: {w}' for w in explanation_warnings)
-    if not estimate.converged:
-        explanation += (f'; WARNING: the {estimate.method} iteration did not converge in '
-                        f'{estimate.iterations} iterations: prefer oe or auto')
-
-    inputs, entries = BASE_INPUTS, ()
+    sources = prepare_sources(calibration, validation)
+    data = _Data.cut(sources, denoise=denoise, progress=progress)
+    base = _fit_base(data, structure=structure, orders=orders, delay=delay,
+                     criterion=criterion, progress=progress)
+    explanation = base.explanation + ''.join(f'; WARNING: {w}' for w in sources.warnings)
+    if not base.estimate.converged:
+        explanation += (f'; WARNING: the {base.estimate.method} iteration did not converge '
+                        f'in {base.estimate.iterations} iterations: prefer oe or auto')
+    notes = list(base.notes)
+    extension = None
     if effects:
         with progress('effects', 1) as bar:
-            windows = shot_windows([s for s in calib if s.shots])
-            windows = [replace(w, y=y) for w, (_, y) in zip(windows, fit_segments)]
-            extension = fit_extended(windows, effects=effects, fs=fs, nf=na, nb=nb, nk=delay)
+            extension, chosen = _fit_effects(sources, data, effects, base,
+                                             compare_lower=structure == 'auto')
             bar.advance()
-        estimate, inputs, entries = extension.estimate, extension.inputs, extension.entries
+        notes += chosen
         explanation += (f'; extended with {", ".join(effects)} (output error: '
-                        f'{estimate.method})')
+                        f'{extension.estimate.method})')
         explanation += ''.join(f'; {note}' for note in extension.notes)
+    return _finish(sources, data, base, extension, explanation, notes, structure, denoise)
+
+
+def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _Base, *,
+                 compare_lower: bool):
+    """
+    Fit the base structure plus ``effects`` on the calibration windows.
+
+    With ``compare_lower`` (orders chosen by the selection, without the effects) a base of
+    more than two poles is compared with the sensor's own two: a pole that imitated a
+    missing effect (a slow real one for a high-pass or a zero shift) competes with the
+    effect and bends its parameters, so the structure with the lower BIC (the searched
+    parameters counted) is kept. Orders that cannot be fitted fall back to two poles.
+
+    Returns:
+        ``(extended fit, notes)``.
+
+    Raises:
+        EffectError: One line, when no structure can be fitted with the effects, or an
+            effect does not apply to the recordings.
+
+    """
+    windows = shot_windows([s for s in sources.calibration if s.shots])
+    windows = [replace(w, y=y) for w, (_, y) in zip(windows, data.fit)]
+    for effect in ordered(effects):
+        reason = effect.applicable(windows)
+        if reason is not None:
+            raise EffectError(f'cannot fit {effect.id}: {reason}')
+    tries = [base.na] + ([2] if base.na > 2 else [])
+    fits, failed = {}, {}
+    for nf in tries:
+        if nf != base.na and not compare_lower and fits:
+            break
+        try:
+            fits[nf] = fit_extended(windows, effects=effects, fs=sources.fs, nf=nf,
+                                    nb=base.nb, nk=base.nk)
+        except (IdentError, EffectError) as exc:
+            failed[nf] = str(exc).splitlines()[0]
+    names = ', '.join(effects)
+    if not fits:
+        why = '; '.join(f'nf={nf}: {text}' for nf, text in failed.items())
+        raise EffectError(f'cannot fit {names} on a base of nf={base.na} nb={base.nb} '
+                          f'nk={base.nk}' + (' or nf=2' if len(tries) > 1 else '') + f': {why}')
+    chosen = min(fits, key=lambda nf: _bic(fits[nf]))
+    notes = []
+    if chosen != base.na:
+        if base.na in failed:
+            notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
+                         f'nf={base.na}, which could not be fitted ({failed[base.na]})')
+        else:
+            notes.append(f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
+                         f'instead of the nf={base.na} chosen without them: BIC lower by '
+                         f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} (the extra poles '
+                         f'imitated the effect)')
+    return fits[chosen], notes
+
+
+def _bic(fit) -> float:
+    """Return the BIC of an extended fit, its searched values and disturbances counted."""
+    estimate = fit.estimate
+    extra = len(fit.values) + (0 if fit.disturbance is None
+                               else fit.disturbance.coefficients.size)
+    n = estimate.n_samples
+    return n * math.log(max(estimate.loss, np.finfo(float).tiny)) + \
+        (estimate.n_parameters + extra) * math.log(n)
+
+
+def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: str,
+            notes: Sequence[str], structure: str, denoise: bool) -> Identification:
+    """Build the model, check its excitation and validate it on the held-out shots."""
+    calib, valid = sources.calibration, sources.validation
+    estimate, inputs, entries = base.estimate, BASE_INPUTS, ()
+    if extension is not None:
+        estimate, inputs, entries = extension.estimate, extension.inputs, extension.entries
     charge = {s.recording.charge_sensitivity for s in calib} - {None}
     fit = {'calibration_shots': sum(len(s.shots) for s in calib),
            'validation_shots': sum(len(s.shots) for s in valid),
-           'emd_denoised': bool(denoise),
-           'selection': explanation}
-    if effects:  # the structure the effects extend, for a later diagnosis
+           'emd_denoised': bool(denoise), 'selection': explanation}
+    if notes:
+        fit['notes'] = ' | '.join(notes)
+    if extension is not None:  # the structure the effects extend, for a later diagnosis
         fit.update(extension.base_orders)
     provenance = _provenance(calib, 'calibration') + _provenance(valid, 'validation')
-    draft = Model.from_estimate(estimate, fs=fs, inputs=inputs,
+    draft = Model.from_estimate(estimate, fs=sources.fs, inputs=inputs,
                                 charge_sensitivity_pC_per_MPa=min(charge) if charge else None,
                                 fit=fit, provenance=provenance, effects=entries)
     draft.check_stable()
     explanation += _check_excitation(draft, calib)
+    fit['selection'] = explanation
     comparisons = tuple(compare([draft], s.recording, s.shots, labels=[structure])[0]
                         for s in valid if s.shots)
     valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
                                   [shot.simulated for c in comparisons for shot in c.shots]))
     worst = max(c.peak_residual_percent for c in comparisons)
-    if effects and extension.disturbance is not None:
+    if extension is not None and extension.disturbance is not None:
         # The comparisons simulate the acceleration-driven part only; with the disturbance
         # re-estimated on the validation windows (its phase belongs to each recording):
         windows = shot_windows([s for s in valid if s.shots])
         fit['validation_fit_percent_disturbance_removed'] = float(fit_percent(
             [w.y for w in windows], extension.predict(windows).total))
-    calib_inputs = [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)]
+    calib_inputs = ([u for u, _ in data.measured] if extension is None else
+                    [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)])
     model = Model.from_estimate(
-        estimate, fs=fs, inputs=inputs,
+        estimate, fs=sources.fs, inputs=inputs,
         charge_sensitivity_pC_per_MPa=draft.charge_sensitivity_pC_per_MPa,
         fit={**fit, 'calibration_fit_percent': float(fit_percent(
-            [y for _, y in measured], simulate(draft, calib_inputs))),
+            [y for _, y in data.measured], simulate(draft, calib_inputs))),
             'validation_fit_percent': valid_fit,
             'validation_peak_residual_percent': worst},
         provenance=provenance, effects=entries, created=draft.created)
-    return Identification(model=model, calibration=tuple(calib), validation=tuple(valid),
+    return Identification(model=model, calibration=calib, validation=valid,
                           comparisons=comparisons, validation_fit_percent=valid_fit,
-                          selection=selection, delay=delay_search,
-                          denoising=tuple(denoiser.results) if denoiser else (),
-                          excluded=tuple(excluded), explanation=explanation)
+                          selection=base.selection, delay=base.delay,
+                          denoising=tuple(data.denoiser.results) if data.denoiser else (),
+                          excluded=sources.excluded, explanation=explanation,
+                          notes=tuple(notes))
 
 
 def excitation(sources: Sequence[ShotSource], f_hz: float | np.ndarray
