@@ -311,14 +311,14 @@ class CompensationFilter:
 
     def _filter_rows(self, rows) -> np.ndarray:
         """Filter input rows (an array or a list of equal-length rows); see filter_inputs."""
-        if all(np.isfinite(row).all() for row in rows):
-            # The usual case costs one pass of lfilter per row and two finiteness checks.
-            saved = self._zi.copy()
-            out = self._run(rows)
-            if np.isfinite(out).all():
-                return out
-            self._zi[:] = saved  # an overflow: redo the block sample-exactly below
-            return self._run_valid(np.asarray(rows))
+        # The usual case costs one pass of lfilter per row and one finiteness check: a
+        # non-finite input sample makes that output sample non-finite too (lfilter adds
+        # b0·x, and 0·NaN = 0·Inf = NaN), so finite outputs prove finite inputs.
+        saved = self._zi.copy()
+        out = self._run(rows)
+        if np.isfinite(out).all():
+            return out
+        self._zi[:] = saved  # redo the block sample-exactly below
         u = np.asarray(rows)
         finite = np.isfinite(u).all(axis=0)
         out = np.full(u.shape[1], np.nan)
@@ -357,7 +357,7 @@ class CompensationFilter:
                 total = y
             else:
                 total += y
-        return np.zeros(0) if total is None else total
+        return np.zeros(np.shape(rows)[-1]) if total is None else total
 
     def induced(self, acceleration: np.ndarray) -> np.ndarray:
         """
