@@ -628,11 +628,13 @@ class RecordingDisturbances:
             if not finite.any():
                 continue
             phi = np.vstack([_columns(self.parts, start + offset, r.size, self.fs),
-                             np.ones(r.size)])[:, finite]
-            self._gram += phi @ phi.T
-            self._rhs += phi @ r[finite]
-            self.samples += int(finite.sum())
+                             np.ones(r.size)])
             where = np.flatnonzero(finite)
+            if where.size < r.size:
+                phi, r = phi[:, finite], r[finite]
+            self._gram += phi @ phi.T
+            self._rhs += phi @ r
+            self.samples += int(where.size)
             self._span = [min(self._span[0], start + offset + where[0]),
                           max(self._span[1], start + offset + where[-1])]
 
