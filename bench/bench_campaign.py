@@ -16,8 +16,10 @@ Measured, each on a fresh output folder:
    tables, summary, report) with a local cluster of 1 and of 2 workers, alternately,
    ``--repeats`` times (the fastest run of each size counts: other work on the machine
    only slows a run down): shots/s, the scaling ratio, each worker's peak resident memory,
-   the CPU seconds per shot inside the tasks, and the share of a core the tasks got (their
-   CPU time over their wall time: below 1 when other work competes for the cores);
+   the CPU seconds per shot inside the tasks and in all (this process with the scheduler,
+   and the worker processes: hashing, Dask, tables, report), and the share of a core the
+   tasks got (their CPU time over their wall time: below 1 when other work competes for
+   the cores);
 2. the same campaign again on the 2-worker output: every recording from the cache;
 3. ``sensor-comp compare MODEL BAG`` on one recording as a separate process (what a user
    scripting the single-recording command per bag pays per shot), and the same core calls
@@ -106,9 +108,13 @@ def _model(bag: Path, folder: Path) -> Path:
 def bench_campaign(folder: Path, model: Path, output: Path, *, workers: int) -> dict:
     """Run the campaign on a local cluster of ``workers``; return its figures."""
     models = read_models([str(model)])
+    before = [resource.getrusage(who) for who in (resource.RUSAGE_SELF,
+                                                  resource.RUSAGE_CHILDREN)]
     began = time.perf_counter()
     summary = run_campaign([folder], output, models=models, workers=workers)
     seconds = time.perf_counter() - began
+    client, children = (_cpu(resource.getrusage(who)) - _cpu(b) for who, b in zip(
+        (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN), before))
     bags = pa_csv.read_csv(output / 'bags.csv').to_pylist()
     cpu = sum(b['cpu_seconds'] for b in bags)
     drift = {s.sensor: s.trend.percent_over_span(s.trend.slope_per_day)
@@ -118,7 +124,13 @@ def bench_campaign(folder: Path, model: Path, output: Path, *, workers: int) -> 
             'shots_per_s': summary.shots / seconds, 'failed': summary.failed,
             'worker_peak_mb': summary.worker_memory_mb, 'task_cpu_s_per_shot': cpu /
             summary.shots, 'task_wall_s': wall, 'core_share': cpu / wall,
+            'client_cpu_s': client, 'workers_cpu_s': children,
+            'total_cpu_s_per_shot': (client + children) / summary.shots,
             'drift_percent': drift}
+
+
+def _cpu(usage) -> float:
+    return usage.ru_utime + usage.ru_stime
 
 
 def bench_single(bag: Path, model: Path) -> dict:
@@ -148,12 +160,12 @@ def _best(runs: list[dict]) -> list[dict]:
 
 
 def _print(runs: list[dict], resumed: dict, single: dict) -> None:
-    print(f'{"workers":>7} {"wall s":>8} {"shots":>6} {"shots/s":>8} {"worker peak MB":>15} '
-          f'{"task CPU ms/shot":>17} {"core share":>10}')
+    print(f'{"workers":>7} {"wall s":>7} {"shots":>6} {"shots/s":>8} {"worker peak MB":>14} '
+          f'{"task CPU ms/shot":>16} {"all CPU ms/shot":>15} {"core share":>10}')
     for r in runs:
-        print(f'{r["workers"]:>7} {r["seconds"]:>8.1f} {r["shots"]:>6} {r["shots_per_s"]:>8.1f} '
-              f'{r["worker_peak_mb"] or 0:>15.0f} {1e3 * r["task_cpu_s_per_shot"]:>17.1f} '
-              f'{r["core_share"]:>10.2f}')
+        print(f'{r["workers"]:>7} {r["seconds"]:>7.1f} {r["shots"]:>6} {r["shots_per_s"]:>8.1f} '
+              f'{r["worker_peak_mb"] or 0:>14.0f} {1e3 * r["task_cpu_s_per_shot"]:>16.1f} '
+              f'{1e3 * r["total_cpu_s_per_shot"]:>15.1f} {r["core_share"]:>10.2f}')
     best = _best(runs)
     if len(best) >= 2:
         print(f'scaling {best[-1]["workers"]} vs {best[0]["workers"]} workers (fastest runs): '

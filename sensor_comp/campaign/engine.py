@@ -69,6 +69,7 @@ class _ShotBar:
 
     def __init__(self, bar, recordings: int):
         self.bar, self.recordings, self.done, self.shots = bar, max(recordings, 1), 0, 0
+        self.label = getattr(bar, 'label', 'shots')
 
     def add(self, shots: int) -> None:
         self.done += 1
@@ -77,8 +78,18 @@ class _ShotBar:
         estimate = self.shots + round(left * self.shots / self.done)
         if hasattr(self.bar, 'total'):
             self.bar.total = max(estimate, self.shots, 1)
-            self.bar.label = f'shots ({self.done}/{self.recordings} recordings)'
+            self.bar.label = f'{self.label} ({self.done}/{self.recordings} recordings)'
         self.bar.advance(shots)
+
+
+class _Steps:
+    """Advance a progress bar by one per finished task (identifications)."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def add(self, _: int = 1) -> None:
+        self.bar.advance()
 
 
 @dataclass(eq=False)
@@ -117,7 +128,7 @@ class _Run:
         bag.entry, bag.cached = entry, True
         bar.add(entry.shots)
 
-    def _drain(self, bar: _ShotBar, identified: dict | None = None) -> None:
+    def _drain(self, bar: _ShotBar | _Steps, identified: dict | None = None) -> None:
         """Take the finished tasks as they come, until none is left."""
         for future in self.pool.completed():
             kind, item = self._tasks.pop(future)
@@ -131,6 +142,7 @@ class _Run:
                 self._analysed(item, value, error, bar)
             else:
                 identified[item] = value if error is None else error
+                bar.add(1)
 
     def _hashed(self, bag: _Bag, source: Source | None, error, bar: _ShotBar) -> None:
         if error is not None:
@@ -186,7 +198,7 @@ class _Run:
                     continue
                 self._submit(('identify', sensor), identify_sensor, sensor, picks,
                              threshold_g=self.options.threshold_g, options=options)
-            self._drain(_ShotBar(progress_bar, len(todo)), identified)
+            self._drain(_Steps(progress_bar), identified)
         redo = []
         for sensor, model in identified.items():
             if isinstance(model, Exception):

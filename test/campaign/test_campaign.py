@@ -221,8 +221,12 @@ def test_a_running_cluster_by_address(campaign, first_run, monkeypatch, tmp_path
 def test_identify_a_model_per_sensor(campaign, tmp_path):
     output = tmp_path / 'out'
     options = IdentifyOptions(structure='oe', orders=(2, 2), delay=1, max_shots=6)
+    bars = _Bars()
     summary = run_campaign([campaign.good[0], campaign.good[1], campaign.good[3]], output,
-                           identify=options, scheduler=SYNCHRONOUS, report=False)
+                           identify=options, scheduler=SYNCHRONOUS, report=False,
+                           progress=bars)
+    assert [(b.label.split()[0], b.done) for b in bars.bars] == [
+        ('shots', 9), ('identify', 2), ('compare', 9)]
     assert (output / 'models' / 'S1.json').exists() and (output / 'models' / 'S2.json').exists()
     model = load(output / 'models' / 'S1.json')
     assert model.fit['campaign_sensor'] == 'S1'
