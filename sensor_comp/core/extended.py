@@ -33,14 +33,16 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 import itertools
 import math
+import re
 
 import numpy as np
-from scipy import linalg, optimize, signal
+from scipy import optimize
 
 from .effects import EffectError, get_effect, ordered
 from .effects.base import effect_entry, Effect, ModelSpec, Physical, Search
 from .ident import Estimate, fit_oe, IdentError, simulate
 from .ident.least_squares import scaled_qr
+from .ident.oe import OutputErrorProblem
 from .ident.levenberg_marquardt import levenberg_marquardt
 from .ident.polynomials import max_root_radius
 from .inputs import input_channels, mode_pair
@@ -56,6 +58,11 @@ ROUNDS = 2
 EARLY_S = 3e-3
 #: Most Levenberg-Marquardt iterations of a joint fit.
 MAX_ITERATIONS = 100
+#: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
+#: ask for the same ones).
+CHANNEL_CACHE = 4
+#: A search placeholder in a channel name or modifier value.
+_KEYS = re.compile(r'\{([^{}]+)\}')
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,135 +258,62 @@ def _columns(window: Window, effects: Sequence[Effect], choices: Sequence[Mappin
     return out
 
 
-def _qr(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return ``(Q, R, scale)`` of ``phi`` with unit-norm columns (zero columns kept)."""
-    scale = np.linalg.norm(phi, axis=0)
-    scale[scale == 0] = 1.0
-    try:  # CholeskyQR2: fast under BLAS thread contention, accurate to cond ~1e8
-        q, r, _ = scaled_qr(phi / scale)
-    except IdentError:
-        q, r = np.linalg.qr(phi / scale)
-    return q, r, scale
-
-
 def _lstsq(phi: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Solve least squares with unit-norm columns; return ``(theta, unit covariance)``."""
-    q, r, scale = _qr(phi)
+    scale = np.linalg.norm(phi, axis=0)
+    scale[scale == 0] = 1.0
+    q, r, _ = scaled_qr(phi / scale)
     theta = np.linalg.solve(r, q.T @ target) / scale
     rinv = np.linalg.solve(r, np.eye(r.shape[0]))
     return theta, (rinv @ rinv.T) / np.outer(scale, scale)
 
 
-def _shift(x: np.ndarray, lag: int) -> np.ndarray:
-    out = np.zeros_like(x)
-    if lag < x.shape[-1]:
-        out[..., lag:] = x[..., :x.shape[-1] - lag]
-    return out
+def _problem(us: Sequence[np.ndarray], ys: Sequence[np.ndarray],
+             cols: Sequence[np.ndarray] | None, spec: ModelSpec) -> OutputErrorProblem:
+    """Return the output-error problem of channels ``us`` plus disturbance columns."""
+    return OutputErrorProblem(us, ys, spec.nf, spec.nb, spec.nk, extra=cols)
 
 
-@dataclass(eq=False)
-class _Problem:
-    """Channels, outputs and disturbance columns of the windows, for one parameter set."""
-
-    us: list[np.ndarray]
-    ys: list[np.ndarray]
-    cols: list[np.ndarray] | None
-    nf: int
-    nb: int
-    nk: int
-
-    def io_columns(self, f: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Return ``q^-(nk+j) u_i/F`` as columns ``(n, n_inputs·nb)``."""
-        x = signal.lfilter([1.0], f, u, axis=-1)
-        return np.stack([_shift(x[i], self.nk + j) for i in range(u.shape[0])
-                         for j in range(self.nb)], axis=1)
-
-    def regression(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return the stacked regressors (inputs through ``1/F``, disturbances) and outputs."""
-        blocks = []
-        for index, u in enumerate(self.us):
-            cols = self.io_columns(f, u)
-            if self.cols is not None:
-                cols = np.concatenate([cols, self.cols[index].T], axis=1)
-            blocks.append(cols)
-        return np.concatenate(blocks), np.concatenate(self.ys)
-
-    def profile_sse(self, f: np.ndarray) -> float:
-        """
-        Return the least sum of squares over numerators (and disturbances) at ``F``.
-
-        The coefficients come from the normal equations of the column-scaled regression
-        (Cholesky: the cheapest for the many evaluations of a search) and the residual is
-        then computed, so round-off can only raise the loss, never fake a low one; least
-        squares by QR when the normal equations are singular.
-        """
-        phi, y = self.regression(f)
-        scale = np.linalg.norm(phi, axis=0)
-        scale[scale == 0] = 1.0
-        phi /= scale
-        try:
-            theta = linalg.cho_solve(linalg.cho_factor(phi.T @ phi), phi.T @ y)
-        except linalg.LinAlgError:
-            theta = _lstsq(phi, y)[0]
-        e = y - phi @ theta
-        return float(e @ e)
-
-
-def _joint(problem: _Problem, a0: np.ndarray, *, method: str,
-           iterations: int = 0) -> tuple[Estimate, np.ndarray | None, np.ndarray | None]:
+def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
+           feasible: Callable[[np.ndarray], bool]
+           ) -> tuple[Estimate, np.ndarray | None, np.ndarray | None]:
     """
     Fit ``F``, ``B`` and the disturbance coefficients jointly, starting from ``F = a0``.
 
-    Levenberg–Marquardt on all parameters with the exact Jacobian (as :func:`fit_oe`,
-    which cannot start from a given denominator nor carry disturbance regressors); the
-    numerators and disturbance coefficients start from their least squares at ``a0``.
+    Levenberg–Marquardt on all parameters with the exact Jacobian
+    (:class:`~sensor_comp.core.ident.oe.OutputErrorProblem`); the numerators and
+    disturbance coefficients start from their least squares at ``a0``; every step keeps
+    ``feasible(F)`` (stable, and no slower than the effects' own time constants).
     """
-    nf, nb, nk = problem.nf, problem.nb, problem.nk
-    n_inputs = problem.us[0].shape[0]
-    nbt = n_inputs * nb
-    cols = problem.cols or [np.zeros((0, y.size)) for y in problem.ys]
-    phi, y = problem.regression(a0)
-    x0 = np.concatenate([a0[1:], _lstsq(phi, y)[0]])
-
-    def unpack(theta):
-        return (np.concatenate([[1.0], theta[:nf]]), theta[nf:nf + nbt].reshape(n_inputs, nb),
-                theta[nf + nbt:])
-
-    def parts(theta, jacobian):
-        f, b, d = unpack(theta)
-        errors, jacs = [], []
-        for u, yw, c in zip(problem.us, problem.ys, cols):
-            xcols = problem.io_columns(f, u)
-            yhat = xcols @ b.ravel()
-            errors.append(yw - yhat - c.T @ d)
-            if jacobian:
-                z = signal.lfilter([1.0], f, yhat)
-                fcols = np.stack([-_shift(z, j) for j in range(1, nf + 1)], axis=1)
-                jacs.append(np.concatenate([fcols, xcols, c.T], axis=1))
-        return np.concatenate(errors), (np.concatenate(jacs) if jacobian else None)
-
+    nf = problem.nf
+    io = nf + problem.n_inputs * problem.nb
+    x0 = np.concatenate([a0[1:], problem.linear(a0)])
     result = levenberg_marquardt(
-        lambda theta, jacobian: parts(theta, True) if jacobian else parts(theta, False)[0],
-        x0, stable=lambda theta: max_root_radius(unpack(theta)[0]) < 1.0,
+        problem.residual, x0, stable=lambda theta: feasible(problem.unpack(theta)[0]),
         max_iter=MAX_ITERATIONS, tol=1e-9)
     theta, cost, e, jac = result.theta, result.cost, result.e, result.jac
-    converged, evaluations = result.converged, result.evaluations
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
-    _, r, scale = _qr(jac)
-    if np.linalg.cond(r) < 1e10:
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    try:
+        _, r, _ = scaled_qr(jac / scale)
+        singular = not np.linalg.cond(r) < 1e10
+    except IdentError:
+        singular = True
+    if singular:  # over-parameterised: not identifiable
+        covariance = np.full((p, p), np.inf)
+    else:
         rinv = np.linalg.solve(r, np.eye(p))
         covariance = variance * (rinv @ rinv.T) / np.outer(scale, scale)
-    else:  # over-parameterised: not identifiable
-        covariance = np.full((p, p), np.inf)
-    f, b, d = unpack(theta)
-    io = nf + nbt
-    estimate = Estimate(structure='oe', a=f, b=b, nk=nk, covariance=covariance[:io, :io],
-                        noise_variance=variance, loss=cost / n, n_samples=n,
-                        iterations=iterations + evaluations, converged=converged,
+    f, b, d = problem.unpack(theta)
+    estimate = Estimate(structure='oe', a=f, b=b, nk=problem.nk,
+                        covariance=covariance[:io, :io], noise_variance=variance,
+                        loss=cost / n, n_samples=n, iterations=result.evaluations,
+                        converged=result.converged,
                         method=f'{method}; joint Levenberg-Marquardt over {p} parameters '
-                               f'({evaluations} evaluations)')
-    if problem.cols is None:
+                               f'({result.evaluations} evaluations)')
+    if problem.extra is None:
         return estimate, None, None
     return estimate, d, covariance[io:, io:]
 
@@ -390,6 +324,38 @@ def _pairs(fs: float) -> list[tuple[float, np.ndarray]]:
             for fn in np.geomspace(fs / 2000, 0.4 * fs, 32) for zeta in (0.1, 0.3, 0.9)]
 
 
+def slowest_pole_s(spec: ModelSpec) -> float | None:
+    """
+    Return the slowest time constant the model's own poles may have, s, or None.
+
+    A channel high-pass (``@highpass_ms``) or a leaky peak (``peak_a_z(tau_ms=…)``) whose
+    time constant is searched can be imitated exactly by a slow real pole of the common
+    denominator with a zero at 1 in the numerators: the fit then puts the effect in the
+    mechanics and sends the searched time constant to its bound (an 82 ms amplifier
+    high-pass read as 10 s). The sensor's poles are fast, so they are held faster than the
+    shortest time constant those searches may take.
+    """
+    timed = [value for modifier, value in spec.modifiers if modifier == 'highpass_ms']
+    timed += [base for base in spec.bases if base.startswith('peak_')]
+    keys = {match.group(1) for text in timed for match in _KEYS.finditer(text)}
+    lows = [s.low for s in spec.searches if s.key in keys]
+    return min(lows) * 1e-3 if lows else None
+
+
+def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
+    """Return whether a denominator is stable and no slower than :func:`slowest_pole_s`."""
+    slowest = slowest_pole_s(spec)
+
+    def feasible(a: np.ndarray) -> bool:
+        if not max_root_radius(a) < 1.0:
+            return False
+        if slowest is None or a.size < 2:
+            return True
+        speeds = np.abs(np.log(np.roots(a).astype(complex))) * fs
+        return bool(np.all(speeds > 1.0 / slowest))
+    return feasible
+
+
 class _Fitter:
     """
     One structure on one set of windows: channels, fits and searches.
@@ -397,7 +363,8 @@ class _Fitter:
     Output-error losses of sensors with a slow tail (a high-pass, a zero shift) have more
     than one basin: a 2nd-order model may imitate the tail with a real pole near 1 instead
     of resonating. The fitter therefore keeps a few denominators (:meth:`starts`, then the
-    fits' own) and starts every fit and every trial of a search from each of them.
+    fits' own) and starts every fit and every trial of a search's grid from each of them.
+    Channels are computed once per set of parameter values (the last few are kept).
     """
 
     def __init__(self, windows: Sequence[Window], spec: ModelSpec, fs: float,
@@ -409,68 +376,105 @@ class _Fitter:
                                sources=self.sources) for w in windows]
                      if self.disturbances else None)
         self.ys = [w.y for w in windows]
+        self.feasible = _feasibility(spec, fs)
+        self._channels: dict[tuple[str, ...], list[np.ndarray]] = {}
 
-    def problem(self, values: Mapping[str, float], *, early: bool = False) -> _Problem:
-        """Return the regression data; ``early``: up to 3 ms after each pulse only."""
+    def channels(self, values: Mapping[str, float]) -> list[np.ndarray]:
+        """Return the input channels of every window at ``values`` (cached)."""
         names = self.spec.channels(values)
-        problem = _Problem(_channels(self.windows, names, self.fs), self.ys, self.cols,
-                           self.spec.nf, self.spec.nb, self.spec.nk)
+        if names not in self._channels:
+            if len(self._channels) >= CHANNEL_CACHE:
+                self._channels.pop(next(iter(self._channels)))
+            self._channels[names] = _channels(self.windows, names, self.fs)
+        return self._channels[names]
+
+    def problem(self, values: Mapping[str, float], *,
+                early: bool = False) -> OutputErrorProblem:
+        """Return the regression data; ``early``: up to 3 ms after each pulse only."""
+        us = self.channels(values)
         if not early:
-            return problem
+            return _problem(us, self.ys, self.cols, self.spec)
         stops = [w.y.size if w.end is None else min(w.y.size, w.end + round(EARLY_S * self.fs))
                  for w in self.windows]
-        return replace(problem, us=[u[:, :n] for u, n in zip(problem.us, stops)],
-                       ys=[y[:n] for y, n in zip(problem.ys, stops)],
-                       cols=None if problem.cols is None else [
-                           c[:, :n] for c, n in zip(problem.cols, stops)])
+        return _problem([u[:, :n] for u, n in zip(us, stops)],
+                        [y[:n] for y, n in zip(self.ys, stops)],
+                        None if self.cols is None else [c[:, :n] for c, n in
+                                                        zip(self.cols, stops)], self.spec)
 
     def starts(self, values: Mapping[str, float], *,
                base: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
         """
-        Return start denominators: from output error and, for 2nd order, from a grid.
+        Return start denominators: from output error and from a grid of pole pairs.
 
         The grid starts are the pole pair with the least loss and the lightly damped one
         with the least loss (a slow tail can make an overdamped pair win at the start
-        values of a search, hiding the resonant basin). ``base`` (denominators of an
-        earlier fit of the same windows) replaces them all.
+        values of a search, hiding the resonant basin); beyond two poles the pairs are
+        padded with poles at the origin, for one pole a grid of real poles is used.
+        ``base`` (denominators of an earlier fit of the same windows) replaces them all.
+        Only feasible denominators (:func:`_feasibility`) are returned.
+
+        Raises:
+            IdentError: When no start can be found.
+
         """
         problem = self.problem(values)
-        firsts = [a for a in base if a.size == problem.nf + 1]
+        firsts = [a for a in base if a.size == problem.nf + 1 and self.feasible(a)]
         if firsts:
             return firsts
         try:
-            firsts.append(fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf,
-                                 nb=problem.nb, nk=problem.nk).a)
+            a = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
+                       nk=problem.nk).a
+            if self.feasible(a):
+                firsts.append(a)
         except IdentError:
             pass
-        if problem.nf == 2:
-            # On the windows' early part (pulse and first ringing): a slow tail has not
-            # built up there to pull the grid towards slow pairs.
-            early = self.problem(values, early=True)
-            grid = [(early.profile_sse(pair), zeta, pair) for zeta, pair in _pairs(self.fs)]
+        # On the windows' early part (pulse and first ringing): a slow tail has not built
+        # up there to pull the grid towards slow pairs.
+        early = self.problem(values, early=True)
+        grid = [(early.profile_sse(a), zeta, a) for zeta, a in _grid(problem.nf, self.fs)
+                if self.feasible(a)]
+        grid = [g for g in grid if np.isfinite(g[0])]
+        if grid:
             firsts.append(min(grid, key=lambda g: g[0])[2])
-            firsts.append(min((g for g in grid if g[1] < 0.5), key=lambda g: g[0])[2])
+            resonant = [g for g in grid if g[1] < 0.5]
+            if resonant:
+                firsts.append(min(resonant, key=lambda g: g[0])[2])
         if not firsts:
-            raise IdentError(f'no start for a model with nf={problem.nf}: the input does not '
-                             f'excite this structure; lower the orders')
+            raise IdentError(f'no start for a model with nf={problem.nf}: neither output '
+                             f'error nor a grid of poles gives a denominator the effects '
+                             f'allow')
         return _distinct(firsts)
 
     def fit(self, values: Mapping[str, float], starts: Sequence[np.ndarray], *,
             fresh: bool = False):
-        """Return the best of the fits from every start (and, ``fresh``, output error)."""
+        """
+        Return the best of the fits from every start (and, ``fresh``, output error).
+
+        Raises:
+            IdentError: When no fit succeeds (no start of this order, or every fit fails).
+
+        """
         problem = self.problem(values)
-        results = []
+        results, failed = [], []
         if self.cols is None and fresh:
             try:
-                results.append((fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf,
-                                       nb=problem.nb, nk=problem.nk), None, None))
-            except IdentError:
-                pass
-        usable = [a for a in starts if a.size == problem.nf + 1]
+                oe = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
+                            nk=problem.nk)
+                if self.feasible(oe.a):
+                    results.append((oe, None, None))
+            except IdentError as exc:
+                failed.append(str(exc))
+        usable = [a for a in starts if a.size == problem.nf + 1 and self.feasible(a)]
         if usable:  # Levenberg-Marquardt from the start with the least loss
             best = min(usable, key=problem.profile_sse)
-            results.append(_joint(problem, best, method='output error from the best start '
-                                                        'denominator'))
+            try:
+                results.append(_joint(problem, best, feasible=self.feasible,
+                                      method='output error from the best start denominator'))
+            except IdentError as exc:
+                failed.append(str(exc))
+        if not results:
+            raise IdentError(f'no fit of nf={problem.nf} nb={problem.nb} nk={problem.nk}: '
+                             + ('; '.join(failed) or 'no start denominator'))
         return min(results, key=lambda r: r[0].loss)
 
     def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
@@ -480,14 +484,21 @@ class _Fitter:
 
     def search(self, search: Search, values: Mapping[str, float],
                starts: Sequence[np.ndarray]) -> float:
-        """Return the value of ``search`` with the least loss (grid, then bounded)."""
-        def loss(x):
-            return self.loss({**values, search.key: math.exp(x) if search.log else x}, starts)
+        """
+        Return the value of ``search`` with the least loss (grid, then bounded).
+
+        The grid tries every start denominator; the bounded refinement only the one that
+        was best at the grid's best point (the others lost there already).
+        """
+        def at(x):
+            return {**values, search.key: math.exp(x) if search.log else x}
 
         grid = search.points()
         xs = np.log(grid) if search.log else grid
-        losses = [loss(x) for x in xs]
+        table = np.array([[self.problem(at(x)).profile_sse(a) for a in starts] for x in xs])
+        losses = table.min(axis=1)
         best = int(np.argmin(losses))
+        start = starts[int(np.argmin(table[best]))]
         low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
         if search.exclude is not None:  # refine on the best point's side of the band
             band = np.log(search.exclude) if search.log else np.asarray(search.exclude)
@@ -495,24 +506,50 @@ class _Fitter:
                 high = min(high, band[0])
             else:
                 low = max(low, band[1])
-        result = optimize.minimize_scalar(loss, bounds=(low, high), method='bounded',
+        result = optimize.minimize_scalar(lambda x: self.problem(at(x)).profile_sse(start),
+                                          bounds=(low, high), method='bounded',
                                           options={'xatol': 1e-4 * max(high - low, 1e-12)})
         x = result.x if result.fun <= losses[best] else xs[best]
         return float(math.exp(x) if search.log else x)
 
     def value_std(self, search: Search, values: Mapping[str, float], f: np.ndarray,
                   variance: float) -> float | None:
-        """Return the standard deviation of a searched value from the loss's curvature."""
+        """
+        Return the standard deviation of a searched value from the loss's curvature.
+
+        For a log search the curvature is taken in ``log(value)`` (steps of 0.1 %) and the
+        deviation carried back by the delta method; within a step of a bound, None (the
+        value is not resolved there).
+        """
         value = values[search.key]
-        step = max(1e-3 * abs(value), 1e-3 * (search.high - search.low) / search.grid)
-        at = {}
-        for k in (-1, 0, 1):
-            v = value + k * step
-            if not search.low <= v <= search.high:
-                v = value - k * step  # mirror a step beyond a bound (symmetric curvature)
-            at[k] = self.problem({**values, search.key: v}).profile_sse(f)
-        curvature = (at[1] - 2 * at[0] + at[-1]) / step ** 2
-        return math.sqrt(2 * variance / curvature) if curvature > 0 else None
+        if search.log:
+            step = 1e-3
+            if not search.low * math.exp(step) <= value <= search.high * math.exp(-step):
+                return None
+            points = [math.log(value) + k * step for k in (-1, 0, 1)]
+            values_at = [math.exp(x) for x in points]
+        else:
+            step = max(1e-3 * abs(value), 1e-3 * (search.high - search.low) / search.grid)
+            values_at = []
+            for k in (-1, 0, 1):
+                v = value + k * step
+                if not search.low <= v <= search.high:
+                    v = value - k * step  # mirror a step beyond a bound (symmetric curvature)
+                values_at.append(v)
+        at = [self.problem({**values, search.key: v}).profile_sse(f) for v in values_at]
+        curvature = (at[2] - 2 * at[1] + at[0]) / step ** 2
+        if not curvature > 0:
+            return None
+        spread = math.sqrt(2 * variance / curvature)
+        return spread * value if search.log else spread
+
+
+def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
+    """Return ``(zeta, denominator)`` start candidates of order ``nf`` (see ``starts``)."""
+    if nf == 1:
+        return [(1.0, np.array([1.0, -math.exp(-2 * math.pi * fn / fs)]))
+                for fn in np.geomspace(fs / 2000, 0.4 * fs, 32)]
+    return [(zeta, np.concatenate([pair, np.zeros(nf - 2)])) for zeta, pair in _pairs(fs)]
 
 
 def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,
@@ -536,9 +573,11 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         The fit, with the physical parameters of every effect.
 
     Raises:
-        EffectError: On an unknown effect or one the data cannot support (e.g. transverse
-            sensitivity without lateral channels).
-        IdentError: On bad orders, too little data or no stable model.
+        EffectError: On an unknown effect, one the data cannot support (e.g. transverse
+            sensitivity without lateral channels), or when the extended model cannot be
+            fitted (no start denominator, no stable fit): one line saying why.
+        IdentError: On no windows, bad orders, or when the base model alone (no effects)
+            cannot be fitted.
 
     """
     windows = list(windows)
@@ -552,6 +591,38 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
     spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs))
     for effect in chosen:
         spec = effect.extend(spec)
+    try:
+        fitter, values, fitted, firsts = _fit_spec(windows, spec, fs, starts)
+    except IdentError as exc:
+        if not chosen:
+            raise
+        text = ' '.join(str(exc).split())
+        raise EffectError(f'cannot fit {", ".join(e.id for e in chosen)} on a base of '
+                          f'nf={nf} nb={nb} nk={nk}: {text}') from None
+    estimate, coef, cov = fitted
+    value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
+                 for s in spec.searches}
+    disturbance = None if coef is None else DisturbanceFit(
+        fitter.disturbances, fitter.choices, fitter.sources, coef, cov)
+    inputs = spec.channels(values)
+    shared = _distinct(list(firsts) + [estimate.a])
+    fit = _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
+                  tuple(shared))
+    return replace(fit, _base=(('base_nf', nf), ('base_nb', nb), ('base_nk', nk)))
+
+
+def _fit_spec(windows: Sequence[Window], spec: ModelSpec, fs: float,
+              starts: Sequence[np.ndarray]):
+    """
+    Fit ``spec``: discrete choices, start denominators, searches and joint fits.
+
+    Returns:
+        ``(fitter, values, (estimate, coefficients, covariance), start denominators)``.
+
+    Raises:
+        IdentError: When no start or no fit can be found.
+
+    """
     disturbances = tuple(get_effect(d) for d in spec.disturbances)
     # Discrete choices (50 or 60 Hz) by the loss at the start denominators; then one fit.
     values = {s.key: s.initial for s in spec.searches}
@@ -561,12 +632,13 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
     firsts = fitters[0].starts(values, base=base)
     fitter = min(fitters, key=lambda f: f.loss(values, firsts))
     denominators = list(firsts)
-    estimate, coef, cov = fitter.fit(values, denominators, fresh=not starts)
+    fitted = fitter.fit(values, denominators, fresh=not starts)
     best = None
     for round_ in range(ROUNDS if spec.searches else 0):
         # The first round tries every start denominator (basins); the next one searches
         # again with the denominator refitted at the values found (they are coupled).
-        denominators = _distinct(denominators + [estimate.a]) if round_ == 0 else [estimate.a]
+        denominators = (_distinct(denominators + [fitted[0].a]) if round_ == 0
+                        else [fitted[0].a])
         trial = dict(values)
         for search in spec.searches:
             trial[search.key] = fitter.search(search, trial, denominators)
@@ -574,16 +646,8 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         # A later round may wander to a worse basin: keep the round with the lowest loss.
         if best is None or result[0].loss < best[1][0].loss:
             best = (trial, result)
-        values, (estimate, coef, cov) = best[0], best[1]
-    value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
-                 for s in spec.searches}
-    disturbance = None if coef is None else DisturbanceFit(
-        disturbances, fitter.choices, fitter.sources, coef, cov)
-    inputs = spec.channels(values)
-    shared = _distinct(list(firsts) + [estimate.a])
-    fit = _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
-                  tuple(shared))
-    return replace(fit, _base=(('base_nf', nf), ('base_nb', nb), ('base_nk', nk)))
+        values, fitted = best
+    return fitter, values, fitted, firsts
 
 
 def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:

@@ -18,7 +18,7 @@ from scipy import linalg, signal
 from .data import IdentError
 
 __all__ = ['RANK_TOLERANCE', 'LeastSquares', 'check_orders', 'delayed_numerator', 'equation_error',
-           'filter_each', 'lagged_regression', 'normal_equations', 'scaled_qr',
+           'filter_each', 'lagged_regression', 'minimum_norm', 'normal_equations', 'scaled_qr',
            'solve_least_squares', 'triangular_inverse']
 
 #: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
@@ -248,13 +248,20 @@ def _householder(phi: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, np.
     return q, r
 
 
-def normal_equations(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
+def normal_equations(phi: np.ndarray, target: np.ndarray, *, ridge: float = 0.0) -> np.ndarray:
     """
     Return the least-squares solution from the column-scaled normal equations (Cholesky).
 
     About one pass over ``phi``: the cheapest solve for the many evaluations of a search,
     accurate while ``phi`` is conditioned better than ~1e6 (callers recompute the residual,
     so round-off can only raise their loss).
+
+    Args:
+        phi: ``(rows, p)`` regressors.
+        target: ``(rows,)`` targets.
+        ridge: Added to the unit diagonal of the scaled Gram matrix (Tikhonov
+            regularisation): a solution for nearly dependent columns, whose residual is at
+            most that much above the least one.
 
     Raises:
         IdentError: When the scaled Gram matrix is not positive definite.
@@ -263,11 +270,29 @@ def normal_equations(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
     gram = phi.T @ phi
     scale = np.sqrt(np.diag(gram))
     scale[~(scale > 0)] = 1.0
+    gram = gram / np.outer(scale, scale)
+    if ridge:
+        gram[np.diag_indices_from(gram)] += ridge
     try:
-        factor = linalg.cho_factor(gram / np.outer(scale, scale))
+        factor = linalg.cho_factor(gram)
     except linalg.LinAlgError:
         raise IdentError('singular normal equations') from None
     return linalg.cho_solve(factor, (phi.T @ target) / scale) / scale
+
+
+def minimum_norm(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """
+    Return the minimum-norm least-squares solution of the column-scaled ``phi`` (SVD).
+
+    For regressors that are linearly dependent (an input and a filtered copy of it, more
+    lags than the data excite): the fit is the least-squares one, the parameters along the
+    dependent directions are set to zero rather than refused. Singular values below
+    :data:`RANK_TOLERANCE` of the largest count as zero.
+    """
+    scale = np.linalg.norm(phi, axis=0)
+    scale[~(scale > 0)] = 1.0
+    theta, *_ = np.linalg.lstsq(phi / scale, target, rcond=RANK_TOLERANCE)
+    return theta / scale
 
 
 def triangular_inverse(r: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from scipy import signal
@@ -24,7 +25,7 @@ from scipy import signal
 from .arx import fit_arx
 from .data import as_segments, IdentError, Segment
 from .estimate import Estimate
-from .least_squares import (check_orders, filter_each, lagged_regression,
+from .least_squares import (check_orders, filter_each, lagged_regression, minimum_norm,
                             normal_equations, solve_least_squares)
 from .levenberg_marquardt import levenberg_marquardt, scaled_normal_equations
 from .polynomials import is_stable, reflect_unstable
@@ -203,26 +204,32 @@ class OutputErrorProblem:
         """
         Return the least-squares numerators and extra coefficients at a fixed ``F``.
 
-        Raises:
-            IdentError: When the regressors are linearly dependent.
-
+        Dependent regressors (an effect channel that is a filtered copy of another, more
+        lags than the data excite) get the minimum-norm solution instead of an error.
         """
-        return solve_least_squares(self.regression(f), self.y).theta
+        phi = self.regression(f)
+        try:
+            return solve_least_squares(phi, self.y).theta
+        except IdentError:
+            return minimum_norm(phi, self.y)
 
     def profile_sse(self, f: np.ndarray) -> float:
         """
         Return the least sum of squares over numerators (and extra coefficients) at ``F``.
 
         The coefficients come from the column-scaled normal equations (Cholesky: the
-        cheapest for the many evaluations of a search), the residual is then computed, so
-        round-off can only raise the loss, never fake a low one; least squares by QR when
-        the normal equations are singular.
+        cheapest for the many evaluations of a search), regularised by a ridge of 1e-10
+        where they are singular; the residual is then computed, so round-off and the ridge
+        can only raise the loss, never fake a low one.
         """
         phi = self.regression(f)
         try:
             theta = normal_equations(phi, self.y)
         except IdentError:
-            theta = solve_least_squares(phi, self.y).theta
+            try:
+                theta = normal_equations(phi, self.y, ridge=1e-10)
+            except IdentError:  # not finite
+                return math.inf
         e = self.y - phi @ theta
         return float(e @ e)
 
