@@ -12,7 +12,7 @@ from .sources import add_force, load_model
 from ..blocks import BlockSequence
 from ..core.compensation import CompensationFilter
 from ..core.model import ModelError
-from ..core.streaming import BlockCompensator
+from ..core.streaming import BlockCompensator, fit_recording_disturbances
 from ..errors import SensorCompError
 from ..files import check_output
 from ..io.bag_reader import (BagReader, block_topics, find_namespace, read_stream_infos,
@@ -46,6 +46,11 @@ def compensate_bag(model, input_path: str, output_path: str, *,
     """
     Copy a bag and add the model's ``pressure/compensated`` and ``pressure/induced``.
 
+    The model's disturbances (mains hum) are fitted on the whole bag in a first pass over
+    its raw blocks and removed from the first sample on
+    (:func:`~sensor_comp.core.streaming.fit_recording_disturbances`), as the diagnosis
+    credits them; no tracker has to settle.
+
     The output is checked first (:func:`~sensor_comp.files.check_output`) and written
     atomically: a uniquely named temporary file, renamed when complete and removed when the
     input turns out to be bad half-way or the run is interrupted. Blocks are paired by stamp
@@ -61,8 +66,9 @@ def compensate_bag(model, input_path: str, output_path: str, *,
 
     Returns:
         The sample accounting (see :class:`~sensor_comp.core.streaming.StreamCounters`)
-        plus ``copied_messages`` and ``first_unpaired`` (per topic, the first block that
-        found no partner, or None).
+        plus ``copied_messages``, ``first_unpaired`` (per topic, the first block that
+        found no partner, or None) and ``disturbance_warnings`` (the model's disturbances
+        the recording is too short to remove, as sentences).
 
     Raises:
         SensorCompError: On a bag cut short, without both raw streams or their
@@ -84,7 +90,12 @@ def compensate_bag(model, input_path: str, output_path: str, *,
         if abs(model.fs - raw.fs) > 1e-9 * raw.fs:
             raise SensorCompError(f'model identified at {model.fs:g} Hz but {input_path} is '
                                   f'sampled at {raw.fs:g} Hz: identify a model at this rate')
-        compensator = BlockCompensator(CompensationFilter.from_model(model), fs=raw.fs)
+        # Offline: the model's disturbances (mains hum) are fitted on the whole recording
+        # in a first pass over the raw blocks, then removed from the first sample on.
+        disturbances = fit_recording_disturbances(model, _raw_blocks(bag, topics), fs=raw.fs)
+        compensator = BlockCompensator(
+            CompensationFilter.from_model(model, trackers=disturbances is None), fs=raw.fs,
+            disturbances=disturbances)
         sequences = {topics[PRESSURE_RAW]: BlockSequence(raw, name=topics[PRESSURE_RAW]),
                      topics[ACCELERATION]: BlockSequence(accel, name=topics[ACCELERATION])}
         pairing = _Pairing(topics[PRESSURE_RAW], topics[ACCELERATION])
@@ -124,7 +135,19 @@ def compensate_bag(model, input_path: str, output_path: str, *,
             if not compensator.counters.output_samples:
                 raise SensorCompError(pairing.describe_failure(input_path, raw.fs))
     return {**compensator.counters.to_dict(), 'copied_messages': copied,
-            'first_unpaired': pairing.first_unpaired()}
+            'first_unpaired': pairing.first_unpaired(),
+            'disturbance_warnings': disturbances.warnings if disturbances else []}
+
+
+def _raw_blocks(bag: BagReader, topics: dict):
+    """Yield ``(kind, stamp, data)`` of the raw blocks (a bad one is the second pass's)."""
+    kinds = {topics[PRESSURE_RAW]: PRESSURE_RAW, topics[ACCELERATION]: ACCELERATION}
+    for msg in bag.messages(list(kinds)):
+        try:
+            stamp, _, data = decode_block(msg.data)
+        except MessageError:
+            continue
+        yield kinds[msg.topic], stamp, data
 
 
 def _check_inputs(path: str, bag: BagReader, infos: dict, topics: dict) -> None:
@@ -253,6 +276,8 @@ def run(args: argparse.Namespace) -> int:
             print(f'warning: {counts["invalid_samples"]} NaN/Inf samples (or an overflowing '
                   f'filter) gave NaN compensated samples; the filter restarted from rest after '
                   f'each run of them')
+        for text in counts['disturbance_warnings']:
+            print(f'warning: {text}')
         if counts['gaps']:
             print(f'warning: {len(counts["gaps"])} stamp gaps; the filter restarted from rest '
                   f'after each')
