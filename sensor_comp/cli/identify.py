@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
                           'continuous': view.to_json(),
                           'validation_fit_percent': result.validation_fit_percent,
                           'validation': [c.to_dict() for c in result.comparisons],
-                          'excluded': list(result.excluded)}, indent=2))
+                          'excluded': list(result.excluded),
+                          'notes': list(result.notes)}, indent=2))
         return 0
     for role, sources in (('calibration', calibration), ('validation', validation)):
         for source in sources:
@@ -92,9 +93,12 @@ def run(args: argparse.Namespace) -> int:
     if result.selection is not None:
         print(result.selection.table())
     print(f'structure: {result.explanation}')
+    for line in result.notes:  # what identification did instead, and why
+        print(f'note: {line}')
     if result.denoising:
-        kept = sum(len(d.kept) for d in result.denoising) / len(result.denoising)
-        print(f'EMD: {len(result.denoising)} windows, {kept:.1f} IMFs kept on average')
+        removed = sum(d.removed for d in result.denoising) / len(result.denoising)
+        print(f'EMD: {len(result.denoising)} windows, {removed:.1f} noise IMFs removed on '
+              f'average')
     print(describe_model(result.model, view))
     for effect in result.model.effects:
         print(f'effect {effect["id"]}: ' + describe_effect(effect))
