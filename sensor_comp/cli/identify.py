@@ -96,8 +96,9 @@ def run(args: argparse.Namespace) -> int:
     for line in result.notes:  # what identification did instead, and why
         print(f'note: {line}')
     if result.denoising:
-        kept = sum(len(d.kept) for d in result.denoising) / len(result.denoising)
-        print(f'EMD: {len(result.denoising)} windows, {kept:.1f} IMFs kept on average')
+        removed = sum(d.removed for d in result.denoising) / len(result.denoising)
+        print(f'EMD: {len(result.denoising)} windows, {removed:.1f} noise IMFs removed on '
+              f'average')
     print(describe_model(result.model, view))
     for effect in result.model.effects:
         print(f'effect {effect["id"]}: ' + describe_effect(effect))
