@@ -351,7 +351,8 @@ def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
             return False
         if slowest is None or a.size < 2:
             return True
-        speeds = np.abs(np.log(np.roots(a).astype(complex))) * fs
+        with np.errstate(divide='ignore'):  # a pole at the origin is infinitely fast
+            speeds = np.abs(np.log(np.roots(a).astype(complex))) * fs
         return bool(np.all(speeds > 1.0 / slowest))
     return feasible
 

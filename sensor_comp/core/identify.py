@@ -544,8 +544,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
             effect does not apply to the recordings.
 
     """
-    windows = shot_windows([s for s in sources.calibration if s.shots])
-    windows = [replace(w, y=y) for w, (_, y) in zip(windows, data.fit)]
+    measured = shot_windows([s for s in sources.calibration if s.shots])
+    windows = [replace(w, y=y) for w, (_, y) in zip(measured, data.fit)]
     for effect in ordered(effects):
         reason = effect.applicable(windows)
         if reason is not None:
@@ -567,6 +567,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                           f'nk={base.nk}' + (' or nf=2' if len(tries) > 1 else '') + f': {why}')
     chosen = min(fits, key=lambda nf: _bic(fits[nf]))
     notes = []
+    if data.denoiser is not None:
+        fits[chosen] = _measured_noise(fits[chosen], measured)
     if chosen != base.na:
         if base.na in failed:
             notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
@@ -577,6 +579,32 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                          f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} (the extra poles '
                          f'imitated the effect)')
     return fits[chosen], notes
+
+
+def _measured_noise(fit, windows):
+    """
+    Return ``fit`` with its uncertainties for the noise of the measured pressure.
+
+    A fit to the EMD-denoised pressure leaves a residual with most of the measurement
+    noise taken out, so the covariance it implies (and every standard deviation derived
+    from it) is too small by the ratio of the residual variances on the measured and the
+    denoised pressure: all are scaled up by that ratio (never down).
+    """
+    prediction = fit.predict(windows).total
+    sse = sum(float(np.sum((w.y - p) ** 2)) for w, p in zip(windows, prediction))
+    n = sum(w.y.size for w in windows)
+    variance = sse / max(n - fit.estimate.n_parameters, 1)
+    ratio = variance / fit.estimate.noise_variance if fit.estimate.noise_variance > 0 else 1.0
+    if not ratio > 1.0:
+        return fit
+    root = math.sqrt(ratio)
+    entries = tuple({**entry, 'std': {k: None if v is None else v * root
+                                      for k, v in (entry.get('std') or {}).items()}}
+                    for entry in fit.entries)
+    estimate = replace(fit.estimate, covariance=fit.estimate.covariance * ratio,
+                       noise_variance=variance)
+    value_std = {k: None if v is None else v * root for k, v in fit.value_std.items()}
+    return replace(fit, estimate=estimate, entries=entries, value_std=value_std)
 
 
 def _bic(fit) -> float:
