@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         fit = (f', fit {s.fit_percent_median:.2f} %, worst peak residual '
                f'{s.peak_residual_percent_worst:.2f} %' if s.models else '')
         print(f'  {s.sensor}: {s.usable_shots} usable shots, sensitivity '
-              f'{s.sensitivity_mpa_per_g:.4g} MPa/g ({s.basis.replace("_", " ")}), {drift}, '
+              f'{s.sensitivity_mpa_per_g:.4e} MPa/g ({s.basis.replace("_", " ")}), {drift}, '
               f'{len(s.change_points)} change point(s) at p < {CHANGE_ALPHA:g}{fit}')
     for note in summary.notes:
         print(f'note: {note}')
