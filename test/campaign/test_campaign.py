@@ -293,3 +293,14 @@ def test_shots_table_column_names_are_documented():
     assert len(SCHEMA) == len(set(SCHEMA.names)) and SCHEMA.field('stamp').type == \
         pa.timestamp('ns', tz='UTC')
     assert np.all([n.islower() for n in SCHEMA.names])
+
+
+def test_every_bad_bag_of_the_corpus_is_one_row_with_its_reason(tmp_path):
+    corpus = Path(__file__).resolve().parents[1] / 'data' / 'bad_bags'
+    summary = run_campaign([corpus], tmp_path / 'out', scheduler=SYNCHRONOUS, report=False)
+    bags = pa_csv.read_csv(tmp_path / 'out' / 'bags.csv').to_pylist()
+    assert len(bags) == summary.bags == len(list(corpus.rglob('*.mcap')))
+    failed = [b for b in bags if b['status'] == 'failed']
+    assert len(failed) == summary.failed >= 20
+    for bag in failed:  # a clear reason naming the file, never an internal error
+        assert Path(bag['bag']).name in bag['reason'] and 'analysis failed' not in bag['reason']
