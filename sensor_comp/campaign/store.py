@@ -91,6 +91,7 @@ class CampaignFolder:
         self.models = self.path / 'models'
         self._hashes_file = self.cache / 'hashes.json'
         self._hashes: dict[str, list] = {}
+        self._index: dict[str, list[Path]] | None = None
 
     def file(self, name: str) -> Path:
         """Return the path of an output file, e.g. ``'shots.parquet'``."""
@@ -181,8 +182,11 @@ class CampaignFolder:
                 that sensor now, or ''.
 
         """
-        known = [self._read_meta(p) for p in
-                 sorted(self.parts.glob(f'{sha256}-{self.options_key}-*.parquet'))]
+        if self._index is None:  # one listing of the folder, not one per recording
+            self._index = {}
+            for part in sorted(self.parts.glob(f'*-{self.options_key}-*.parquet')):
+                self._index.setdefault(part.name.split('-', 1)[0], []).append(part)
+        known = [self._read_meta(p) for p in self._index.get(sha256, ())]
         known = [k for k in known if k is not None]
         failed = next((k for k in known if k.failed), None)
         if failed is not None or not known:
@@ -203,6 +207,8 @@ class CampaignFolder:
         temp = part.with_name(f'.{part.name}.partial')
         pq.write_table(table, temp, compression='zstd')
         os.replace(temp, part)
+        if self._index is not None and part not in self._index.setdefault(sha256, []):
+            self._index[sha256].append(part)
         return CachedBag(part, meta)
 
     @staticmethod
