@@ -60,8 +60,8 @@ class _Bag:
 
     @property
     def sensor(self) -> str:
-        """Return its sensor: from the map, else as its result names it."""
-        return self.mapped or (self.info.sensor if self.info else '')
+        """Return its sensor: from the map, else the one the recording names ('' if unread)."""
+        return self.mapped or (self.info.bag_sensor if self.info else '')
 
 
 class _ShotBar:

@@ -251,6 +251,8 @@ def test_sensor_map(campaign, tmp_path):
     assert sensors == {'run_0000.mcap': 'A', 'run_0001.mcap': 'A', 'run_0002.mcap': 'A',
                        'run_0003.mcap': 'B', 'run_0004.mcap': '', 'scope.csv': 'S3'}
     assert [s.sensor for s in summary.sensors] == ['A', 'B', 'S3']
+    unmapped = _run(campaign, tmp_path / 'out', report=False)  # the same model for all
+    assert unmapped.processed == 0 and [s.sensor for s in unmapped.sensors] == ['S1', 'S2', 'S3']
     mapping.write_text('A: ["*.mcap"]\nB: [run_0003.mcap]\n')
     with pytest.raises(CampaignError, match='matches the patterns of A and B'):
         _run(campaign, tmp_path / 'out2', sensor_map=SensorMap.read(mapping))
