@@ -7,7 +7,11 @@ Shots are detected on the acceleration and every second one is held out for vali
 
 1. :func:`identify` wall time for ``structure='oe'`` (with the delay search) and ``'auto'``
    (order and delay grid), without and with EMD denoising of the calibration windows, and
-   the EMD cost per shot window;
+   the EMD cost per shot window; 1b. for each structure (no EMD), the CPU time of
+   ``identify`` beside that of its estimator alone on the same calibration windows (the
+   final fit with the orders and delay ``identify`` chose; for ``'auto'`` the chosen
+   model's) and beside all the estimator calls ``identify`` makes (delay search, structure
+   candidates, final fit), with the ratios: the rest is the workflow's own cost;
 2. offline compensation throughput of :class:`CompensationFilter` on 10 M samples in one
    call and in blocks (the block outputs must equal the one-call output);
 3. the same fit (orders ``na = nb = 2`` and the delay ``identify`` found, on the measured
@@ -59,7 +63,7 @@ from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import Recording
 
 __all__ = ['FULL', 'QUICK', 'Plan', 'bench_compensation', 'bench_comparison', 'bench_emd',
-           'bench_identify', 'main', 'validation_fit']
+           'bench_identify', 'bench_ratio', 'main', 'validation_fit']
 
 #: How to install the packages of the comparison.
 INSTALL_HINT = ('pip install -r bench/requirements-compare.txt (in a separate venv: '
@@ -79,6 +83,8 @@ class Plan:
         blocks: Block widths of the block-by-block runs.
         repeats: Throughput runs per mode (the fastest counts).
         sysidentpy_rls: Also fit sysidentpy with its default estimator (recursive LS, slow).
+        ratio_structures: Structures whose ``identify`` time is set beside the time of
+            its estimator calls (part 1b, without EMD).
 
     """
 
@@ -88,6 +94,7 @@ class Plan:
     blocks: tuple[int, ...]
     repeats: int
     sysidentpy_rls: bool
+    ratio_structures: tuple[str, ...] = ('oe', 'gls', 'arx', 'armax', 'auto')
 
 
 #: The full benchmark (about 2 minutes on 2 cores).
@@ -95,7 +102,8 @@ FULL = Plan(shots=len(TABLE2), structures=('oe', 'auto'), compensation_samples=1
             blocks=(1_000, 10_000), repeats=3, sysidentpy_rls=True)
 #: ``--quick``: four shots, ``'oe'`` only, 1 M samples (about 20 s).
 QUICK = Plan(shots=4, structures=('oe',), compensation_samples=1_000_000,
-             blocks=(1_000, 10_000), repeats=1, sysidentpy_rls=False)
+             blocks=(1_000, 10_000), repeats=1, sysidentpy_rls=False,
+             ratio_structures=('oe', 'gls', 'arx', 'auto'))
 
 # Input and output segments: ((1, n) acceleration in m/s², (n,) pressure in Pa) per window.
 Segments = list[tuple[np.ndarray, np.ndarray]]
@@ -183,6 +191,99 @@ def bench_identify(source: ShotSource, *, structures: Sequence[str]) -> list[dic
                 'emd_windows': len(result.denoising), 'na': model.a.size - 1,
                 'nb': model.b.shape[1], 'nk': model.nk,
                 'validation_fit_percent': result.validation_fit_percent, 'model': model})
+    return rows
+
+
+#: Estimators whose outermost calls part 1b clocks, and the modules ``identify`` calls
+#: them through.
+_ESTIMATORS = {'oe': fit_oe, 'arx': fit_arx, 'gls': fit_armax_gls, 'armax': fit_armax_els}
+_CALLERS = ('sensor_comp.core.identify', 'sensor_comp.core.ident.selection')
+
+
+@contextlib.contextmanager
+def _estimator_clock():
+    """Clock the CPU time and count of the outermost estimator calls made while active."""
+    clock = {'seconds': 0.0, 'calls': 0, 'depth': 0}
+
+    def timed(estimator):
+        def call(*args, **kwargs):
+            began = time.process_time() if clock['depth'] == 0 else None
+            clock['depth'] += 1
+            try:
+                return estimator(*args, **kwargs)
+            finally:
+                clock['depth'] -= 1
+                if began is not None:
+                    clock['seconds'] += time.process_time() - began
+                    clock['calls'] += 1
+        return call
+
+    saved = []
+    for name in _CALLERS:
+        module = importlib.import_module(name)
+        for estimator in _ESTIMATORS.values():
+            if getattr(module, estimator.__name__, None) is estimator:
+                saved.append((module, estimator.__name__, estimator))
+                setattr(module, estimator.__name__, timed(estimator))
+    try:
+        yield clock
+    finally:
+        for module, name, estimator in saved:
+            setattr(module, name, estimator)
+
+
+def _final_fit(structure: str, calib: Segments, model: Model) -> Callable[[], object]:
+    """Return the estimator call that fits ``model``'s structure on ``calib`` alone."""
+    na, nb, nk = model.a.size - 1, model.b.shape[1], model.nk
+    if structure in ('oe', 'auto'):
+        return lambda: fit_oe(calib, nf=na, nb=nb, nk=nk)
+    keyword = {'arx': fit_arx, 'gls': fit_armax_gls, 'armax': fit_armax_els}[structure]
+    return lambda: keyword(calib, na=na, nb=nb, nk=nk)
+
+
+def bench_ratio(source: ShotSource, *, structures: Sequence[str], repeats: int) -> list[dict]:
+    """
+    Time ``identify`` (no EMD) against its estimator calls, CPU seconds (best of repeats).
+
+    Args:
+        source: The recording and its detected shots.
+        structures: ``identify`` structures.
+        repeats: Runs of each; the fastest counts.
+
+    Returns:
+        One row per structure: ``identify_s`` (CPU) and ``identify_wall_s``,
+        ``estimator_s`` (the final fit alone on the same calibration windows) and
+        ``ratio``, ``calls`` and ``calls_s`` (every estimator call ``identify`` made) and
+        ``calls_ratio``, the orders and the validation fit.
+
+    """
+    calib, _ = _window_data(source)
+    rows = []
+    for structure in structures:
+        best = None
+        for _ in range(repeats):
+            with _estimator_clock() as clock:
+                began, wall = time.process_time(), time.perf_counter()
+                result = identify([source], structure=structure, denoise=False)
+                seconds, wall = time.process_time() - began, time.perf_counter() - wall
+            if best is None or seconds < best[0]:
+                best = (seconds, wall, dict(clock), result)
+        seconds, wall, clock, result = best
+        final = _final_fit(structure, calib, result.model)
+        alone = []
+        for _ in range(max(repeats, 3)):
+            began = time.process_time()
+            final()
+            alone.append(time.process_time() - began)
+        estimator = min(alone)
+        model = result.model
+        rows.append({'structure': structure, 'identify_s': seconds, 'identify_wall_s': wall,
+                     'estimator_s': estimator, 'ratio': seconds / max(estimator, 1e-9),
+                     'calls': clock['calls'], 'calls_s': clock['seconds'],
+                     'calls_ratio': seconds / max(clock['seconds'], 1e-9),
+                     'na': model.a.size - 1, 'nb': model.b.shape[1], 'nk': model.nk,
+                     'validation_fit_percent': result.validation_fit_percent,
+                     'notes': list(result.notes)})
     return rows
 
 
@@ -478,6 +579,20 @@ def _print_identify(rows: list[dict], emd: dict, data: str) -> None:
           f'max {emd["seconds_max"]:.3f} s')
 
 
+def _print_ratio(rows: list[dict], data: str) -> None:
+    print(f'\n1b. identify against its estimator calls (CPU s, no EMD), {data}\n')
+    print(_table(['structure', 'identify s', '(wall s)', 'estimator alone s', 'ratio',
+                  'estimator calls', 'calls s', 'ratio to calls', 'na nb nk'],
+                 [[r['structure'], f'{r["identify_s"]:.3f}', f'{r["identify_wall_s"]:.3f}',
+                   f'{r["estimator_s"]:.3f}', f'{r["ratio"]:.2f}x', str(r['calls']),
+                   f'{r["calls_s"]:.3f}', f'{r["calls_ratio"]:.2f}x',
+                   f'{r["na"]} {r["nb"]} {r["nk"]}'] for r in rows]))
+    print('\nestimator alone: the final fit (orders and delay identify chose) on the same '
+          'calibration windows; estimator calls: every fit identify made (delay search, '
+          'structure candidates, final fit); the rest is the workflow (channels, checks, '
+          'validation)')
+
+
 def _print_compensation(rows: list[dict], model: Model) -> None:
     print(f'\n2. offline compensation, CompensationFilter.process, '
           f'{rows[0]["samples"]:,} samples (model {model.structure} na={model.a.size - 1} '
@@ -560,6 +675,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     emd = bench_emd(source)
     _print_identify(identified, emd, data)
     sys.stdout.flush()
+    ratios = bench_ratio(source, structures=plan.ratio_structures,
+                         repeats=max(plan.repeats, 2))
+    _print_ratio(ratios, data)
+    sys.stdout.flush()
 
     base = next(r for r in identified if r['structure'] == 'oe' and not r['emd'])
     compensation = bench_compensation(base['model'], recording,
@@ -583,7 +702,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                   'versions': _versions()},
                   'data': {'shots': len(source.shots), 'fs': recording.fs,
                            'samples': recording.n_samples, 'seed': config.seed},
-                  'identify': identified, 'emd': emd, 'compensation': compensation,
+                  'identify': identified, 'ratio': ratios, 'emd': emd,
+                  'compensation': compensation,
                   'comparison': comparison}
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump(_plain(report), f, indent=2)
