@@ -47,9 +47,9 @@ them has the same validation fit (``bench/bench_emd.py`` measures all of it); a 
 takes ~0.07 s instead of ~1 s.
 
 Parallel windows (:func:`denoise_windows`, :meth:`EmdDenoiser.map`): the windows are
-shared between this process and helper processes (:data:`PROCESSES` in all), each a fresh
-interpreter started by ``subprocess`` (no fork of a process that may run threads; no
-import of the caller's ``__main__``), fed pickled windows over pipes. Below
+shared between this process and helper processes (:data:`PROCESSES` in all), each a
+:class:`sensor_comp.worker.Worker` (a fresh interpreter: no fork, no import of the
+caller's ``__main__``). Below
 :data:`MIN_POOL_SAMPLES` samples the helpers' start-up (~0.5 s) is not worth it and the
 windows run here; so they do when the load average leaves no core free, inside a
 ``multiprocessing`` worker (the caller already runs in parallel), or with
@@ -71,10 +71,6 @@ from dataclasses import dataclass, field
 import math
 import multiprocessing
 import os
-import pickle
-import signal
-import subprocess
-import sys
 import threading
 import time
 
@@ -83,6 +79,7 @@ from PyEMD import EMD
 
 from .shots import mad_sigma
 from ..errors import SensorCompError
+from ..worker import Worker
 
 __all__ = ['DEFAULT_FACTOR', 'MAX_SAMPLES', 'MIN_POOL_SAMPLES', 'PROCESSES',
            'REFERENCE_SIFTING', 'SIFTING', 'DenoiseError', 'DenoiseResult', 'EmdDenoiser',
@@ -394,63 +391,23 @@ class _Pool:
 
 
 class _Helper:
-    """A helper interpreter denoising pickled windows read from a pipe (see _serve)."""
+    """A worker process denoising windows (:mod:`sensor_comp.worker`)."""
 
     def __init__(self):
-        jobs_read, self._jobs = os.pipe()
-        self._results, results_write = os.pipe()
-        # No pylab: PyEMD imports it for plots a helper never draws (0.5 s of start-up).
-        command = (f'import sys; sys.modules["pylab"] = None; sys.path[:] = {sys.path!r}; '
-                   f'from sensor_comp.core.denoise import _serve; '
-                   f'_serve({jobs_read}, {results_write})')
-        env = dict(os.environ, **{PROCESSES_ENV: '1'})
-        self.process = subprocess.Popen([sys.executable, '-c', command], env=env,
-                                        pass_fds=(jobs_read, results_write),
-                                        stdin=subprocess.DEVNULL)
-        os.close(jobs_read)
-        os.close(results_write)
-        self._send = os.fdopen(self._jobs, 'wb')
-        self._receive = os.fdopen(self._results, 'rb')
+        self._worker = Worker(name='EMD helper', env={PROCESSES_ENV: '1'})
 
     def call(self, job) -> DenoiseResult | None:
-        """Return the helper's result, or None when it died or failed."""
+        """Return the helper's result, or None when it died or failed (redone here)."""
+        window, options = job
         try:
-            pickle.dump(job, self._send, protocol=pickle.HIGHEST_PROTOCOL)
-            self._send.flush()
-            result = pickle.load(self._receive)
-        except (OSError, EOFError, pickle.UnpicklingError):
+            result = self._worker.call(emd_denoise, window, **options)
+        except Exception:  # WorkerDied, or the window's error: raised again here
             return None
         return result if isinstance(result, DenoiseResult) else None
 
     def close(self) -> None:
-        """End the helper: its job pipe closes, it exits (killed if it does not)."""
-        for stream in (self._send, self._receive):
-            try:
-                stream.close()
-            except OSError:
-                pass
-        try:
-            self.process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
-
-
-def _serve(jobs: int, results: int) -> None:
-    """Denoise the windows read from ``jobs`` until it closes (a helper's main loop)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop
-    with os.fdopen(jobs, 'rb') as read, os.fdopen(results, 'wb') as write:
-        while True:
-            try:
-                window, options = pickle.load(read)
-            except EOFError:
-                return
-            try:
-                result = emd_denoise(window, **options)
-            except Exception as exc:  # the parent redoes the window and raises it there
-                result = repr(exc)
-            pickle.dump(result, write, protocol=pickle.HIGHEST_PROTOCOL)
-            write.flush()
+        """End the helper (killed if it does not exit)."""
+        self._worker.close()
 
 
 class EmdDenoiser:

@@ -131,11 +131,12 @@ from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
                            MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
+from ..worker import Worker, WorkerDied
 from ._common import (check, check_output_parameter, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
                       DIAGNOSTICS_QOS, diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
                       merge_stream_infos, message_class, NodeError, publish_raw, run_main,
                       spin_until, subscribe_blocks, take_queued, warn_unknown_parameters)
-from ._fit_worker import diagnose_fit, fit_shots, FitWorker, start_worker, WorkerDied
+from ._fit_worker import diagnose_fit, fit_shots, start_worker
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 
@@ -389,7 +390,7 @@ class Identification(Node):
         self._last_error: str | None = None
         self._stop = threading.Event()
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='identification')
-        self._process: FitWorker | None = None  # the fit process, during a fit
+        self._process: Worker | None = None  # the fit process, during a fit
         self._process_lock = threading.Lock()
         self._block_subscriptions, self._takers = subscribe_blocks(
             self, (PRESSURE_RAW, ACCELERATION), self._on_block, self._take_queued)
