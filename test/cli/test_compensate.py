@@ -249,7 +249,8 @@ def test_a_damaged_block_is_named_by_bag_and_topic(damaged, model_files, tmp_pat
 
 
 def test_hum_is_removed_from_the_first_sample_of_a_short_bag(tmp_path):
-    """A 0.16 s bag: the hum the model names is fitted on the whole recording and removed.
+    """
+    A 0.16 s bag: the hum the model names is fitted on the whole recording and removed.
 
     The live tracker needs ~0.5 s to settle and left most of the hum in such a bag. The
     removed hum (raw - compensated - induced) must equal the simulated one within what a
