@@ -23,7 +23,7 @@ import pyarrow.parquet as pq
 from .store import CampaignFolder
 from .summary import BASES, CampaignSummary, SensorSummary
 from .. import __version__
-from ..core.report import _png
+from ..core.report import embedded_png
 from ..files import write_text_atomically
 
 __all__ = ['WORST_SHOTS', 'campaign_report', 'write_report']
@@ -209,10 +209,10 @@ def campaign_report(folder: CampaignFolder, summary: CampaignSummary) -> str:
                  'p &lt; 0.01 per test (see sensor_comp.campaign.drift).</p>'
                  + _sensor_rows(summary))
     parts.append('<h2>2. Sensitivity over the campaign</h2>' + ''.join(
-        _png(_sensitivity_figure(data, s)) for s in summary.sensors if s.usable_shots))
+        embedded_png(_sensitivity_figure(data, s)) for s in summary.sensors if s.usable_shots))
     residual = _residual_figure(data, summary)
     parts.append('<h2>3. Peak residual after compensation</h2>'
-                 + (_png(residual) if residual else '<p>No shot was compared with a '
+                 + (embedded_png(residual) if residual else '<p>No shot was compared with a '
                     'model.</p>'))
     parts.append(f'<h2>4. The {WORST_SHOTS} worst shots</h2>' + _worst(data, folder))
     parts.append('<h2>5. Recordings that failed</h2>' + _failed(data, folder))

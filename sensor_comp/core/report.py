@@ -28,7 +28,7 @@ from .shots import Shot, shot_table
 from .. import __version__
 from ..files import write_text_atomically
 
-__all__ = ['html_report', 'write_report']
+__all__ = ['embedded_png', 'html_report', 'write_report']
 
 _STYLE = """
 body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
@@ -41,7 +41,8 @@ td, th { border: 1px solid #ccc; padding: .3em .6em; text-align: left; }
 """
 
 
-def _png(fig: Figure) -> str:
+def embedded_png(fig: Figure) -> str:
+    """Return ``fig`` as an ``<img>`` with the PNG inline: a report is one self-contained file."""
     buffer = io.BytesIO()
     fig.savefig(buffer, format='png', dpi=90)
     return ('<img alt="figure" src="data:image/png;base64,'
@@ -116,17 +117,20 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
     parts.append('<h2>2. Model against measurement</h2>'
                  '<p>Each model simulated from the measured acceleration over every shot '
                  'window, from rest (MATLAB <code>compare</code>).</p>'
-                 + _pre(format_table(comparisons)) + _png(comparison_figure(comparisons)))
-    parts.append('<h2>3. Residual</h2>' + _png(comparison_residual_figure(comparisons[:1])))
+                 + _pre(format_table(comparisons))
+                 + embedded_png(comparison_figure(comparisons)))
+    parts.append('<h2>3. Residual</h2>'
+                 + embedded_png(comparison_residual_figure(comparisons[:1])))
     parts.append('<h2>4. Residual tests</h2>'
                  '<p>Whiteness: autocorrelation of the residual; independence: its '
                  'cross-correlation with the accelerations, with 99 % bands valid for '
                  'coloured shock inputs (Bartlett).</p>'
-                 + _png(whiteness_figure(analysis)) + _png(cross_correlation_figure(analysis)))
+                 + embedded_png(whiteness_figure(analysis))
+                 + embedded_png(cross_correlation_figure(analysis)))
     parts.append('<h2>5. Where the model fails</h2>'
                  + _pre('\n'.join(analysis.summary()))
-                 + _png(segments_figure(analysis)) + _png(spectrum_figure(analysis))
-                 + _png(amplitude_figure(analysis)) + _png(probes_figure(analysis)))
+                 + ''.join(embedded_png(figure(analysis)) for figure in (
+                     segments_figure, spectrum_figure, amplitude_figure, probes_figure)))
     if diagnosis is not None:
         parts.append('<h2>6. Diagnosis: which physical effect is missing</h2>'
                      + _ranking_table(diagnosis.get('ranking', [])))
@@ -134,8 +138,8 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
             parts.append(f'<p>{html.escape(str(line))}</p>')
     if after:
         parts.append('<h2>7. Before and after adding the effect</h2>'
-                     + _pre(format_table(after)) + _png(comparison_figure(after))
-                     + _png(comparison_residual_figure(after)))
+                     + _pre(format_table(after)) + embedded_png(comparison_figure(after))
+                     + embedded_png(comparison_residual_figure(after)))
     parts.append('</body></html>')
     return '\n'.join(parts)
 
