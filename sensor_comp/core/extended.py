@@ -61,6 +61,10 @@ MAX_ITERATIONS = 100
 #: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
 #: ask for the same ones).
 CHANNEL_CACHE = 4
+#: Longest searched time constant (high-pass, leaky peak), in units of the longest window.
+TAU_WINDOWS = 100.0
+#: A log-searched value within this factor of a bound lies at the edge of its range.
+EDGE = 1.01
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -335,11 +339,38 @@ def slowest_pole_s(spec: ModelSpec) -> float | None:
     high-pass read as 10 s). The sensor's poles are fast, so they are held faster than the
     shortest time constant those searches may take.
     """
-    timed = [value for modifier, value in spec.modifiers if modifier == 'highpass_ms']
-    timed += [base for base in spec.bases if base.startswith('peak_')]
-    keys = {match.group(1) for text in timed for match in _KEYS.finditer(text)}
+    keys = _timed_keys(spec)
     lows = [s.low for s in spec.searches if s.key in keys]
     return min(lows) * 1e-3 if lows else None
+
+
+def _timed_keys(spec: ModelSpec) -> set[str]:
+    """Return the search keys that are time constants of a high-pass or a leaky peak."""
+    timed = [value for modifier, value in spec.modifiers if modifier == 'highpass_ms']
+    timed += [base for base in spec.bases if base.startswith('peak_')]
+    return {match.group(1) for text in timed for match in _KEYS.finditer(text)}
+
+
+def _bound_time_constants(spec: ModelSpec, longest_s: float) -> ModelSpec:
+    """
+    Return ``spec`` with its searched time constants bounded by the data length.
+
+    A high-pass or leaky peak with a time constant of more than :data:`TAU_WINDOWS` times
+    the longest window changes the windows by less than the window over the time constant
+    (a droop or offset of a few per cent of the shot at most): the loss is flat out there
+    and a search would run to a bound that has nothing to do with the data (10 s for
+    windows of 25 ms). The upper bound (and a start above it) is lowered to that length,
+    never raised; the lower bound stays.
+    """
+    keys = _timed_keys(spec)
+    cap = TAU_WINDOWS * longest_s * 1e3
+    searches = []
+    for search in spec.searches:
+        if search.key in keys and search.high > cap > search.low:
+            start = None if search.start is None else min(search.start, cap)
+            search = replace(search, high=cap, start=start)
+        searches.append(search)
+    return replace(spec, searches=tuple(searches))
 
 
 def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
@@ -592,6 +623,7 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
     spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs))
     for effect in chosen:
         spec = effect.extend(spec)
+    spec = _bound_time_constants(spec, max(w.y.size for w in windows) / fs)
     try:
         fitter, values, fitted, firsts = _fit_spec(windows, spec, fs, starts)
     except IdentError as exc:
@@ -710,6 +742,12 @@ def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
                 parameters = {}
                 notes.append(f'{effect.id}: {exc}')
         entries.append(effect_entry(effect, parameters, **extra))
+    for search in spec.searches:  # an arbitrary bound reached: the data do not tell
+        value = values[search.key]
+        if search.log and not search.low * EDGE < value < search.high / EDGE:
+            notes.append(f'{search.key} = {value:.4g} lies at the edge of its search range '
+                         f'{search.low:.4g}-{search.high:.4g}: not resolved by these data '
+                         f'(no deviation stated)')
     return ExtendedFit(tuple(e.id for e in chosen), spec, tuple(inputs), estimate, values,
                        value_std, disturbance, tuple(entries), fs, tuple(notes),
                        denominators)
