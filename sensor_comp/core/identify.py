@@ -20,6 +20,15 @@ so that its result can be trusted:
   ``effects`` entries (physical parameters with standard deviations) describe the
   extension. Without effects the workflow is unchanged.
 
+What fails on valid data falls back, and says so (``Identification.notes``, the model's
+``fit['notes']``, a ``note:`` line of the CLI): a fit to the EMD-denoised pressure that
+fails is made on the measured pressure; orders that cannot be fitted are lowered (``na``,
+then ``nb``); an unstable equation-error estimate (ARX, ARMAX) is replaced by output error;
+effects on a base of more than two poles are also fitted on the sensor's own two (poles
+chosen without the effects imitate them) and the lower BIC kept, two poles when the larger
+base cannot be fitted. An effect that cannot be fitted at all is one :class:`EffectError`
+line saying why.
+
 What the data cannot support is refused or warned about, never silently fitted:
 
 - a shot with a defect (:attr:`~sensor_comp.core.shots.Shot.defects`: clipped, NaN/Inf in
