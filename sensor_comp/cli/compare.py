@@ -7,12 +7,12 @@ import json
 import os
 
 from .identify import add_threshold
-from .sources import add_force, load_model, load_shots
+from .sources import add_force, check_plots, load_model, load_shots
 from ..core.compare import compare, format_table
 from ..core.identify import ShotSource
 from ..core.model import Model, ModelError
 from ..errors import SensorCompError
-from ..files import check_output, save_figure
+from ..files import save_figure
 
 __all__ = ['register', 'run', 'usable_source']
 
@@ -81,12 +81,7 @@ def run(args: argparse.Namespace) -> int:
         if not path.endswith('.json'):
             raise SensorCompError(f'{path}: expected a model file (.json) before the '
                                   f'recording, which comes last')
-    plots = {flag: str(check_output(getattr(args, flag), inputs=args.paths, kind='png',
-                                    force=args.force))
-             for flag in ('plot', 'residual_plot') if getattr(args, flag)}
-    if len(set(plots.values())) < len(plots):
-        raise SensorCompError(f'--plot and --residual-plot both name {plots["plot"]}; give '
-                              f'them different names')
+    plots = check_plots(args, ('plot', 'residual_plot'), inputs=args.paths)
     models = [load_model(p) for p in model_paths]
     labels = _labels(model_paths)
     source, warnings = usable_source(recording_path, dict(zip(model_paths, models)),

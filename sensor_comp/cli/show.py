@@ -8,11 +8,10 @@ import json
 import numpy as np
 
 from .identify import describe_model
-from .sources import add_force, load_model
+from .sources import add_force, check_plots, load_model
 from ..core.ident.polynomials import max_root_radius
 from ..core.model import frequency_response, step_response
-from ..errors import SensorCompError
-from ..files import check_output, save_figure
+from ..files import save_figure
 
 __all__ = ['register', 'run']
 
@@ -39,12 +38,7 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Show the models; return the exit code."""
-    plots = {flag: str(check_output(getattr(args, flag), inputs=args.models, kind='png',
-                                    force=args.force))
-             for flag in ('response_plot', 'step_plot') if getattr(args, flag)}
-    if len(set(plots.values())) < len(plots):
-        raise SensorCompError(f'--response-plot and --step-plot both name '
-                              f'{plots["step_plot"]}; give them different names')
+    plots = check_plots(args, ('response_plot', 'step_plot'), inputs=args.models)
     models = {path: load_model(path) for path in args.models}
     responses = {path: frequency_response(m) for path, m in models.items()}
     steps = {path: step_response(m, duration_s=args.step_ms / 1e3) for path, m in models.items()}

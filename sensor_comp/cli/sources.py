@@ -8,9 +8,11 @@ from pathlib import Path
 from ..core.identify import ShotSource
 from ..core.model import load, Model
 from ..errors import SensorCompError
+from ..files import check_output
 from ..streams import Recording
 
-__all__ = ['add_force', 'load_model', 'load_recording', 'load_shots', 'progress_factory']
+__all__ = ['add_force', 'check_plots', 'load_model', 'load_recording', 'load_shots',
+           'progress_factory']
 
 
 def add_force(parser, *, help: str = 'replace an existing output file even if it is of '
@@ -98,3 +100,24 @@ def progress_factory(quiet: bool):
     """Return a ``progress(label, total)`` factory honouring ``--quiet``."""
     from .progress import Progress
     return lambda label, total: Progress(label, total, quiet=quiet)
+
+
+def check_plots(args, flags: tuple[str, ...], *, inputs) -> dict[str, str]:
+    """
+    Check the plot files named by the options ``flags`` of ``args`` before any work.
+
+    Returns:
+        ``{flag: path written}`` for the flags given (``.png`` added where no suffix).
+
+    Raises:
+        SensorCompError: If a plot path is refused, or two flags name the same file.
+
+    """
+    plots = {flag: str(check_output(getattr(args, flag), inputs=inputs, kind='png',
+                                    force=args.force))
+             for flag in flags if getattr(args, flag)}
+    if len(set(plots.values())) < len(plots):
+        names = ' and '.join('--' + flag.replace('_', '-') for flag in plots)
+        raise SensorCompError(f'{names} both name {next(iter(plots.values()))}; give them '
+                              f'different names')
+    return plots
