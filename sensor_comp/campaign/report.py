@@ -17,11 +17,10 @@ import os
 
 from matplotlib.figure import Figure
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from .store import CampaignFolder
 from .summary import BASES, CampaignSummary, SensorSummary
+from .table import read_columns
 from .. import __version__
 from ..core.report import embedded_png
 from ..files import write_text_atomically
@@ -174,19 +173,9 @@ def _failed(data: dict, folder: CampaignFolder) -> str:
 
 
 def _read(folder: CampaignFolder) -> dict[str, np.ndarray]:
-    table = pq.read_table(folder.file('shots.parquet'), columns=[
+    return read_columns(folder.file('shots.parquet'), [
         'bag', 'sensor', 'shot', 'stamp', 'offset_s', 'peak_g', 'mode', 'reason', 'model',
         'mpa_per_g', 'sensitivity_mpa_per_g', 'fit_percent', 'peak_residual_percent'])
-    data = {}
-    for name in table.column_names:
-        column = table.column(name)
-        if name in ('stamp', 'shot'):
-            data[name] = column.cast(pa.int64()).fill_null(0).to_numpy()
-        elif pa.types.is_floating(column.type):
-            data[name] = column.fill_null(math.nan).to_numpy()
-        else:
-            data[name] = np.array(column.fill_null('').to_pylist(), dtype=object)
-    return data
 
 
 def campaign_report(folder: CampaignFolder, summary: CampaignSummary) -> str:

@@ -16,12 +16,10 @@ import json
 import math
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from .drift import change_points, ChangePoint, Trend, trend
 from .store import CampaignFolder
-from .table import write_records
+from .table import read_columns, write_records
 from ..files import write_text_atomically
 
 __all__ = ['BASES', 'CampaignSummary', 'SensorSummary', 'summarise', 'write_summary']
@@ -186,17 +184,7 @@ def _sensor(name: str, data: dict, mask: np.ndarray, recordings: set,
 
 def _columns(folder: CampaignFolder) -> dict[str, np.ndarray]:
     """Read the columns the summary needs from the per-shot table."""
-    table = pq.read_table(folder.file('shots.parquet'), columns=list(_COLUMNS))
-    data = {}
-    for name in _COLUMNS:
-        column = table.column(name)
-        if name == 'stamp':
-            data[name] = column.cast(pa.int64()).fill_null(0).to_numpy()
-        elif pa.types.is_floating(column.type):
-            data[name] = column.fill_null(math.nan).to_numpy()
-        else:
-            data[name] = np.array(column.fill_null('').to_pylist(), dtype=object)
-    return data
+    return read_columns(folder.file('shots.parquet'), list(_COLUMNS))
 
 
 def summarise(folder: CampaignFolder, *, engine: str, workers: int,

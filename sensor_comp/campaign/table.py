@@ -12,15 +12,18 @@ when complete.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+import math
 import os
 from pathlib import Path
 import tempfile
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-__all__ = ['COLUMNS', 'SCHEMA', 'TABLE_VERSION', 'TableWriter', 'failure_row', 'rows_table',
+__all__ = ['COLUMNS', 'SCHEMA', 'TABLE_VERSION', 'TableWriter', 'failure_row', 'read_columns',
+           'rows_table',
            'write_records']
 
 #: Version of the row layout; part of every cache key, so a new layout recomputes.
@@ -135,3 +138,23 @@ def _temporary(path: Path) -> Path:
     fd, name = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=path.parent)
     os.close(fd)
     return Path(name)
+
+
+def read_columns(path: str | os.PathLike, names: Sequence[str]) -> dict[str, np.ndarray]:
+    """
+    Read columns of a per-shot Parquet table as numpy arrays.
+
+    Integers (``stamp``, ``shot``) fill nulls with 0, floats with NaN, text with ``''``
+    (object arrays), so masks and statistics need no null handling.
+    """
+    table = pq.read_table(path, columns=list(names))
+    data = {}
+    for name in names:
+        column = table.column(name)
+        if name in ('stamp', 'shot'):
+            data[name] = column.cast(pa.int64()).fill_null(0).to_numpy()
+        elif pa.types.is_floating(column.type):
+            data[name] = column.fill_null(math.nan).to_numpy()
+        else:
+            data[name] = np.array(column.fill_null('').to_pylist(), dtype=object)
+    return data
