@@ -49,7 +49,7 @@ class OutputError(SensorCompError):
 
 
 def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = (),
-                 kind: str, force: bool = False) -> Path:
+                 kind: str, force: bool = False, forceable: bool = True) -> Path:
     """
     Check that ``path`` can take an output of ``kind``, before any work; return the path to write.
 
@@ -65,6 +65,8 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
         kind: One of :data:`KINDS`. A ``'png'`` plot may also end in another image suffix
             (``.svg``, ``.pdf``, ...); without a suffix, ``.png`` is appended.
         force: Replace an existing file of another kind.
+        forceable: Whether the caller offers ``--force`` (a node does not): the refusal
+            then names it as a way out.
 
     Returns:
         The path to write and to name in messages: ``path``, with ``.png`` appended to a plot
@@ -104,7 +106,8 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
     elif found not in (kind, None, 'empty') and not force:
         what = KINDS.get(found, 'a file of another kind')
         raise OutputError(f'output {path} exists and is {what}, not {KINDS[kind]}; choose '
-                          f'another name, or pass --force to replace it')
+                          f'another name' + (', or pass --force to replace it' if forceable
+                                             else ''))
     return path
 
 

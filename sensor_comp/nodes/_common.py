@@ -216,12 +216,10 @@ def check_output_parameter(node: Node, name: str, path: str, *, kind: str,
     """
     check(node, name, path, bool(path), 'the name of a file to write')
     try:
-        return check_output(path, inputs=inputs, kind=kind)
+        return check_output(path, inputs=inputs, kind=kind, forceable=False)
     except OutputError as exc:
-        # A node has no --force: its only way out is another name.
-        reason = str(exc).replace(', or pass --force to replace it', '')
         raise NodeError(f'{node.get_fully_qualified_name()}: parameter {name!r}: '
-                        f'{reason}') from None
+                        f'{exc}') from None
 
 
 def warn_unknown_parameters(node: Node) -> None:
