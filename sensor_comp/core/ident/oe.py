@@ -33,9 +33,10 @@ from .polynomials import is_stable, reflect_unstable
 __all__ = ['ARX_MARGIN', 'OutputErrorProblem', 'SteiglitzMcBride', 'fit_oe',
            'steiglitz_mcbride']
 
-#: An ARX start whose simulation error exceeds the minimum found from Steiglitz-McBride by
-#: more than this fraction is not descended from (its bias puts it in the same basin).
-ARX_MARGIN = 0.1
+#: The ARX start is also descended from when its simulation error is below this factor
+#: plus one times the minimum found from Steiglitz-McBride (0: only when it is already
+#: better; a start just above it ends in the same minimum, as every rig tried did).
+ARX_MARGIN = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -339,8 +340,8 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     # numerator) when the data are far from linear or carry a slow tail, or to a poor basin
     # of a first-order model; the ARX poles, biased but in the right place, then start
     # better. The ARX start is descended from when Steiglitz-McBride ended worse than it
-    # began (it drifted) or within ARX_MARGIN of the minimum found; otherwise its bias puts
-    # it far above the same minimum and it is skipped.
+    # began (it drifted) or when it is already below the minimum found (ARX_MARGIN);
+    # otherwise its bias puts it above the same minimum and it is skipped.
     arx = np.concatenate([f0[1:], problem.linear(f0)])
     arx_cost = _cost(problem, arx)
     best = drifted = None
