@@ -525,7 +525,7 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
     if effects:
         with progress('effects', 1) as bar:
             extension, chosen = _fit_effects(sources, data, effects, base,
-                                             compare_lower=structure == 'auto')
+                                             compare=structure == 'auto')
             bar.advance()
         notes += chosen
         explanation += (f'; extended with {", ".join(effects)} (output error: '
@@ -535,15 +535,16 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
 
 
 def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _Base, *,
-                 compare_lower: bool):
+                 compare: bool):
     """
     Fit the base structure plus ``effects`` on the calibration windows.
 
-    With ``compare_lower`` (orders chosen by the selection, without the effects) a base of
-    more than two poles is compared with the sensor's own two: a pole that imitated a
-    missing effect (a slow real one for a high-pass or a zero shift) competes with the
-    effect and bends its parameters, so the structure with the lower BIC (the searched
-    parameters counted) is kept. Orders that cannot be fitted fall back to two poles.
+    With ``compare`` (orders chosen by the selection, without the effects) a base of other
+    than two poles is compared with the sensor's own two, and the structure with the lower
+    BIC (the searched parameters counted) kept: a pole that imitated a missing effect (a
+    slow real one for a high-pass or a zero shift) competes with the effect and bends its
+    parameters, and one pole chosen for data whose mode lay beyond the shocks' band may not
+    hold it once an effect needs it. Orders that cannot be fitted fall back to two poles.
 
     Returns:
         ``(extended fit, notes)``.
@@ -559,10 +560,10 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
         reason = effect.applicable(windows)
         if reason is not None:
             raise EffectError(f'cannot fit {effect.id}: {reason}')
-    tries = [base.na] + ([2] if base.na > 2 else [])
+    tries = [base.na] + ([2] if base.na != 2 else [])
     fits, failed = {}, {}
     for nf in tries:
-        if nf != base.na and not compare_lower and fits:
+        if nf != base.na and not compare and fits:
             break
         try:
             fits[nf] = fit_extended(windows, effects=effects, fs=sources.fs, nf=nf,
@@ -583,10 +584,11 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
             notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
                          f'nf={base.na}, which could not be fitted ({failed[base.na]})')
         else:
+            why = ('the extra poles imitated the effect' if base.na > 2 else
+                   'with the effect in, the mode needs both poles')
             notes.append(f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
                          f'instead of the nf={base.na} chosen without them: BIC lower by '
-                         f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} (the extra poles '
-                         f'imitated the effect)')
+                         f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} ({why})')
     return fits[chosen], notes
 
 
