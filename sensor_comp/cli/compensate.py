@@ -17,8 +17,9 @@ from ..errors import SensorCompError
 from ..files import check_output
 from ..io.bag_reader import (BagReader, block_topics, find_namespace, read_stream_infos,
                              require_described)
-from ..io.bag_writer import BagWriter, topic_name
+from ..io.bag_writer import BagWriter
 from ..io.messages import decode_block, encode_block, encode_stream_info, IMAGE, MessageError
+from ..io.rosbag2_layout import topic_name
 from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_INFO,
                        StreamError, StreamInfo)
 

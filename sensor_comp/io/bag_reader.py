@@ -11,6 +11,9 @@ what was lost. Damage is never read past silently: a chunk whose CRC, size or co
 does not check out raises :class:`BagError`, or is skipped and listed with ``skip_damaged``
 (what :mod:`sensor_comp.io.repair` does).
 
+The MCAP format itself (records, chunks, decompression) is parsed by
+:mod:`sensor_comp.io.mcap_records`; the rosbag2 layout is :mod:`sensor_comp.io.rosbag2_layout`.
+
 :func:`read_streams` turns the ``64FC1`` Image blocks of a bag back into
 :class:`~sensor_comp.streams.Stream` objects, using the rate, channels and units announced on
 the latched ``<namespace>/stream_info`` topic; :func:`read_recording` joins acceleration and
@@ -19,27 +22,29 @@ raw pressure into a :class:`~sensor_comp.streams.Recording`.
 
 from __future__ import annotations
 
-import errno
 import mmap
 import os
 from pathlib import Path
-import re
 import struct
 from typing import Iterable, Iterator, NamedTuple
 import warnings
 import zlib
 
-import lz4.frame
 import zstandard
 
 from ..blocks import assemble
 from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO, Stream, StreamError
 from ..streams import StreamInfo
-from .bag_writer import topic_name
+from .mcap_records import (ATTACHMENT, AttachmentRecord, CHANNEL, ChannelRecord, CHUNK, CHUNK_HEAD,
+                           COMPRESSIONS, DamagedChunk, DATA_END, decompress, FOOTER, FOOTER_BODY,
+                           FOOTER_SIZE, HEADER, iter_records, MCAP_MAGIC, MESSAGE, MESSAGE_HEAD,
+                           METADATA, MetadataRecord, parse_attachment, RawMessage, read_string,
+                           read_string_map, RECORD, RecordCut, SCHEMA, SchemaRecord, STATISTICS,
+                           STATISTICS_HEAD, U16, U32, U64)
 from .messages import (BLOCK_ENCODING, decode_block, decode_stream_info, DIAGNOSTIC_ARRAY,
                        IMAGE, MessageError)
-from .rosbag2_layout import (BagError, is_latched, MESSAGE_ENCODING, PROFILE,
-                             SCHEMA_ENCODINGS, TruncatedBagWarning)
+from .rosbag2_layout import (BagError, is_latched, mcap_file, MESSAGE_ENCODING, open_hint,
+                             PROFILE, SCHEMA_ENCODINGS, topic_name, TruncatedBagWarning)
 
 __all__ = [
     'AttachmentRecord',
@@ -62,22 +67,6 @@ __all__ = [
     'require_described',
 ]
 
-#: The first bytes of every MCAP file.
-MCAP_MAGIC = b'\x89MCAP0\r\n'
-_HEADER, _FOOTER, _SCHEMA, _CHANNEL, _MESSAGE, _CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
-_ATTACHMENT, _STATISTICS, _METADATA, _DATA_END = 0x09, 0x0B, 0x0C, 0x0F
-_RECORD = struct.Struct('<BQ')  # opcode, length
-_FOOTER_SIZE = _RECORD.size + 20
-_FOOTER_BODY = struct.Struct('<QQI')  # summary start, summary offsets start, summary CRC
-_MESSAGE_HEAD = struct.Struct('<HIQQ')  # channel, sequence, log time, publish time
-_CHUNK_HEAD = struct.Struct('<QQQI')  # start, end, uncompressed size, uncompressed crc
-_STATISTICS_HEAD = struct.Struct('<QHIIIIQQI')
-_U16, _U32, _U64 = struct.Struct('<H'), struct.Struct('<I'), struct.Struct('<Q')
-_TIMES = struct.Struct('<QQ')
-# rosbag2's bag directory: metadata.yaml names the storage plugin and the files.
-_STORAGE = re.compile(r'^\s*storage_identifier:\s*["\']?([\w-]+)', re.MULTILINE)
-_FILES = re.compile(r'^(\s*)relative_file_paths:\s*\n((?:\1\s*-\s*.+\n?)*)', re.MULTILINE)
-
 
 class TopicInfo(NamedTuple):
     """A topic of a bag: message type, latched (transient-local) flag, message count."""
@@ -87,182 +76,8 @@ class TopicInfo(NamedTuple):
     message_count: int
 
 
-class RawMessage(NamedTuple):
-    """One serialized message as stored in a bag (times in integer nanoseconds)."""
-
-    topic: str
-    msgtype: str
-    log_time_ns: int
-    publish_time_ns: int
-    data: bytes
-    sequence: int = 0
-
-
-class SchemaRecord(NamedTuple):
-    """An MCAP schema: message type name, encoding (``ros2msg``) and definition text."""
-
-    name: str
-    encoding: str
-    data: bytes
-
-
-class ChannelRecord(NamedTuple):
-    """An MCAP channel: topic, its type, latched flag, schema id and channel metadata."""
-
-    topic: str
-    msgtype: str
-    latched: bool
-    schema_id: int
-    message_encoding: str
-    metadata: dict
-
-
-class MetadataRecord(NamedTuple):
-    """An MCAP metadata record (e.g. rosbag2's ``rosbag2`` record)."""
-
-    name: str
-    metadata: dict
-
-
-class AttachmentRecord(NamedTuple):
-    """An MCAP attachment (a file stored in the bag)."""
-
-    log_time_ns: int
-    create_time_ns: int
-    name: str
-    media_type: str
-    data: bytes
-
-
-class DamagedChunk(NamedTuple):
-    """
-    A part of the data section that could not be read.
-
-    ``offset`` is its byte offset in the file; ``start_ns``/``end_ns`` the log times of the
-    messages it holds (``None`` when its header is unreadable too).
-    """
-
-    offset: int
-    start_ns: int | None
-    end_ns: int | None
-    reason: str
-
-
 class TruncatedBagError(BagError):
     """A bag was cut short in its data section: messages after the cut are lost."""
-
-
-class _Cut(Exception):
-    """Internal: the data section ends before the record that starts at ``offset``."""
-
-    def __init__(self, offset: int):
-        super().__init__(offset)
-        self.offset = offset
-
-
-def _open_hint(error: OSError) -> str:
-    if error.errno == errno.ENOENT:
-        return 'check the path'
-    if error.errno == errno.EACCES:
-        return 'check its permissions (ls -l) or read it as its owner'
-    return 'check that it is a readable file'
-
-
-def _listing(paths) -> str:
-    return ', '.join(p.name for p in paths)
-
-
-def _rosbag2_files(folder: Path, metadata: Path) -> list[Path]:
-    """Return the files a rosbag2 ``metadata.yaml`` lists, checking storage and presence."""
-    try:
-        text = metadata.read_text(errors='replace')
-    except OSError as exc:
-        raise BagError(f'cannot read {metadata}: {exc.strerror}; {_open_hint(exc)}') from None
-    storage = _STORAGE.search(text)
-    files = _FILES.search(text)
-    names = ([line.strip()[1:].strip().strip('"\'') for line in files.group(2).splitlines()
-              if line.strip()] if files else [])
-    if storage and storage.group(1) != 'mcap':
-        raise BagError(f'{folder} is a rosbag2 bag recorded with the '
-                       f'{storage.group(1)!r} storage ({", ".join(names) or "no files"}); '
-                       f'sensor_comp reads MCAP: convert it with `ros2 bag convert` '
-                       f'(output storage_id: mcap) or record with `--storage mcap`')
-    if not names:
-        return sorted(folder.glob('*.mcap'))
-    missing = [n for n in names if not (folder / n).is_file()]
-    if missing:
-        present = sorted(folder.glob('*.mcap'))
-        raise BagError(f'{folder}: metadata.yaml lists {", ".join(missing)}, which is '
-                       f'missing (the folder holds {_listing(present) or "no .mcap file"}); '
-                       f'pass the .mcap file itself')
-    return [folder / n for n in names]
-
-
-def _mcap_file(path: Path) -> Path:
-    """Return ``path``, or the single ``.mcap`` file of a rosbag2 bag directory."""
-    if path.name == 'metadata.yaml' and path.is_file():
-        path = path.parent
-    if not path.is_dir():
-        return path
-    metadata = path / 'metadata.yaml'
-    files = (_rosbag2_files(path, metadata) if metadata.is_file()
-             else sorted(path.glob('*.mcap')))
-    if len(files) == 1:
-        return files[0]
-    if files:
-        raise BagError(f'{path} is a bag split into {len(files)} files ({_listing(files)}); '
-                       f'sensor_comp reads one file at a time: pass one of them')
-    others = sorted(path.glob('*.db3'))
-    if others:
-        raise BagError(f'{path} holds a rosbag2 SQLite bag ({_listing(others)}), no .mcap '
-                       f'file; convert it with `ros2 bag convert` (output storage_id: mcap)')
-    raise BagError(f'{path} is a directory with no .mcap file; pass an MCAP bag (a .mcap '
-                   f'file, or a rosbag2 directory holding one)')
-
-
-def _string(buf, pos: int) -> tuple[str, int]:
-    (size,) = _U32.unpack_from(buf, pos)
-    end = pos + 4 + size
-    if end > len(buf):
-        raise struct.error('string runs past the end of its record')
-    try:
-        return str(buf[pos + 4:end], 'utf-8'), end
-    except UnicodeDecodeError:
-        raise struct.error(f'string at byte {pos} of its record is not UTF-8') from None
-
-
-def _string_map(buf, pos: int) -> tuple[dict, int]:
-    (size,) = _U32.unpack_from(buf, pos)
-    pos += 4
-    end = pos + size
-    if end > len(buf):
-        raise struct.error('map runs past the end of its record')
-    items = {}
-    while pos < end:
-        key, pos = _string(buf, pos)
-        items[key], pos = _string(buf, pos)
-    return items, pos
-
-
-def _records(buf, start: int, end: int) -> Iterator[tuple[int, memoryview, int]]:
-    """
-    Yield ``(opcode, body, offset)`` of the records in ``buf[start:end]``.
-
-    Raises:
-        _Cut: At the first record that does not fit in ``end`` or has the invalid opcode 0
-            (zero-filled tail after a crash).
-
-    """
-    pos = start
-    while pos < end:
-        if pos + _RECORD.size > end:
-            raise _Cut(pos)
-        opcode, length = _RECORD.unpack_from(buf, pos)
-        body_end = pos + _RECORD.size + length
-        if opcode == 0 or body_end > end:
-            raise _Cut(pos)
-        yield opcode, buf[pos + _RECORD.size:body_end], pos
-        pos = body_end
 
 
 #: Bytes of the file read before a pass over the data section unmaps them (see
@@ -315,7 +130,7 @@ class BagReader:
     """
 
     def __init__(self, path, *, skip_damaged: bool = False):
-        self.path = _mcap_file(Path(path))
+        self.path = mcap_file(Path(path))
         self.skip_damaged = skip_damaged
         try:
             with open(self.path, 'rb') as file:
@@ -326,7 +141,7 @@ class BagReader:
                 self._map = mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ)
         except OSError as exc:
             raise BagError(f'cannot open bag {self.path}: {exc.strerror}; '
-                           f'{_open_hint(exc)}') from None
+                           f'{open_hint(exc)}') from None
         self._buf = memoryview(self._map)
         self.schemas: dict[int, SchemaRecord] = {}
         self.channels: dict[int, ChannelRecord] = {}
@@ -407,34 +222,34 @@ class BagReader:
             raise self._fail(f'not an MCAP file: it starts with {bytes(self._buf[:16])!r} '
                              f'instead of the MCAP magic {MCAP_MAGIC!r}{hint}')
         try:
-            opcode, body, _ = next(_records(self._buf, len(MCAP_MAGIC), len(self._buf)))
-            if opcode != _HEADER:
+            opcode, body, _ = next(iter_records(self._buf, len(MCAP_MAGIC), len(self._buf)))
+            if opcode != HEADER:
                 raise self._fail(f'first record has opcode 0x{opcode:02x}, not an MCAP '
                                  f'header: the file is damaged')
-            self.profile, pos = _string(body, 0)
-            self.library, _ = _string(body, pos)
-        except (_Cut, StopIteration, struct.error):
+            self.profile, pos = read_string(body, 0)
+            self.library, _ = read_string(body, pos)
+        except (RecordCut, StopIteration, struct.error):
             raise self._fail(f'ends after {len(self._buf)} bytes, before its header record is '
                              f'complete: nothing was recorded') from None
         if self.profile != PROFILE:
             raise self._fail(f'MCAP profile is {self.profile!r}, not {PROFILE!r}: not a ROS 2 '
                              f'bag (written by {self.library!r})')
-        return len(MCAP_MAGIC) + _RECORD.size + len(body)
+        return len(MCAP_MAGIC) + RECORD.size + len(body)
 
     def _add_schema(self, body) -> None:
-        (sid,) = _U16.unpack_from(body, 0)
-        name, pos = _string(body, 2)
-        encoding, pos = _string(body, pos)
-        (size,) = _U32.unpack_from(body, pos)
+        (sid,) = U16.unpack_from(body, 0)
+        name, pos = read_string(body, 2)
+        encoding, pos = read_string(body, pos)
+        (size,) = U32.unpack_from(body, pos)
         if pos + 4 + size > len(body):
             raise struct.error('schema data runs past the end of its record')
         self.schemas[sid] = SchemaRecord(name, encoding, bytes(body[pos + 4:pos + 4 + size]))
 
     def _add_channel(self, body) -> None:
         cid, sid = struct.unpack_from('<HH', body, 0)
-        topic, pos = _string(body, 4)
-        encoding, pos = _string(body, pos)
-        metadata, _ = _string_map(body, pos)
+        topic, pos = read_string(body, 4)
+        encoding, pos = read_string(body, pos)
+        metadata, _ = read_string_map(body, pos)
         if encoding != MESSAGE_ENCODING:
             raise self._fail(f'topic {topic} has message encoding {encoding!r}; ROS 2 bags '
                              f'carry {MESSAGE_ENCODING!r}')
@@ -453,36 +268,36 @@ class BagReader:
     def _read_summary(self) -> dict[int, int] | None:
         """Read schemas, channels and counts from the summary; ``None`` if unusable."""
         buf = self._buf
-        footer = len(buf) - len(MCAP_MAGIC) - _FOOTER_SIZE
+        footer = len(buf) - len(MCAP_MAGIC) - FOOTER_SIZE
         if footer < self._data_start or bytes(buf[-len(MCAP_MAGIC):]) != MCAP_MAGIC:
             return None
-        opcode, _ = _RECORD.unpack_from(buf, footer)
-        summary_start, offsets_start, crc = _FOOTER_BODY.unpack_from(buf, footer + _RECORD.size)
-        if opcode != _FOOTER or not self._data_start <= summary_start <= footer:
+        opcode, _ = RECORD.unpack_from(buf, footer)
+        summary_start, offsets_start, crc = FOOTER_BODY.unpack_from(buf, footer + RECORD.size)
+        if opcode != FOOTER or not self._data_start <= summary_start <= footer:
             return None
-        if crc and zlib.crc32(buf[summary_start:footer + _RECORD.size + 16]) != crc:
+        if crc and zlib.crc32(buf[summary_start:footer + RECORD.size + 16]) != crc:
             self.warning = (f'{self.path}: its summary is damaged (CRC mismatch); the data '
                             f'section was read instead')
             return None
         stats = None
         try:
-            for opcode, body, _ in _records(buf, summary_start, offsets_start or footer):
-                if opcode == _SCHEMA:
+            for opcode, body, _ in iter_records(buf, summary_start, offsets_start or footer):
+                if opcode == SCHEMA:
                     self._add_schema(body)
-                elif opcode == _CHANNEL:
+                elif opcode == CHANNEL:
                     self._add_channel(body)
-                elif opcode == _STATISTICS:
+                elif opcode == STATISTICS:
                     stats = body
             # Without statistics, or with channels missing from the summary, the scan counts
             # (keeping the channels found here: they may have no message in the data section).
             if stats is None:
                 return None
-            fields = _STATISTICS_HEAD.unpack_from(stats, 0)
+            fields = STATISTICS_HEAD.unpack_from(stats, 0)
             if fields[2] != len(self.channels):
                 return None
-            pairs = struct.iter_unpack('<HQ', stats[_STATISTICS_HEAD.size:][:fields[-1]])
+            pairs = struct.iter_unpack('<HQ', stats[STATISTICS_HEAD.size:][:fields[-1]])
             counts = dict(pairs)
-        except (_Cut, struct.error):  # a damaged summary: trust only the data section
+        except (RecordCut, struct.error):  # a damaged summary: trust only the data section
             self.schemas.clear()
             self.channels.clear()
             return None
@@ -501,25 +316,25 @@ class BagReader:
         scanning = counts is not None
         try:
             for opcode, body, offset, cut in self._data_records(scanning):
-                if opcode == _CHUNK:
+                if opcode == CHUNK:
                     inner = self._chunk_records(body, offset, cut)
-                elif opcode in (_SCHEMA, _CHANNEL, _MESSAGE):
+                elif opcode in (SCHEMA, CHANNEL, MESSAGE):
                     inner = ((opcode, body),)
-                elif opcode == _DATA_END:
+                elif opcode == DATA_END:
                     self._data_end = True
                     return
-                elif extras and opcode == _METADATA:
-                    name, pos = _string(body, 0)
-                    yield MetadataRecord(name, _string_map(body, pos)[0])
+                elif extras and opcode == METADATA:
+                    name, pos = read_string(body, 0)
+                    yield MetadataRecord(name, read_string_map(body, pos)[0])
                     continue
-                elif extras and opcode == _ATTACHMENT:
-                    yield self._attachment(body)
+                elif extras and opcode == ATTACHMENT:
+                    yield parse_attachment(body)
                     continue
                 else:
                     continue
                 for op, rec in inner:
-                    if op == _MESSAGE:
-                        cid, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(rec)
+                    if op == MESSAGE:
+                        cid, sequence, log_time, publish_time = MESSAGE_HEAD.unpack_from(rec)
                         channel = self.channels.get(cid)
                         if channel is None:
                             raise self._fail(f'message at log time {log_time} ns refers to '
@@ -528,25 +343,14 @@ class BagReader:
                             counts[cid] = counts.get(cid, 0) + 1
                         if wanted is None or cid in wanted:
                             yield RawMessage(channel.topic, channel.msgtype, log_time,
-                                             publish_time, bytes(rec[_MESSAGE_HEAD.size:]),
+                                             publish_time, bytes(rec[MESSAGE_HEAD.size:]),
                                              sequence)
-                    elif scanning and op == _SCHEMA:
+                    elif scanning and op == SCHEMA:
                         self._add_schema(rec)
-                    elif scanning and op == _CHANNEL:
+                    elif scanning and op == CHANNEL:
                         self._add_channel(rec)
         except struct.error as exc:
             raise self._fail(f'damaged record in the data section: {exc}') from None
-
-    @staticmethod
-    def _attachment(body) -> AttachmentRecord:
-        log_time, create_time = _TIMES.unpack_from(body, 0)
-        name, pos = _string(body, _TIMES.size)
-        media_type, pos = _string(body, pos)
-        (size,) = _U64.unpack_from(body, pos)
-        if pos + 8 + size > len(body):
-            raise struct.error('attachment data run past the end of its record')
-        return AttachmentRecord(log_time, create_time, name, media_type,
-                                bytes(body[pos + 8:pos + 8 + size]))
 
     def _data_records(self, scanning: bool) -> Iterator[tuple[int, memoryview, int, bool]]:
         """
@@ -560,10 +364,10 @@ class BagReader:
         buf = self._buf
         released = 0
         try:
-            for opcode, body, offset in _records(buf, self._data_start, self._data_stop):
+            for opcode, body, offset in iter_records(buf, self._data_start, self._data_stop):
                 released = self._release(released, offset)
                 yield opcode, body, offset, False
-        except _Cut as exc:
+        except RecordCut as exc:
             if not scanning and self._summary:
                 lost = self._data_stop - exc.offset
                 self._damage(exc.offset, None, f'is damaged (its length runs past the data '
@@ -571,8 +375,8 @@ class BagReader:
                                                f'cannot be read', kind='record')
                 return
             self._cut = exc.offset
-            if exc.offset + _RECORD.size <= len(buf) and buf[exc.offset] == _CHUNK:
-                yield _CHUNK, buf[exc.offset + _RECORD.size:], exc.offset, True
+            if exc.offset + RECORD.size <= len(buf) and buf[exc.offset] == CHUNK:
+                yield CHUNK, buf[exc.offset + RECORD.size:], exc.offset, True
 
     def _release(self, start: int, stop: int) -> int:
         """
@@ -607,9 +411,9 @@ class BagReader:
     def _chunk_records(self, body, offset: int, cut: bool) -> Iterator[tuple[int, memoryview]]:
         """Yield the records of a chunk; of a cut chunk, those that decompress completely."""
         try:
-            start, end, size, crc = _CHUNK_HEAD.unpack_from(body, 0)
-            compression, pos = _string(body, _CHUNK_HEAD.size)
-            (length,) = _U64.unpack_from(body, pos)
+            start, end, size, crc = CHUNK_HEAD.unpack_from(body, 0)
+            compression, pos = read_string(body, CHUNK_HEAD.size)
+            (length,) = U64.unpack_from(body, pos)
         except struct.error:
             if not cut:
                 self._damage(offset, None, 'has an unreadable header')
@@ -635,33 +439,20 @@ class BagReader:
             return
         records = memoryview(records)  # slicing without copies
         try:
-            for opcode, rec, _ in _records(records, 0, len(records)):
-                if cut and opcode == _MESSAGE:
+            for opcode, rec, _ in iter_records(records, 0, len(records)):
+                if cut and opcode == MESSAGE:
                     self._partial_messages += 1
                 yield opcode, rec
-        except _Cut:
+        except RecordCut:
             if not cut:
                 self._damage(offset, times, 'holds an incomplete record')
 
     def _decompress(self, compression: str, data, size: int, cut: bool, offset: int):
         """Return a chunk's records; of a cut chunk, as much as decompresses."""
-        if compression == '':
-            return data
-        if compression == 'zstd':
-            if cut:
-                return zstandard.ZstdDecompressor().decompressobj().decompress(data)
-            declared = zstandard.frame_content_size(data)
-            if declared < 0:  # unknown: decompress as a stream, never trusting ``size``
-                return zstandard.ZstdDecompressor().decompressobj().decompress(data)
-            if declared != size:
-                raise zstandard.ZstdError(f'its frame holds {declared} bytes, its header '
-                                          f'says {size}')
-            return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-        if compression == 'lz4':
-            return (lz4.frame.LZ4FrameDecompressor().decompress(data) if cut
-                    else lz4.frame.decompress(data))
-        raise self._fail(f'chunk at byte {offset} uses compression {compression!r}; '
-                         f'supported: zstd, lz4, none')
+        if compression not in COMPRESSIONS:
+            raise self._fail(f'chunk at byte {offset} uses compression {compression!r}; '
+                             f'supported: zstd, lz4, none')
+        return decompress(compression, data, size, cut=cut)
 
     def _scan(self) -> dict[int, int]:
         """Register schemas and channels and count messages by reading the data section."""

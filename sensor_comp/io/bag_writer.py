@@ -26,7 +26,7 @@ from ..streams import Recording, STREAM_INFO, Stream
 from .messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info, IMAGE
 from .msgdefs import message_definition, type_hash
 from .rosbag2_layout import (BagError, MESSAGE_ENCODING, offered_qos_profiles, PROFILE,
-                             SCHEMA_ENCODINGS)
+                             SCHEMA_ENCODINGS, topic_name)
 
 __all__ = ['BagWriter', 'topic_name', 'write_recording', 'write_streams']
 
@@ -35,17 +35,6 @@ _COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
 _LIBRARY = f'sensor_comp/{__version__}; {LIBRARY_IDENTIFIER}'
 _UINT32 = 2 ** 32
 _UINT64 = 2 ** 64
-
-
-def topic_name(namespace: str, relative: str) -> str:
-    """
-    Return the absolute topic of ``relative`` (e.g. ``'pressure/raw'``) in ``namespace``.
-
-    ``'/rig'``, ``'rig'`` and ``'/rig/'`` all give ``'/rig/pressure/raw'``; ``''`` and ``'/'``
-    give ``'/pressure/raw'``.
-    """
-    namespace = namespace.strip('/')
-    return f'/{namespace}/{relative}' if namespace else f'/{relative}'
 
 
 class BagWriter:

@@ -1,5 +1,5 @@
 """
-What makes an MCAP file a rosbag2 bag: profile, encodings and offered QoS metadata.
+What makes an MCAP file a rosbag2 bag: profile, encodings, QoS metadata, topics, directory.
 
 rosbag2's MCAP storage writes header profile ``ros2``, schemas named ``pkg/msg/Type`` with
 encoding ``ros2msg`` (full ``.msg`` text, see :mod:`sensor_comp.io.msgdefs`), channels with
@@ -7,10 +7,15 @@ message encoding ``cdr`` and the channel metadata ``offered_qos_profiles``: a YA
 QoS profiles the recorded publishers offered. ``ros2 bag play`` re-offers the reliability and
 durability found there, so a latched (transient-local) topic such as ``stream_info`` must say
 ``durability: transient_local`` or late subscribers never receive it.
+
+Reader and writer share the rest of the layout from here: :func:`topic_name` (a stream's
+topic in a namespace) and :func:`mcap_file` (the ``.mcap`` file of a rosbag2 bag directory).
 """
 
 from __future__ import annotations
 
+import errno
+from pathlib import Path
 import re
 
 from ..errors import SensorCompError
@@ -22,7 +27,10 @@ __all__ = [
     'BagError',
     'TruncatedBagWarning',
     'is_latched',
+    'mcap_file',
     'offered_qos_profiles',
+    'open_hint',
+    'topic_name',
 ]
 
 PROFILE = 'ros2'
@@ -48,6 +56,9 @@ _QOS_TEMPLATE = (
 # Version-8 bags store the enums as numbers (rmw_qos_durability_policy_t: 1 = transient local).
 _DURABILITY = re.compile(r'(?<![\w])durability\s*:\s*["\']?(\w+)')
 _TRANSIENT_LOCAL = {'transient_local', '1'}
+# rosbag2's bag directory: metadata.yaml names the storage plugin and the files.
+_STORAGE = re.compile(r'^\s*storage_identifier:\s*["\']?([\w-]+)', re.MULTILINE)
+_FILES = re.compile(r'^(\s*)relative_file_paths:\s*\n((?:\1\s*-\s*.+\n?)*)', re.MULTILINE)
 
 
 class BagError(SensorCompError):
@@ -86,3 +97,75 @@ def is_latched(offered_qos: str) -> bool:
     """
     durabilities = _DURABILITY.findall(offered_qos or '')
     return bool(durabilities) and all(d.lower() in _TRANSIENT_LOCAL for d in durabilities)
+
+
+def topic_name(namespace: str, relative: str) -> str:
+    """
+    Return the absolute topic of ``relative`` (e.g. ``'pressure/raw'``) in ``namespace``.
+
+    ``'/rig'``, ``'rig'`` and ``'/rig/'`` all give ``'/rig/pressure/raw'``; ``''`` and ``'/'``
+    give ``'/pressure/raw'``.
+    """
+    namespace = namespace.strip('/')
+    return f'/{namespace}/{relative}' if namespace else f'/{relative}'
+
+
+def open_hint(error: OSError) -> str:
+    """Return what to check when a bag file cannot be opened."""
+    if error.errno == errno.ENOENT:
+        return 'check the path'
+    if error.errno == errno.EACCES:
+        return 'check its permissions (ls -l) or read it as its owner'
+    return 'check that it is a readable file'
+
+
+def _listing(paths) -> str:
+    return ', '.join(p.name for p in paths)
+
+
+def _rosbag2_files(folder: Path, metadata: Path) -> list[Path]:
+    """Return the files a rosbag2 ``metadata.yaml`` lists, checking storage and presence."""
+    try:
+        text = metadata.read_text(errors='replace')
+    except OSError as exc:
+        raise BagError(f'cannot read {metadata}: {exc.strerror}; {open_hint(exc)}') from None
+    storage = _STORAGE.search(text)
+    files = _FILES.search(text)
+    names = ([line.strip()[1:].strip().strip('"\'') for line in files.group(2).splitlines()
+              if line.strip()] if files else [])
+    if storage and storage.group(1) != 'mcap':
+        raise BagError(f'{folder} is a rosbag2 bag recorded with the '
+                       f'{storage.group(1)!r} storage ({", ".join(names) or "no files"}); '
+                       f'sensor_comp reads MCAP: convert it with `ros2 bag convert` '
+                       f'(output storage_id: mcap) or record with `--storage mcap`')
+    if not names:
+        return sorted(folder.glob('*.mcap'))
+    missing = [n for n in names if not (folder / n).is_file()]
+    if missing:
+        present = sorted(folder.glob('*.mcap'))
+        raise BagError(f'{folder}: metadata.yaml lists {", ".join(missing)}, which is '
+                       f'missing (the folder holds {_listing(present) or "no .mcap file"}); '
+                       f'pass the .mcap file itself')
+    return [folder / n for n in names]
+
+
+def mcap_file(path: Path) -> Path:
+    """Return ``path``, or the single ``.mcap`` file of a rosbag2 bag directory."""
+    if path.name == 'metadata.yaml' and path.is_file():
+        path = path.parent
+    if not path.is_dir():
+        return path
+    metadata = path / 'metadata.yaml'
+    files = (_rosbag2_files(path, metadata) if metadata.is_file()
+             else sorted(path.glob('*.mcap')))
+    if len(files) == 1:
+        return files[0]
+    if files:
+        raise BagError(f'{path} is a bag split into {len(files)} files ({_listing(files)}); '
+                       f'sensor_comp reads one file at a time: pass one of them')
+    others = sorted(path.glob('*.db3'))
+    if others:
+        raise BagError(f'{path} holds a rosbag2 SQLite bag ({_listing(others)}), no .mcap '
+                       f'file; convert it with `ros2 bag convert` (output storage_id: mcap)')
+    raise BagError(f'{path} is a directory with no .mcap file; pass an MCAP bag (a .mcap '
+                   f'file, or a rosbag2 directory holding one)')
