@@ -344,10 +344,8 @@ class _Data:
         fit = measured
         if denoiser is not None:
             with progress('EMD denoising', len(measured)) as bar:
-                fit = []
-                for u, y in measured:
-                    fit.append((u, denoiser(y)))
-                    bar.advance()
+                denoised = denoiser.map([y for _, y in measured], done=bar.advance)
+            fit = [(u, y) for (u, _), y in zip(measured, denoised)]
         return cls(measured, valid, fit, denoiser)
 
 
