@@ -16,7 +16,7 @@ Topics, relative to the node's namespace (default ``/rig``), as in the stream co
   channels, unit and sensor metadata of both streams, published before the first block.
 
 QoS: blocks are reliable, volatile, keep-all (a slow reader slows the node down, nothing is
-dropped; see :mod:`sensor_comp.nodes._common`); ``stream_info`` is reliable,
+dropped; see :mod:`sensor_comp.nodes.qos`); ``stream_info`` is reliable,
 transient-local, depth 1 so that late subscribers get it.
 
 Parameters (read once at start; invalid values stop the node with a message naming them, a
@@ -62,9 +62,12 @@ from ..io.csv_import import read_csv
 from ..io.messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info, IMAGE
 from ..sim import parse_effect, random_shots, RigConfig, SimConfigError, simulate, TABLE2
 from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO
-from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, finish_publishing,
-                      LATCHED_QOS, message_class, NodeError, publish_raw, run_main,
-                      sleep_until, wait_for_subscribers, warn_unknown_parameters)
+from .errors import NodeError
+from .lifecycle import run_main
+from .parameters import check, declare, warn_unknown_parameters
+from .qos import BLOCK_QOS, LATCHED_QOS
+from .transport import (DEFAULT_NAMESPACE, finish_publishing, message_class, publish_raw,
+                        sleep_until, wait_for_subscribers)
 
 __all__ = ['Acquisition', 'SOURCES', 'main']
 

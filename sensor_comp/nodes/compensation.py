@@ -99,11 +99,13 @@ from ..io.messages import (decode_block, decode_stream_info, decode_string, DIAG
                            encode_block, encode_stream_info, IMAGE, MessageError, STRING)
 from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_INFO,
                        StreamInfo)
-from ._common import (BLOCK_QOS, check, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
-                      DIAGNOSTICS_QOS, diagnostics, finish_publishing, LATCHED_QOS,
-                      latched_qos, merge_stream_infos, message_class, NodeError, publish_raw,
-                      run_main, spin_until, subscribe_blocks, take_queued,
-                      warn_unknown_parameters)
+from .diagnostics import DIAGNOSTICS, diagnostics, DIAGNOSTICS_QOS
+from .errors import NodeError
+from .lifecycle import run_main, spin_until
+from .parameters import check, declare, warn_unknown_parameters
+from .qos import BLOCK_QOS, LATCHED_QOS, latched_qos
+from .transport import (DEFAULT_NAMESPACE, finish_publishing, merge_stream_infos, message_class,
+                        publish_raw, subscribe_blocks, take_queued)
 
 __all__ = ['Compensation', 'main']
 

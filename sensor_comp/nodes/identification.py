@@ -132,11 +132,14 @@ from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, e
                            MessageError, STRING)
 from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
 from ..worker import Worker, WorkerDied
-from ._common import (check, check_output_parameter, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
-                      DIAGNOSTICS_QOS, diagnostics, join_callbacks, LATCHED_QOS, latched_qos,
-                      merge_stream_infos, message_class, NodeError, publish_raw, run_main,
-                      spin_until, subscribe_blocks, take_queued, warn_unknown_parameters)
 from ._fit_worker import diagnose_fit, fit_shots, start_worker
+from .diagnostics import DIAGNOSTICS, diagnostics, DIAGNOSTICS_QOS
+from .errors import NodeError
+from .lifecycle import join_callbacks, run_main, spin_until
+from .parameters import check, check_output_parameter, declare, warn_unknown_parameters
+from .qos import LATCHED_QOS, latched_qos
+from .transport import (DEFAULT_NAMESPACE, merge_stream_infos, message_class, publish_raw,
+                        subscribe_blocks, take_queued)
 
 __all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
 

@@ -32,7 +32,7 @@ What it does:
 consumers take what is still queued (until nothing happened for 0.2 s, at most 10 s),
 then follows the shutdown order that keeps rclpy from aborting: ``executor.shutdown()``,
 join the spinning thread, wait for the callbacks still running in the executor's thread
-pool (:func:`~sensor_comp.nodes._common.join_callbacks`), destroy the nodes (the recorder
+pool (:func:`~sensor_comp.nodes.lifecycle.join_callbacks`), destroy the nodes (the recorder
 finalises its bag, the identification's worker ends), and shut down the context if the
 pipeline made it.
 """
@@ -48,11 +48,13 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ._common import DEFAULT_NAMESPACE, join_callbacks, NodeError, use_fastdds_profile
 from .acquisition import Acquisition
 from .compensation import Compensation
+from .errors import NodeError
 from .identification import Identification
+from .lifecycle import join_callbacks, use_fastdds_profile
 from .recorder import Recorder
+from .transport import DEFAULT_NAMESPACE
 
 __all__ = ['NODES', 'Pipeline', 'PipelineTimeout', 'pipeline']
 

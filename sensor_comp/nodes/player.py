@@ -36,7 +36,7 @@ are published first, transient-local with a depth of their message count, so a l
 subscriber gets all of them (e.g. every ``stream_info``). Every other topic is published
 reliable, volatile, **keep-all**: no message leaves the publisher's history before every
 matched subscriber has acknowledged it, a full history makes the player wait (see
-:func:`~sensor_comp.nodes._common.publish_raw`), and the player waits for the last
+:func:`~sensor_comp.nodes.transport.publish_raw`), and the player waits for the last
 acknowledgements before it exits. Nothing is lost to a subscriber that is matched before
 playing starts (``wait_for_subscribers``) and keeps all messages (keep-all history, like
 the recorder); a keep-last subscriber may still drop what it does not take in time.
@@ -57,9 +57,12 @@ from rclpy.node import Node
 from rclpy.validate_namespace import validate_namespace
 
 from ..io.bag_reader import BagReader
-from ._common import (BLOCK_QOS, check, declare, finish_publishing, latched_qos, message_class,
-                      NodeError, publish_raw, run_main, sleep_until, wait_for_subscribers,
-                      warn_unknown_parameters)
+from .errors import NodeError
+from .lifecycle import run_main
+from .parameters import check, declare, warn_unknown_parameters
+from .qos import BLOCK_QOS, latched_qos
+from .transport import (finish_publishing, message_class, publish_raw, sleep_until,
+                        wait_for_subscribers)
 
 __all__ = ['Player', 'main']
 

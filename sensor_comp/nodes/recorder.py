@@ -83,9 +83,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ..errors import SensorCompError
 from ..io.bag_writer import BagWriter
 from ..io.messages import DIAGNOSTIC_ARRAY
-from ._common import (check, check_output_parameter, declare, DEFAULT_NAMESPACE, DIAGNOSTICS,
-                      DIAGNOSTICS_QOS, diagnostics, message_class, NodeError, run_main,
-                      warn_unknown_parameters)
+from .diagnostics import DIAGNOSTICS, diagnostics, DIAGNOSTICS_QOS
+from .errors import NodeError
+from .lifecycle import run_main
+from .parameters import check, check_output_parameter, declare, warn_unknown_parameters
+from .transport import DEFAULT_NAMESPACE, message_class
 
 __all__ = ['Recorder', 'main', 'split_path']
 

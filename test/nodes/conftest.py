@@ -40,7 +40,7 @@ from sensor_msgs.msg import Image  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from sensor_comp.io.messages import encode_block, encode_stream_info  # noqa: E402
-from sensor_comp.nodes._common import join_callbacks, use_fastdds_profile  # noqa: E402
+from sensor_comp.nodes.lifecycle import join_callbacks, use_fastdds_profile  # noqa: E402
 from sensor_comp.nodes.player import Player  # noqa: E402
 from sensor_comp.streams import Recording, StreamInfo  # noqa: E402
 

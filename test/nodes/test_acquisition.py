@@ -15,8 +15,9 @@ from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.csv_import import read_csv
 from sensor_comp.io.messages import decode_block, decode_stream_info, IMAGE
 from sensor_comp.nodes import acquisition
-from sensor_comp.nodes._common import BLOCK_QOS, LATCHED_QOS, message_class
 from sensor_comp.nodes.acquisition import Acquisition
+from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
+from sensor_comp.nodes.transport import message_class
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
 FS = 1e5

@@ -17,10 +17,12 @@ from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import (decode_block, decode_stream_info, decode_string,
                                      DIAGNOSTIC_ARRAY, encode_block, encode_stream_info,
                                      encode_string, IMAGE, STRING)
-from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS,
-                                       message_class, NodeError)
 from sensor_comp.nodes.compensation import Compensation, model_from_text, STATUS_NAME
+from sensor_comp.nodes.diagnostics import DIAGNOSTICS_QOS
+from sensor_comp.nodes.errors import NodeError
 from sensor_comp.nodes.identification import Identification, provenance_shots
+from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
+from sensor_comp.nodes.transport import message_class
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
 FS = 2e5

@@ -22,10 +22,12 @@ from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
 from sensor_comp.nodes import _fit_worker as fit_worker
 from sensor_comp.nodes import identification as identification_module
-from sensor_comp.nodes._common import BLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, NodeError
 from sensor_comp.nodes.compensation import model_from_text
+from sensor_comp.nodes.diagnostics import DIAGNOSTICS_QOS
+from sensor_comp.nodes.errors import NodeError
 from sensor_comp.nodes.identification import (Identification, provenance_shots,
                                               STATUS_NAME)
+from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
 from sensor_comp.sim import random_shots, RigConfig, simulate
 from sensor_comp.streams import G0
 

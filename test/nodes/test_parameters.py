@@ -5,9 +5,9 @@ import hashlib
 import pytest
 
 from sensor_comp.io.bag_writer import write_recording
-from sensor_comp.nodes._common import NodeError
 from sensor_comp.nodes.acquisition import Acquisition
 from sensor_comp.nodes.compensation import Compensation
+from sensor_comp.nodes.errors import NodeError
 from sensor_comp.nodes.identification import Identification
 from sensor_comp.nodes.player import Player
 from sensor_comp.nodes.recorder import Recorder

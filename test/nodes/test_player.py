@@ -13,8 +13,10 @@ from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
 from sensor_comp.io.bag_writer import BagWriter, write_recording
 from sensor_comp.io.messages import (decode_block, decode_string, DIAGNOSTIC_ARRAY,
                                      encode_block, encode_string, IMAGE, STRING)
-from sensor_comp.nodes._common import BLOCK_QOS, latched_qos, message_class, NodeError
+from sensor_comp.nodes.errors import NodeError
 from sensor_comp.nodes.player import Player
+from sensor_comp.nodes.qos import BLOCK_QOS, latched_qos
+from sensor_comp.nodes.transport import message_class
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
 T0_NS = 1_700_000_000_000_000_000

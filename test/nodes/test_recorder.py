@@ -15,7 +15,8 @@ from sensor_comp.errors import SensorCompError
 from sensor_comp.io.bag_reader import BagReader, TopicInfo
 from sensor_comp.io.messages import (DIAGNOSTIC_ARRAY, encode_block, encode_stream_info,
                                      encode_string, IMAGE, STRING)
-from sensor_comp.nodes._common import BLOCK_QOS, LATCHED_QOS, NodeError
+from sensor_comp.nodes.errors import NodeError
+from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
 from sensor_comp.nodes.recorder import Recorder
 from sensor_comp.streams import StreamInfo
 

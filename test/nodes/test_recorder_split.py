@@ -14,8 +14,9 @@ from std_msgs.msg import String
 from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.messages import (decode_stream_info, decode_string, encode_block,
                                      encode_stream_info, encode_string)
-from sensor_comp.nodes._common import (BLOCK_QOS, DIAGNOSTICS, DIAGNOSTICS_QOS, LATCHED_QOS,
-                                       NodeError)
+from sensor_comp.nodes.diagnostics import DIAGNOSTICS, DIAGNOSTICS_QOS
+from sensor_comp.nodes.errors import NodeError
+from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
 from sensor_comp.nodes.recorder import Recorder, split_path, STATUS_NAME
 from sensor_comp.streams import StreamInfo
 
