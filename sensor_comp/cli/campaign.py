@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .identify import add_threshold
+from .options import add_threshold
 from .sources import progress_factory
 from ..campaign import (IdentifyOptions, read_models, run_campaign, SensorMap, ShotOptions,
                         SYNCHRONOUS)

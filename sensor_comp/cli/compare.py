@@ -6,45 +6,13 @@ import argparse
 import json
 import os
 
-from .identify import add_threshold
-from .sources import add_force, check_plots, load_model, load_shots
+from .options import add_threshold
+from .sources import add_force, check_plots, load_model, usable_source
 from ..core.compare import compare, format_table
-from ..core.identify import ShotSource
-from ..core.model import Model, ModelError
 from ..errors import SensorCompError
 from ..files import save_figure
 
-__all__ = ['register', 'run', 'usable_source']
-
-
-def usable_source(path: str, models: dict[str, Model], *, windows=None,
-                  threshold_g: float | None = None) -> tuple[ShotSource, list[str]]:
-    """
-    Load a recording to compare ``models`` (by file name) with; return it and its warnings.
-
-    Shots with a defect (clipped, NaN/Inf, no shock) are left out, one warning each; so is
-    a warning for a peak pressure per acceleration outside the usual range.
-
-    Raises:
-        SensorCompError: If the file does not read, holds no usable shot, its pressure is
-            dead, its units are impossible, or a model is unstable or belongs to another
-            sample rate.
-
-    """
-    for name, model in models.items():
-        try:
-            model.check_stable()
-        except ModelError as exc:
-            raise ModelError(f'model {name}: {exc}') from None
-    loaded = load_shots(path, windows=windows, threshold_g=threshold_g)
-    for name, model in models.items():
-        model.check_rate(loaded.recording.fs, model_name=f'model {name}',
-                         data_name=f'recording {path}')
-    source, warnings = loaded.usable()
-    if not source.shots:
-        raise SensorCompError(f'{path}: no usable shot ({"; ".join(warnings)})')
-    units = source.check_units()
-    return source, warnings + ([units] if units else [])
+__all__ = ['register', 'run']
 
 
 def register(subparsers) -> None:

@@ -12,9 +12,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .compensate import compensate_bag
-from .identify import describe_effect, describe_model
+from .describe import describe_effect, describe_model
 from .sources import add_force, load_shots, progress_factory
+from ..bag_compensation import compensate_bag
 from ..bundled import bundled_bag
 from ..core.compare import compare, format_table
 from ..core.diagnose import diagnose

@@ -7,7 +7,7 @@ import json
 import os
 import sys
 
-from .identify import add_threshold
+from .options import add_threshold
 from .sources import load_model, load_shots, progress_factory
 from ..core.model import Model, Source
 from ..errors import SensorCompError

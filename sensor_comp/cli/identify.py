@@ -5,20 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 
+from .describe import describe_effect, describe_model
+from .options import add_threshold
 from .sources import add_force, load_shots, progress_factory
 from ..core.identify import identify, STRUCTURES
 from ..core.shots import shot_table
 from ..files import check_output
 
-__all__ = ['add_threshold', 'describe_effect', 'describe_model', 'register',
-           'run']
-
-
-def add_threshold(parser) -> None:
-    """Add the ``--threshold`` option of shot detection to ``parser``."""
-    parser.add_argument('--threshold', type=float, metavar='G',
-                        help='shot trigger level in g above the median axial acceleration '
-                             '(default: 5 %% of the largest excursion, at least 8 noise σ)')
+__all__ = ['register', 'run']
 
 
 def register(subparsers) -> None:
@@ -108,28 +102,3 @@ def run(args: argparse.Namespace) -> int:
           f'{result.model.fit["validation_peak_residual_percent"]:.1f} %')
     print(f'wrote {args.output}')
     return 0
-
-
-def describe_effect(effect: dict) -> str:
-    """Return an effect's fitted physical parameters as ``name = value ± std unit``."""
-    parameters = effect.get('parameters', {})
-    std = effect.get('std', {}) or {}
-    units = effect.get('units', {}) or {}
-    return ', '.join(f'{name} = {value:.4g}'
-                     + (f' ± {std[name]:.2g}' if std.get(name) is not None else '')
-                     + (f' {units[name]}' if units.get(name) else '')
-                     for name, value in parameters.items())
-
-
-def describe_model(model, view) -> str:
-    if view.overdamped:
-        dynamics = 'overdamped, time constants ' + ', '.join(
-            f'{1e6 * t:.3g} µs' for t in view.time_constants_s)
-    else:
-        dynamics = (f'natural frequency {view.natural_frequency_hz / 1e3:.3f} kHz, damping '
-                    f'ratio {view.damping_ratio:.4f}')
-    charge = ('' if view.sensitivity_pC_per_g is None
-              else f' = {view.sensitivity_pC_per_g:.4g} pC/g')
-    return (f'model: {model.structure} na={model.orders["na"]} nb={model.orders["nb"]} '
-            f'nk={model.nk} at {model.fs / 1e3:g} kS/s; {dynamics}; static sensitivity '
-            f'{view.sensitivity_MPa_per_g:.4g} MPa/g{charge}')

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from .compare import usable_source
 from .diagnose import run_diagnosis
-from .identify import add_threshold
-from .sources import add_force, load_model
+from .options import add_threshold
+from .sources import add_force, load_model, usable_source
 from ..core.compare import compare
 from ..core.report import html_report, write_report
 from ..core.residual import analyse

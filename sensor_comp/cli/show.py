@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from .identify import describe_model
+from .describe import describe_model
 from .sources import add_force, check_plots, load_model
 from ..core.ident.polynomials import max_root_radius
 from ..core.model import frequency_response, step_response

@@ -6,13 +6,13 @@ import os
 from pathlib import Path
 
 from ..core.identify import ShotSource
-from ..core.model import load, Model
+from ..core.model import load, Model, ModelError
 from ..errors import SensorCompError
 from ..files import check_output
 from ..streams import Recording
 
 __all__ = ['add_force', 'check_plots', 'load_model', 'load_recording', 'load_shots',
-           'progress_factory']
+           'progress_factory', 'usable_source']
 
 
 def add_force(parser, *, help: str = 'replace an existing output file even if it is of '
@@ -121,3 +121,33 @@ def check_plots(args, flags: tuple[str, ...], *, inputs) -> dict[str, str]:
         raise SensorCompError(f'{names} both name {next(iter(plots.values()))}; give them '
                               f'different names')
     return plots
+
+
+def usable_source(path: str, models: dict[str, Model], *, windows=None,
+                  threshold_g: float | None = None) -> tuple[ShotSource, list[str]]:
+    """
+    Load a recording to compare ``models`` (by file name) with; return it and its warnings.
+
+    Shots with a defect (clipped, NaN/Inf, no shock) are left out, one warning each; so is
+    a warning for a peak pressure per acceleration outside the usual range.
+
+    Raises:
+        SensorCompError: If the file does not read, holds no usable shot, its pressure is
+            dead, its units are impossible, or a model is unstable or belongs to another
+            sample rate.
+
+    """
+    for name, model in models.items():
+        try:
+            model.check_stable()
+        except ModelError as exc:
+            raise ModelError(f'model {name}: {exc}') from None
+    loaded = load_shots(path, windows=windows, threshold_g=threshold_g)
+    for name, model in models.items():
+        model.check_rate(loaded.recording.fs, model_name=f'model {name}',
+                         data_name=f'recording {path}')
+    source, warnings = loaded.usable()
+    if not source.shots:
+        raise SensorCompError(f'{path}: no usable shot ({"; ".join(warnings)})')
+    units = source.check_units()
+    return source, warnings + ([units] if units else [])

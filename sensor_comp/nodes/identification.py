@@ -67,9 +67,10 @@ detection on the whole recording finds the same shots; their windows may differ 
 sample where the median of the buffer and of the whole recording round a half-amplitude
 crossing differently, so the model states its windows in ``provenance`` (stream sample
 indices since the first sample received, the stamp of each window start);
-:func:`provenance_shots` rebuilds those shots in a recording of the same streams, and
-:func:`~sensor_comp.core.identify.identify` run offline on them gives the same
-coefficients.
+:func:`~sensor_comp.core.live_shots.provenance_shots` rebuilds those shots in a recording
+of the same streams, and :func:`~sensor_comp.core.identify.identify` run offline on them
+gives the same coefficients. The rolling buffer is :class:`~sensor_comp.core.live_shots.LiveShots`
+(no ROS: the node feeds it the paired blocks).
 
 Faults never stop the node; each is one log line naming the topic, the stamp and the
 reason, and is counted on ``/diagnostics``. Blocks are paired by
@@ -123,14 +124,14 @@ from std_srvs.srv import Trigger
 
 from ..core.effects import EFFECTS
 from ..core.identify import STRUCTURES
+from ..core.live_shots import LiveShots, ShotWindow
 from ..core.model import Model, Source
-from ..core.shots import (DEFAULT_HOLDOFF_MS, DEFAULT_POST_MS, DEFAULT_PRE_MS, detect_shots,
-                          mad_sigma, NOISE_FACTOR, Shot, ShotError)
+from ..core.shots import DEFAULT_POST_MS, DEFAULT_PRE_MS, Shot
 from ..core.streaming import BlockError, BlockPairer, NonFiniteRuns, StreamCounters
 from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
                            MessageError, STRING)
-from ..streams import ACCELERATION, G0, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
+from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO, StreamInfo
 from ..worker import Worker, WorkerDied
 from ._fit_worker import diagnose_fit, fit_shots, start_worker
 from .diagnostics import DIAGNOSTICS, diagnostics, DIAGNOSTICS_QOS
@@ -141,7 +142,7 @@ from .qos import LATCHED_QOS, latched_qos
 from .transport import (DEFAULT_NAMESPACE, merge_stream_infos, message_class, publish_raw,
                         subscribe_blocks, take_queued)
 
-__all__ = ['Identification', 'ShotWindow', 'main', 'provenance_shots']
+__all__ = ['Identification', 'main']
 
 #: Status name on ``/diagnostics``.
 STATUS_NAME = 'sensor_comp: identification'
@@ -154,180 +155,6 @@ _GAP_NOTE = 'filled with NaN; a shot window holding it is left out'
 _NON_FINITE_NOTE = ('taken as a stream gap (NaN); a shot window holding them is left out')
 # Queued messages taken per block callback (see take_queued).
 _BATCH = 64
-# Live detection is skipped while new samples stay below this fraction of the trigger level.
-_QUIET_FRACTION = 0.75
-
-
-@dataclass(frozen=True)
-class ShotWindow:
-    """
-    One shot kept for identification, with a copy of its window's samples.
-
-    Attributes:
-        shot: The shot; sample indices count from the first sample the node received.
-        stamp_ns: Acquisition time of the window's first sample.
-        pressure: ``(n,)`` raw pressure of the window in Pa.
-        acceleration: ``(3, n)`` acceleration of the window in m/s².
-
-    """
-
-    shot: Shot
-    stamp_ns: int
-    pressure: np.ndarray
-    acceleration: np.ndarray
-
-
-class _LiveShots:
-    """
-    Assemble paired blocks into a rolling buffer and find the shots that are complete.
-
-    Stream sample indices count from the first sample received; a stamp gap becomes NaN
-    samples (a gap longer than the buffer empties it). The blocks come from a
-    :class:`~sensor_comp.core.streaming.BlockPairer`, which has dropped the overlapping and
-    out-of-order ones.
-    """
-
-    def __init__(self, *, fs: float, threshold_g: float | None, pre_ms: float,
-                 post_ms: float, max_pulse_ms: float, frame_id: str, metadata: dict):
-        self.fs = fs
-        self.options = {'threshold_g': threshold_g, 'pre_ms': pre_ms, 'post_ms': post_ms}
-        self.frame_id, self.metadata = frame_id, metadata
-        span = math.ceil((pre_ms + max_pulse_ms + post_ms + DEFAULT_HOLDOFF_MS) * fs / 1e3)
-        self.settle = span  # samples after a pulse end before its shot is taken
-        self.scan_step = max(1, span // 2)
-        self.capacity = 2 * span + self.scan_step
-        self.pre = math.ceil(pre_ms * fs / 1e3)
-        self._chunks: list[np.ndarray] = []
-        self.start = 0  # stream index of the buffer's first sample
-        self.length = 0
-        self._since_scan = 0
-        self._taken_until = 0  # stream index: shots with an earlier onset are done
-        self._ref = (0, 0)  # (stream index, stamp) of the latest block start
-        self._settle_at: int | None = None  # stream index: a shot found can be taken
-        self._quiet: tuple[float, float] | None = None  # (median, trigger level) in g
-        self.detected = 0
-
-    @property
-    def received_until(self) -> int:
-        """Return the stream index one past the last sample received."""
-        return self.start + self.length
-
-    def stamp_of(self, index: int) -> int:
-        """Return the stamp of stream sample ``index``."""
-        ref_index, ref_stamp = self._ref
-        return ref_stamp + round((index - ref_index) * 1e9 / self.fs)
-
-    def add(self, stamp: int, block: np.ndarray, missing: int
-            ) -> list[tuple[ShotWindow, str | None]]:
-        """
-        Append a block pair; return the shots now complete, each with a reason to skip.
-
-        Args:
-            stamp: Stamp of the block's first sample.
-            block: ``(4, w)``: the pressure row, then the acceleration rows.
-            missing: Samples missing before the block (a stamp gap).
-
-        """
-        if missing:
-            self._gap(missing)
-        self._ref = (self.received_until, stamp)
-        self._append(block)
-        if self._since_scan < self.scan_step:
-            return []
-        return self._scan()
-
-    def _gap(self, missing: int) -> None:
-        if missing >= self.capacity:
-            self._chunks, self.start, self.length = [], self.received_until + missing, 0
-        else:
-            self._append(np.full((4, missing), np.nan))
-
-    def _append(self, block: np.ndarray) -> None:
-        self._chunks.append(block)
-        self.length += block.shape[1]
-        self._since_scan += block.shape[1]
-
-    def _buffer(self) -> np.ndarray:
-        if len(self._chunks) != 1:
-            self._chunks = [np.concatenate(self._chunks, axis=1)]
-        return self._chunks[0]
-
-    def _scan(self) -> list[tuple[ShotWindow, str | None]]:
-        fresh, self._since_scan = self._since_scan, 0
-        buffer = self._buffer()
-        found = self._detect(buffer) if self._may_hold_shot(buffer[3, -fresh:]) else []
-        if self.length > self.capacity:  # copy: a view would keep the old buffer alive
-            self._chunks = [buffer[:, -self.capacity:].copy()]
-            self.start += self.length - self.capacity
-            self.length = self.capacity
-        return found
-
-    def _may_hold_shot(self, fresh_axial: np.ndarray) -> bool:
-        """
-        Return whether detection must run on this scan.
-
-        Detection costs ~5 ms per 80 000 samples (several medians of the buffer), and at
-        1 MS/s a scan comes every 18 ms. It runs only when it can find something new: when
-        a new sample reaches 3/4 of the least level that could trigger (the threshold, or
-        8 noise σ for the automatic one, from the latest detection; a Gaussian noise
-        sample exceeds 6 σ with probability 2e-9), and while a shot found waits to
-        settle, once it can be taken (its pulse end plus ``settle``; a quarter scan early,
-        as the end may move by a few samples with the buffer's median).
-        """
-        if self._quiet is None:
-            return True
-        median, level = self._quiet
-        with np.errstate(invalid='ignore'):
-            excursion = np.nanmax(np.abs(fresh_axial / G0 - median), initial=0.0)
-        if not excursion < _QUIET_FRACTION * level:
-            return True
-        return (self._settle_at is not None
-                and self.received_until >= self._settle_at - self.scan_step // 4)
-
-    def _detect(self, buffer: np.ndarray) -> list[tuple[ShotWindow, str | None]]:
-        recording = Recording(fs=self.fs, t0_ns=self.stamp_of(self.start), pressure=buffer[0],
-                              acceleration=buffer[1:], frame_id=self.frame_id,
-                              metadata=self.metadata)
-        try:
-            shots = detect_shots(recording, **self.options)
-        except ShotError:  # no finite acceleration in the buffer (a gap)
-            return []
-        axial = buffer[3] / G0
-        median = float(np.nanmedian(axial))
-        self._quiet = (median, self.options['threshold_g'] or
-                       NOISE_FACTOR * mad_sigma(axial - median))
-        found = []
-        self._settle_at = None
-        for shot in shots:
-            if self.start + shot.onset < self._taken_until:
-                continue
-            if self.received_until < self.start + shot.end + self.settle:
-                # A later shot may still shorten its window.
-                self._settle_at = self.start + shot.end + self.settle
-                break
-            self._taken_until = self.start + shot.end
-            self.detected += 1
-            found.append(self._window(buffer, shot))
-        return found
-
-    def _window(self, buffer: np.ndarray, shot: Shot) -> tuple[ShotWindow, str | None]:
-        offset = self.start
-        moved = replace(shot, index=self.detected - 1, start=shot.start + offset,
-                        stop=shot.stop + offset, onset=shot.onset + offset,
-                        end=shot.end + offset, peak=shot.peak + offset,
-                        baseline_stop=shot.baseline_stop + offset)
-        window = buffer[:, shot.window]
-        kept = ShotWindow(moved, self.stamp_of(moved.start), window[0].copy(),
-                          window[1:].copy())
-        where = f'shot {moved.index} ({moved.peak_g:.4g} g at stamp {kept.stamp_ns} ns)'
-        if shot.clipped:
-            return kept, f'{where} left out: clipped (the sensor or the recorder saturated)'
-        if not (np.isfinite(window).all()):
-            return kept, f'{where} left out: its window holds a stream gap'
-        if shot.start == 0 and shot.onset - shot.start < self.pre and offset > 0:
-            return kept, (f'{where} left out: its pre-trigger fell out of the buffer (a pulse '
-                          f'longer than max_pulse_ms?)')
-        return kept, None
 
 
 @dataclass(frozen=True)
@@ -382,7 +209,7 @@ class Identification(Node):
         self.received = 0
         self.held_dropped = 0
         self._infos: dict[str, StreamInfo] = {}
-        self._live: _LiveShots | None = None
+        self._live: LiveShots | None = None
         self._pairer: BlockPairer | None = None
         self._non_finite: NonFiniteRuns | None = None
         self.invalid_samples = 0
@@ -510,9 +337,9 @@ class Identification(Node):
             return
         if self._live is not None or pressure is None:
             return
-        self._live = _LiveShots(fs=pressure.fs, threshold_g=self.threshold_g,
-                                frame_id=pressure.frame_id, metadata=dict(pressure.metadata),
-                                **self._window_ms)
+        self._live = LiveShots(fs=pressure.fs, threshold_g=self.threshold_g,
+                               frame_id=pressure.frame_id, metadata=dict(pressure.metadata),
+                               **self._window_ms)
         self._pairer = BlockPairer(
             fs=pressure.fs, log=self.get_logger().warning,
             gap_note=_GAP_NOTE, names=(self.resolve_topic_name(PRESSURE_RAW),
@@ -846,54 +673,6 @@ class Identification(Node):
         self._worker.shutdown(wait=True, cancel_futures=True)
         self._retire_process()  # the fit thread has retired it, unless it never ran
         super().destroy_node()
-
-
-def provenance_shots(model: Model, recording: Recording) -> tuple[Shot, ...]:
-    """
-    Return the shots a live model was fitted and validated on, in a recording's samples.
-
-    The node lists its windows in the model's provenance (stamps, indices, baselines);
-    with a recording of the same streams (e.g. made by the recorder) this gives the shots
-    to run :func:`~sensor_comp.core.identify.identify` on offline, which reproduces the
-    model.
-
-    Args:
-        model: A model published by this node.
-        recording: A recording of the streams the node received.
-
-    Returns:
-        The shots, in the order they were kept.
-
-    Raises:
-        ShotError: If the model has no live provenance, or a window lies outside the
-            recording or off its sample grid.
-
-    """
-    live = [source for source in model.provenance if source.path.startswith('live topics')]
-    if len(live) != 1:
-        raise ShotError('the model has no provenance of the identification node (made '
-                        'offline?): no live windows to rebuild')
-    shots = []
-    for entry in live[0].shots:
-        offset = (entry['stamp_ns'] - recording.t0_ns) * recording.fs / 1e9
-        start = round(offset)
-        shift = start - entry['start']
-        stop = entry['stop'] + shift
-        if abs(offset - start) > 0.5e-3 or start < 0 or stop > recording.n_samples:
-            raise ShotError(f'shot {entry["index"]}: window at stamp {entry["stamp_ns"]} ns '
-                            f'({stop - start} samples) is not in the recording (t0 '
-                            f'{recording.t0_ns} ns, {recording.n_samples} samples at '
-                            f'{recording.fs:g} Hz)')
-        shots.append(Shot(
-            index=entry['index'], fs=recording.fs, start=start, stop=stop,
-            onset=entry['onset'] + shift, end=entry['end'] + shift, peak=entry['peak'] + shift,
-            peak_g=entry['peak_g'], width_ms=entry['width_ms'],
-            peak_pressure_mpa=entry['peak_pressure_mpa'], charge_pc=entry['charge_pc'],
-            mpa_per_g=entry['mpa_per_g'], clipped=entry['clipped'],
-            baseline_stop=entry['baseline_stop'] + shift, baseline_pa=entry['baseline_pa'],
-            baseline_acceleration=tuple(entry['baseline_acceleration']),
-            notes=tuple(entry['notes'])))
-    return tuple(shots)
 
 
 def _statistics(model: Model) -> dict:

@@ -7,10 +7,11 @@ from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
 
+from sensor_comp.bag_compensation import compensate_bag
 from sensor_comp.blocks import iter_blocks
-from sensor_comp.cli.compensate import compensate_bag
 from sensor_comp.core.compensation import CompensationFilter
 from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.live_shots import provenance_shots
 from sensor_comp.core.model import Model
 from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.bag_writer import write_recording
@@ -20,7 +21,7 @@ from sensor_comp.io.messages import (decode_block, decode_stream_info, decode_st
 from sensor_comp.nodes.compensation import Compensation, model_from_text, STATUS_NAME
 from sensor_comp.nodes.diagnostics import DIAGNOSTICS_QOS
 from sensor_comp.nodes.errors import NodeError
-from sensor_comp.nodes.identification import Identification, provenance_shots
+from sensor_comp.nodes.identification import Identification
 from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
 from sensor_comp.nodes.transport import message_class
 from sensor_comp.sim import random_shots, RigConfig, simulate

@@ -13,8 +13,10 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from sensor_comp.blocks import iter_blocks
+from sensor_comp.core import live_shots as live_shots_module
 from sensor_comp.core.diagnose import diagnose
 from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.live_shots import provenance_shots
 from sensor_comp.core.model import load
 from sensor_comp.core.shots import detect_shots, ShotError
 from sensor_comp.io.bag_reader import read_recording
@@ -25,8 +27,7 @@ from sensor_comp.nodes import identification as identification_module
 from sensor_comp.nodes.compensation import model_from_text
 from sensor_comp.nodes.diagnostics import DIAGNOSTICS_QOS
 from sensor_comp.nodes.errors import NodeError
-from sensor_comp.nodes.identification import (Identification, provenance_shots,
-                                              STATUS_NAME)
+from sensor_comp.nodes.identification import Identification, STATUS_NAME
 from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
 from sensor_comp.sim import random_shots, RigConfig, simulate
 from sensor_comp.streams import G0
@@ -349,10 +350,9 @@ def test_live_detection_runs_only_when_it_can_find_a_shot_and_finds_the_offline_
         calls.append(recording.n_samples)
         return detect_shots(recording, **options)
 
-    monkeypatch.setattr(identification_module, 'detect_shots', counting)
-    live = identification_module._LiveShots(fs=FS, threshold_g=None, pre_ms=5.0, post_ms=20.0,
-                                            max_pulse_ms=10.0, frame_id='s',
-                                            metadata=rec.metadata)
+    monkeypatch.setattr(live_shots_module, 'detect_shots', counting)
+    live = live_shots_module.LiveShots(fs=FS, threshold_g=None, pre_ms=5.0, post_ms=20.0,
+                                       max_pulse_ms=10.0, frame_id='s', metadata=rec.metadata)
     data = np.vstack([rec.pressure[np.newaxis], rec.acceleration])
     found = []
     for start in range(0, rec.n_samples, 1000):

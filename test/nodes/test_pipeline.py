@@ -13,12 +13,12 @@ import pytest
 import sensor_comp
 from sensor_comp.core.compensation import compensate_recording
 from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.live_shots import provenance_shots
 from sensor_comp.core.model import load
 from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
 from sensor_comp.io.messages import decode_string
 from sensor_comp.nodes.compensation import model_from_text
 from sensor_comp.nodes.errors import NodeError
-from sensor_comp.nodes.identification import provenance_shots
 from sensor_comp.nodes.pipeline import pipeline, PipelineTimeout
 from sensor_comp.sim import random_shots, RigConfig, simulate
 
