@@ -65,7 +65,7 @@ _T0_NS = 1_700_000_000_000_000_000
 
 def _ros():
     """Start rclpy with the nodes' Fast DDS profile; return the module."""
-    from sensor_comp.nodes._common import use_fastdds_profile
+    from sensor_comp.nodes.lifecycle import use_fastdds_profile
     use_fastdds_profile()
     import rclpy
     rclpy.init(args=[])
@@ -77,8 +77,9 @@ def _publish(args) -> dict:
     rclpy = _ros()
     from sensor_comp.io.messages import DIAGNOSTIC_ARRAY, encode_block, encode_stream_info
     from sensor_comp.io.messages import IMAGE
-    from sensor_comp.nodes._common import (BLOCK_QOS, finish_publishing, LATCHED_QOS,
-                                           message_class, publish_raw, wait_for_subscribers)
+    from sensor_comp.nodes.qos import BLOCK_QOS, LATCHED_QOS
+    from sensor_comp.nodes.transport import (finish_publishing, message_class, publish_raw,
+                                             wait_for_subscribers)
     from sensor_comp.streams import StreamInfo
     node = rclpy.create_node('bench_publisher', namespace='/rig')
     image = message_class(IMAGE)
@@ -120,7 +121,8 @@ def _subscribe(args) -> dict:
     rclpy = _ros()
     from rclpy.executors import SingleThreadedExecutor
     from sensor_comp.io.messages import decode_block, IMAGE
-    from sensor_comp.nodes._common import BLOCK_QOS, message_class, take_queued
+    from sensor_comp.nodes.qos import BLOCK_QOS
+    from sensor_comp.nodes.transport import message_class, take_queued
     node = rclpy.create_node('bench_subscriber', namespace='/rig')
     samples = {'pressure/compensated': 0, 'pressure/induced': 0}
     latency = []  # (stamp, source time, receive time) of compensated blocks

@@ -14,7 +14,7 @@ barely compress), then two processes run on a private ROS domain (localhost disc
 
 Rates are given in blocks/s (messages of both topics) and in samples/s per stream (a block
 pair carries ``width`` samples of every channel). Both processes use the nodes' Fast DDS
-profile (see :mod:`sensor_comp.nodes._common`). The player runs ahead of the recorder: the
+profile (see :mod:`sensor_comp.nodes.lifecycle`). The player runs ahead of the recorder: the
 recorder's reader queues the backlog. The last column checks that nothing was lost.
 
 Run: ``python -m bench --only recorder_player [--quick]`` from the repository root (with
@@ -37,7 +37,8 @@ from rclpy.parameter import Parameter
 
 from sensor_comp.io.bag_reader import BagReader
 from sensor_comp.io.bag_writer import write_recording
-from sensor_comp.nodes._common import use_fastdds_profile, wait_for_subscribers
+from sensor_comp.nodes.lifecycle import use_fastdds_profile
+from sensor_comp.nodes.transport import wait_for_subscribers
 from sensor_comp.nodes.player import Player
 from sensor_comp.nodes.recorder import Recorder
 from sensor_comp.streams import Recording

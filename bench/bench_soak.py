@@ -129,8 +129,8 @@ class _Diagnostics:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from diagnostic_msgs.msg import DiagnosticArray
-        from sensor_comp.nodes._common import (DIAGNOSTICS, DIAGNOSTICS_QOS,
-                                               use_fastdds_profile)
+        from sensor_comp.nodes.diagnostics import DIAGNOSTICS, DIAGNOSTICS_QOS
+        from sensor_comp.nodes.lifecycle import use_fastdds_profile
         use_fastdds_profile()
         self._context = rclpy.Context()
         self._context.init()
