@@ -6,10 +6,10 @@ fixed-order model has the lowest loss (output error is fitted only around the mi
 located by the losses of every delay with one denominator held). :func:`select_structure`
 fits a grid of orders and delays, ranks the candidates by an information criterion on the
 calibration segments and, when validation segments are given, keeps only candidates whose
-validation fit comes within ``fit_tolerance`` of the best one; among near-equal criteria the simplest
-structure wins. It returns the choice, the whole table and a sentence that says why. Output
-error is fitted afresh once per order pair and refined from contained structures and
-neighbouring delays elsewhere (:func:`_fit_grid`).
+validation fit comes within ``fit_tolerance`` of the best one; among near-equal criteria
+the simplest structure wins. It returns the choice, the whole table and a sentence that
+says why. Output error is fitted afresh once per order pair and refined from contained
+structures and neighbouring delays elsewhere (:func:`_fit_grid`).
 """
 
 from __future__ import annotations
