@@ -289,24 +289,8 @@ class Model:
         if self.structure not in STRUCTURES:
             raise ModelError(f'model structure must be one of {", ".join(STRUCTURES)}, got '
                              f'{self.structure!r}')
-        inputs = tuple(self.inputs)
-        if not inputs or not all(isinstance(n, str) and n for n in inputs) \
-                or len(set(inputs)) != len(inputs):
-            raise ModelError(f'model inputs must be distinct non-empty names, got {inputs!r}')
-        for name in inputs:
-            try:
-                parse_channel(name)
-            except InputError as exc:
-                raise ModelError(f'{exc}; this sensor_comp {__version__} cannot compute it '
-                                 f'(a model from a newer version?)') from None
-        b = np.array(self.b, dtype=np.float64)
-        b = b[np.newaxis] if b.ndim == 1 else b
-        if b.ndim != 2 or b.shape[0] != len(inputs) or b.shape[1] == 0:
-            raise ModelError(f'model numerators must have shape ({len(inputs)}, nb) for inputs '
-                             f'{inputs}, got {b.shape}')
-        if not np.all(np.isfinite(b)):
-            raise ModelError(f'model numerators hold a non-finite value: {b.tolist()}')
-        b.flags.writeable = False
+        inputs = _check_inputs(self.inputs)
+        b = _numerators(self.b, inputs, 'model numerators')
         if isinstance(self.nk, bool) or not isinstance(self.nk, (int, np.integer)) \
                 or self.nk < 0:
             raise ModelError(f'model delay nk must be an integer >= 0, got {self.nk!r}')
@@ -322,13 +306,11 @@ class Model:
                     values[name] is None or values[f'{name}_std'].shape != values[name].shape):
                 raise ModelError(f'standard deviations of {name} do not match its shape')
         if self.b_std is not None:
-            b_std = np.array(self.b_std, dtype=np.float64)
-            b_std = b_std[np.newaxis] if b_std.ndim == 1 else b_std
-            if b_std.shape != b.shape or not np.all(np.isfinite(b_std)):
-                raise ModelError(f'standard deviations of the numerators must be finite with '
-                                 f'shape {b.shape}, got {b_std.shape}')
-            b_std.flags.writeable = False
-            values['b_std'] = b_std
+            values['b_std'] = _numerators(self.b_std, inputs,
+                                          'standard deviations of the numerators')
+            if values['b_std'].shape != b.shape:
+                raise ModelError(f'standard deviations of the numerators must have shape '
+                                 f'{b.shape}, got {values["b_std"].shape}')
         cs = self.charge_sensitivity_pC_per_MPa
         if cs is not None:
             if not _is_number(cs) or cs <= 0:
@@ -605,28 +587,7 @@ def load(path: str | os.PathLike) -> Model:
 
     """
     where = f'model file {os.fspath(path)!r}'
-    try:
-        text = Path(path).read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ModelError(f'cannot read {where}: {exc}') from None
-    try:
-        doc = json.loads(text, parse_constant=_reject_constant)
-    except ValueError as exc:
-        raise ModelError(f'{where} is not valid JSON ({exc}); every number must be '
-                         f'finite') from None
-    if not isinstance(doc, dict):
-        raise ModelError(f'{where} must hold a JSON object, got {type(doc).__name__}')
-    schema = doc.get('schema')
-    if not isinstance(schema, str) or not schema.startswith(_SCHEMA_PREFIX):
-        raise ModelError(f'{where} is not a sensor_comp model (schema {schema!r}, expected '
-                         f'{SCHEMA!r})')
-    if schema != SCHEMA:
-        raise ModelError(f'{where} has schema {schema!r}, which this sensor_comp '
-                         f'{__version__} cannot read (it reads {SCHEMA!r}); use the '
-                         f'sensor_comp version that wrote it or re-identify the model')
-    missing = [key for key in _REQUIRED if key not in doc]
-    if missing:
-        raise ModelError(f'{where} lacks the key(s) {", ".join(map(repr, missing))}')
+    doc = _read_document(path, where)
     _check_finite_json(doc, where)
     inputs = _expect(doc, 'inputs', list, where)
     numerators = _expect(doc, 'numerators', dict, where)
@@ -636,6 +597,17 @@ def load(path: str | os.PathLike) -> Model:
     orders = _expect(doc, 'orders', dict, where)
     for key in ('na', 'nb', 'nk'):
         _expect(orders, key, int, f'{where}: orders')
+    model = _model_of(doc, inputs, numerators, orders, where)
+    actual = model.orders
+    for key in ('na', 'nb', 'nk'):
+        if orders[key] != actual[key]:
+            raise ModelError(f'{where}: orders.{key} = {orders[key]} does not match the '
+                             f'polynomials ({key} = {actual[key]})')
+    return model
+
+
+def _model_of(doc: dict, inputs: list, numerators: dict, orders: dict, where: str) -> Model:
+    """Build the model of a checked model file; errors name the file."""
     noise = doc.get('noise') or {}
     std = doc.get('std')
     if std is not None and not isinstance(std, dict):
@@ -643,7 +615,7 @@ def load(path: str | os.PathLike) -> Model:
     std = std or {}
     std_num = std.get('numerators')
     try:
-        model = Model(
+        return Model(
             fs=_expect(doc, 'fs', (int, float), where),
             structure=_expect(doc, 'structure', str, where), inputs=tuple(inputs),
             b=[_numbers(numerators[n], f'{where}: numerators[{n!r}]') for n in inputs],
@@ -666,12 +638,61 @@ def load(path: str | os.PathLike) -> Model:
         raise ModelError(f'{where}: {exc}') from None
     except (TypeError, ValueError) as exc:
         raise ModelError(f'{where}: malformed value ({exc})') from None
-    actual = model.orders
-    for key in ('na', 'nb', 'nk'):
-        if orders[key] != actual[key]:
-            raise ModelError(f'{where}: orders.{key} = {orders[key]} does not match the '
-                             f'polynomials ({key} = {actual[key]})')
-    return model
+
+
+def _read_document(path: str | os.PathLike, where: str) -> dict:
+    """Return the JSON object of a model file whose schema this version reads."""
+    try:
+        text = Path(path).read_text(encoding='utf-8')
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelError(f'cannot read {where}: {exc}') from None
+    try:
+        doc = json.loads(text, parse_constant=_reject_constant)
+    except ValueError as exc:
+        raise ModelError(f'{where} is not valid JSON ({exc}); every number must be '
+                         f'finite') from None
+    if not isinstance(doc, dict):
+        raise ModelError(f'{where} must hold a JSON object, got {type(doc).__name__}')
+    schema = doc.get('schema')
+    if not isinstance(schema, str) or not schema.startswith(_SCHEMA_PREFIX):
+        raise ModelError(f'{where} is not a sensor_comp model (schema {schema!r}, expected '
+                         f'{SCHEMA!r})')
+    if schema != SCHEMA:
+        raise ModelError(f'{where} has schema {schema!r}, which this sensor_comp '
+                         f'{__version__} cannot read (it reads {SCHEMA!r}); use the '
+                         f'sensor_comp version that wrote it or re-identify the model')
+    missing = [key for key in _REQUIRED if key not in doc]
+    if missing:
+        raise ModelError(f'{where} lacks the key(s) {", ".join(map(repr, missing))}')
+    return doc
+
+
+def _check_inputs(names) -> tuple[str, ...]:
+    """Return the input names; refuse duplicates and names this version cannot compute."""
+    inputs = tuple(names)
+    if not inputs or not all(isinstance(n, str) and n for n in inputs) \
+            or len(set(inputs)) != len(inputs):
+        raise ModelError(f'model inputs must be distinct non-empty names, got {inputs!r}')
+    for name in inputs:
+        try:
+            parse_channel(name)
+        except InputError as exc:
+            raise ModelError(f'{exc}; this sensor_comp {__version__} cannot compute it '
+                             f'(a model from a newer version?)') from None
+    return inputs
+
+
+def _numerators(values, inputs: tuple[str, ...], what: str) -> np.ndarray:
+    """Return one finite, read-only row of numerator coefficients per input."""
+    b = np.array(values, dtype=np.float64)
+    b = b[np.newaxis] if b.ndim == 1 else b
+    if b.ndim != 2 or b.shape[0] != len(inputs) or b.shape[1] == 0:
+        raise ModelError(f'{what} must have shape ({len(inputs)}, nb) for inputs {inputs}, '
+                         f'got {b.shape}')
+    if not np.all(np.isfinite(b)):
+        raise ModelError(f'{what} hold a non-finite value: {b.tolist()}')
+    b.flags.writeable = False
+    return b
 
 
 def _list(doc: Mapping, key: str, where: str) -> list:
