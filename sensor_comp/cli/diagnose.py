@@ -10,6 +10,7 @@ import sys
 from .options import add_threshold
 from .sources import load_model, load_shots, progress_factory
 from ..core.model import Model, Source
+from ..core.noise_floor import PRACTICAL_SHARE
 from ..errors import SensorCompError
 
 __all__ = ['calibration_sources', 'register', 'run', 'run_diagnosis']
@@ -22,7 +23,8 @@ def register(subparsers) -> None:
         description='Fit the model plus each catalogued physical effect on the calibration '
                     'shots (the bags the model was identified from, or --calibration) and '
                     'score each on the shots of BAG, which it has not seen; print the verdict '
-                    '(missing_effect, adequate or unexplained) and the ranking with evidence.')
+                    '(missing_effect, partly_explained, adequate or unexplained), what the '
+                    'model leaves against the noise, and the ranking with evidence.')
     parser.add_argument('model', help='model file (.json)')
     parser.add_argument('bag', help='validation recording (.mcap or .csv)')
     parser.add_argument('--calibration', nargs='+', metavar='CALIB',
@@ -89,6 +91,15 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f'verdict: {diagnosis.verdict}')
     print(f'  {diagnosis.explanation}')
+    left = diagnosis.leftover
+    if left is not None:
+        share = diagnosis.explained_share
+        print(f'  leftover{" with " + " + ".join(diagnosis.named) if diagnosis.named else ""}: '
+              f'{left.energy_ratio:.2f}× the noise energy (noise alone: up to '
+              f'{left.tolerance:.2f}×), RMS {left.rms_ratio:.2f} σ (σ = '
+              f'{diagnosis.noise_sigma_pa:.4g} Pa)'
+              + ('' if share is None else
+                 f'; {100 * share:.0f} % of the excess over the noise explained'))
     if diagnosis.ranking:
         print(f'\n{"#":>2}  {"effect":24s} {"score":>7} {"p":>9}  sig  parameters')
         for position, entry in enumerate(diagnosis.ranking, 1):
@@ -102,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
         for entry in diagnosis.ranking:
             if entry.significant:
                 print(f'{entry.effect}: {entry.evidence}')
+            elif entry.doubt and entry.explained >= PRACTICAL_SHARE:
+                print(f'{entry.effect}: not counted: {entry.doubt}')
     for skipped in diagnosis.skipped:
         print(f'{skipped.effect} not tried: {skipped.reason}')
     for note in diagnosis.notes:

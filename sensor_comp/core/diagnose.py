@@ -5,33 +5,64 @@ For every candidate effect of :mod:`sensor_comp.core.effects` the base model plu
 effect is fitted on the CALIBRATION shots (:func:`~sensor_comp.core.extended.fit_extended`)
 and scored on the VALIDATION shots, which it has never seen:
 
+- **base**: a given model's effects on a sensor base of at most one mode, sampled exactly
+  (``nf ≤ 2``, numerator on lags ``nk..nf``, ``nk ≤ 1``), refitted on the calibration
+  shots: the orders and delay a free structure search chose are not used, because extra
+  poles or a delay of many samples stand in for the effects the diagnosis is to name.
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
+- **noise**: the base residual before the triggers (a straight line per window and the
+  50/60 Hz mains lines removed, so that slow pickup and hum are not taken for noise),
+  modelled as an AR process (:func:`~sensor_comp.core.noise_floor.noise_model`): the
+  pressure noise plus the accelerometer noise through the model plus any anti-alias
+  colouring, as measured.
 - **significance**: whether that improvement can come from noise. The validation residual
-  of an adequate base model is the measurement noise ``e``; an extension changes the
-  prediction by ``δ`` (fitted elsewhere, so independent of ``e``), and
-  ``SSE_base − SSE_ext = 2 r_baseᵀδ − ‖δ‖²``. The statistic is
-  ``z = r_baseᵀδ / √Var(eᵀδ)`` with ``Var(eᵀδ) = Σ_k w_k R_e(k) R_δ(k)`` (Bartlett-tapered
-  over the noise's correlation lags, so coloured noise counts with its effective number of
-  samples), ``R_e`` the autocovariance of the base residual before the triggers (linear
-  trend removed per window: the noise as measured, blind to slow pickup) and ``R_δ`` that
-  of the change. Under the null hypothesis ``z`` is standard normal. Disturbances not
-  driven by the acceleration (mains hum) have their coefficients estimated on the
-  validation windows themselves (their phase belongs to the recording); for them the
-  statistic is the energy the regressors take from the residual over the noise's long-run
-  variance, χ² with as many degrees of freedom as coefficients. An effect is significant
-  when its p-value is below ``alpha`` divided by the number of candidates (Bonferroni) and
-  its score is positive.
+  of an adequate base model is the measurement noise ``e`` (its window baseline, the
+  pre-trigger mean, removed); an extension changes the prediction by ``δ`` (fitted
+  elsewhere, so independent of ``e``), and ``SSE_base − SSE_ext = 2 r_baseᵀδ − ‖δ‖²``.
+  The statistic is ``z = r_baseᵀδ / √Var(eᵀδ)`` with ``Var(eᵀδ) = Σ_k R_e(k) R_δ̃(k)``
+  over the noise model's lags (coloured noise counts with its effective number of
+  samples, a slow ``δ`` with the noise's low-frequency density), ``δ̃`` being ``δ`` with
+  its sum moved onto the pre-trigger (the baseline the noise shares). Under the null
+  hypothesis ``z`` is standard normal. Disturbances not driven by the acceleration (mains
+  hum) have their coefficients estimated on the validation windows themselves (their
+  phase belongs to the recording); for them the statistic is the energy the regressors
+  take from the residual over the noise's long-run variance, χ² with as many degrees of
+  freedom as coefficients. An effect is significant when its p-value is below ``alpha``
+  divided by the number of candidates (Bonferroni) AND it matters: its score is at least
+  :data:`MIN_SCORE` and the energy it removes is at least
+  :data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE` of the noise energy of the windows
+  (with hundreds of thousands of samples far smaller structure is significant, e.g. the
+  bias accelerometer noise gives an output-error fit) AND the fit reads as the effect
+  (:meth:`~sensor_comp.core.effects.Effect.implausible`: physical parameters readable, no
+  searched value at an end of its range, a delay that lags; a disturbance must also
+  remove before the triggers what it predicts there).
+- **leftover**: what each model leaves against its own noise floor
+  (:func:`~sensor_comp.core.noise_floor.leftover`): its energy in noise units, overall and
+  before the trigger, during the pulse, in the ringing and in the tail, and what the
+  excess looks like. A model with a named effect may leave :data:`FORM_SHARE` of the
+  base residual's excess besides the practical allowance (a catalogue form close to, not
+  exactly, the physics of a large effect).
 
-The verdict is ``'missing_effect'`` when any effect is significant (ranking: significant
-effects first, each group by score), ``'adequate'`` when none is and the base residual is
-consistent with noise (its mean square within the statistical tolerance of the noise
-variance, and the residual analysis of :mod:`sensor_comp.core.residual` agreeing when it
-runs), and ``'unexplained'`` when the residual is not noise but no catalogued effect
-explains it.
+The verdict:
 
-Shots with a defect (:attr:`~sensor_comp.core.shots.Shot.defects`: clipped, NaN/Inf in the
-window, no shock) are left out of both sets, each with a note.
+- ``'missing_effect'``: the best significant effect (significant ones ranked first, each
+  group by score) leaves a residual consistent with the noise, or it and a second
+  significant one do together (their changes added, as fitted on the calibration shots);
+- ``'partly_explained'``: the best significant effect removes part of the residual but
+  leaves one the noise does not account for (a second effect, or one outside the
+  catalogue): the explanation gives the explained share, the leftover in noise units and
+  where it lies;
+- ``'adequate'``: no effect is significant and the base residual is consistent with the
+  noise (and the residual analysis of :mod:`sensor_comp.core.residual` agrees when it
+  runs);
+- ``'unexplained'``: the base residual is not noise but no catalogued effect explains a
+  relevant part of it.
+
+A candidate whose fit fails (any error: too little data, no stable model, a numerical
+failure) is one line in the notes, ``<effect>: not fitted: <why>``; the others go on. Shots
+with a defect (:attr:`~sensor_comp.core.shots.Shot.defects`: clipped, NaN/Inf in the window,
+no shock) are left out of both sets, each with a note.
 """
 
 from __future__ import annotations
@@ -43,12 +74,17 @@ import math
 import numpy as np
 from scipy import stats
 
-from .effects import Effect, EFFECTS, EffectError, get_effect, Outcome, Physical
+from .effects import Effect, EFFECTS, get_effect, Outcome, Physical
+from .effects.base import BASE_CONTEXT
+from .effects.mains_hum import line_columns
 from .extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
-from .ident import estimate_delay, fit_percent, IdentError
+from .ident import estimate_delay, fit_percent
 from .identify import ShotSource
 from .model import Model
+from .noise_floor import (Leftover, leftover, noise_model, NoiseModel, PRACTICAL_SHARE,
+                          segment_bounds)
 from .progress import ProgressFactory, Silent
+from .residual import analyse, model_resonances, ringing_time_s
 from .shots import split_calibration
 from ..errors import SensorCompError
 
@@ -60,15 +96,22 @@ BASE_ORDERS, BASE_DELAY = (2, 3), 0
 #: Family-wise false-alarm probability over all candidates.
 ALPHA = 1e-3
 #: Possible verdicts.
-VERDICTS = ('missing_effect', 'adequate', 'unexplained')
-#: Lag range of the noise autocovariance, s (at least one lag).
-NOISE_LAG_S = 50e-6
-#: z of the one-sided tolerance on the residual's mean square.
-ENERGY_Z = 3.0
-#: Residual energy beyond the noise's that is not worth a model change (fraction of the
-#: noise energy): the discretisation of a continuous sensor leaves about 2 % in the
-#: simulator's data at 200 kS/s.
-MODEL_ALLOWANCE = 0.05
+VERDICTS = ('missing_effect', 'partly_explained', 'adequate', 'unexplained')
+#: Lag range of the noise model, s (its autocovariance runs over four times as many lags).
+NOISE_LAG_S = 0.5e-3
+#: Share of the base residual's energy beyond the noise that a model with the right effect
+#: may still leave (its catalogue form is close to, not exactly, the physics), besides
+#: the practical allowance: a few per cent of a large effect is no second effect.
+FORM_SHARE = 0.05
+#: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
+#: a searched second mode keeps away from.
+MODE_ZETA = 0.2
+#: A disturbance that removes before the triggers less than this share of the energy it
+#: predicts there, by :data:`BEFORE_Z` standard deviations, is no pickup present before the
+#: shocks.
+BEFORE_SHARE, BEFORE_Z = 0.5, 4.0
+#: Mains frequencies whose lines are removed from the noise before the triggers, Hz.
+MAINS_HZ = (50.0, 60.0)
 #: Least score (fraction of the base residual energy removed) a significant effect needs:
 #: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
 MIN_SCORE = 0.005
@@ -89,13 +132,17 @@ class Ranked:
         score: Fraction of the base model's validation residual energy removed.
         parameters: Physical parameters ``name -> (value, std or None)``.
         evidence: One human sentence with numbers.
-        significant: The improvement is beyond noise (see the module docs).
+        significant: The improvement is beyond noise and matters (see the module docs).
         statistic: ``z`` (acceleration-driven) or χ² (disturbance).
         test: ``'z'`` or ``'chi2'``.
         p_value: Probability of the statistic or more from noise alone.
         fit_percent: Validation fit of the extended model.
         peak_residual_percent: Worst validation shot's peak residual, % of its peak.
         units: Unit of each parameter.
+        explained: Energy removed, in noise energies of the validation windows.
+        leftover: What the extended model leaves against the noise.
+        doubt: Why the fit is no physical reading of the effect (then it is not
+            significant), or None (:meth:`~sensor_comp.core.effects.Effect.implausible`).
         fit: The extended fit (not in :meth:`to_dict`).
 
     """
@@ -112,6 +159,9 @@ class Ranked:
     fit_percent: float
     peak_residual_percent: float
     units: dict = field(default_factory=dict)
+    explained: float = 0.0
+    leftover: Leftover | None = field(default=None, repr=False, compare=False)
+    doubt: str | None = None
     fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -123,7 +173,9 @@ class Ranked:
                 'evidence': self.evidence, 'significant': self.significant,
                 'statistic': _json(self.statistic), 'test': self.test,
                 'p_value': _json(self.p_value), 'fit_percent': _json(self.fit_percent),
-                'peak_residual_percent': _json(self.peak_residual_percent)}
+                'peak_residual_percent': _json(self.peak_residual_percent),
+                'explained_noise_energy': _json(self.explained), 'doubt': self.doubt,
+                'leftover': None if self.leftover is None else self.leftover.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -146,21 +198,28 @@ class Diagnosis:
     Attributes:
         verdict: One of :data:`VERDICTS`.
         ranking: Candidates, significant ones first, each group by score.
-        skipped: Candidates not fitted, with the reason.
+        skipped: Candidates not tried, with the reason.
         base: The base fit on the calibration shots.
         base_effects: Effects already in the base model.
         fit_percent: Base model's validation fit.
         peak_residual_percent: Base model's worst validation peak residual, %.
         noise_sigma_pa: Noise σ before the triggers (base residual, trend removed), Pa.
         energy_ratio: Base residual mean square over the noise variance.
-        energy_tolerance: Largest ``energy_ratio`` noise alone gives (``ENERGY_Z`` σ).
-        consistent_with_noise: The base residual is noise (energy, and the residual
+        energy_tolerance: Largest ``energy_ratio`` noise alone gives (statistical, plus
+            the practical allowance).
+        consistent_with_noise: The base residual is noise (leftover, and the residual
             analysis when it ran).
         analyses: Residual analyses of the base model per validation recording (empty
             when not run or not available).
         alpha: Family-wise false-alarm probability.
         explanation: The verdict in words.
-        notes: What the user should know.
+        notes: What the user should know (candidates not fitted, shots left out, ...).
+        named: The effects the verdict names (one, two for a pair, none).
+        leftover: What the verdict's model leaves against the noise: the named effect(s)
+            added, or the base model when none is named.
+        base_leftover: What the base model leaves.
+        explained_share: Share of the base residual's energy beyond the noise that the
+            named effect(s) remove (None when none is named).
 
     """
 
@@ -179,6 +238,10 @@ class Diagnosis:
     alpha: float = ALPHA
     explanation: str = ''
     notes: tuple[str, ...] = ()
+    named: tuple[str, ...] = ()
+    leftover: Leftover | None = field(default=None, repr=False)
+    base_leftover: Leftover | None = field(default=None, repr=False)
+    explained_share: float | None = None
 
     @property
     def significant(self) -> list[str]:
@@ -207,14 +270,19 @@ class Diagnosis:
         return lines + list(self.notes)
 
     def to_dict(self) -> dict:
-        """Return the JSON-ready diagnosis (``verdict``, ``ranking``, ...)."""
-        return {'verdict': self.verdict, 'ranking': [r.to_dict() for r in self.ranking],
+        """Return the JSON-ready diagnosis (``verdict``, ``ranking``, ``leftover``, ...)."""
+        return {'verdict': self.verdict, 'named': list(self.named),
+                'explained_share': _json(self.explained_share),
+                'leftover': None if self.leftover is None else self.leftover.to_dict(),
+                'ranking': [r.to_dict() for r in self.ranking],
                 'skipped': [s.to_dict() for s in self.skipped],
                 'base': {'effects': list(self.base_effects), 'inputs': list(self.base.inputs),
                          'orders': {'nf': self.base.spec.nf, 'nb': self.base.spec.nb,
                                     'nk': self.base.spec.nk},
                          'fit_percent': _json(self.fit_percent),
-                         'peak_residual_percent': _json(self.peak_residual_percent)},
+                         'peak_residual_percent': _json(self.peak_residual_percent),
+                         'leftover': (None if self.base_leftover is None
+                                      else self.base_leftover.to_dict())},
                 'noise_sigma_pa': _json(self.noise_sigma_pa),
                 'energy_ratio': _json(self.energy_ratio),
                 'energy_tolerance': _json(self.energy_tolerance),
@@ -227,56 +295,58 @@ def _json(x):
     return None if x is None or not math.isfinite(x) else float(x)
 
 
-@dataclass(frozen=True)
-class _Noise:
-    """Autocovariance of the noise (lags 0..L) and the Bartlett weights."""
+@dataclass(frozen=True, eq=False)
+class _Context:
+    """What every candidate is fitted with and scored against."""
 
-    autocovariance: np.ndarray
-    weights: np.ndarray
+    fs: float
+    calibration: list[Window]
+    validation: list[Window]
+    orders: tuple[int, int, int]
+    base_effects: tuple[str, ...]
+    base: ExtendedFit
+    prediction: Prediction
+    residual: list[np.ndarray]
+    noise: NoiseModel
+    bounds: list[tuple[int, int, int, int, int]]
+    analyses: tuple
+    alpha: float
 
     @property
-    def variance(self) -> float:
-        return float(self.autocovariance[0])
+    def samples(self) -> int:
+        return sum(r.size for r in self.residual)
 
     @property
-    def long_run_variance(self) -> float:
-        """``Σ_{|k|≤L} w_k R(k)``: the variance of a mean of smooth weights."""
-        r, w = self.autocovariance, self.weights
-        return float(max(r[0] + 2 * np.sum(w[1:] * r[1:]), 1e-300))
+    def noise_lag(self) -> int:
+        return max(1, round(NOISE_LAG_S * self.fs))
 
-    def variance_of_product(self, delta: Sequence[np.ndarray]) -> float:
-        """Return ``Var(eᵀδ) = Σ_k w_k R_e(k) R_δ(k)`` for noise ``e`` and fixed ``δ``."""
-        r_delta = _autocovariance_sums(delta, self.autocovariance.size - 1)
-        r, w = self.autocovariance, self.weights
-        return float(max(r[0] * r_delta[0] + 2 * np.sum(w[1:] * r[1:] * r_delta[1:]), 0.0))
+    @property
+    def sse(self) -> float:
+        return sum(float(r @ r) for r in self.residual)
 
+    @property
+    def excess(self) -> float:
+        """Return the base residual's energy beyond the noise, in noise energies."""
+        if not self.noise.variance > 0:
+            return math.inf
+        return max(self.sse / (self.samples * self.noise.variance) - 1.0, 0.0)
 
-def _autocovariance_sums(blocks: Sequence[np.ndarray], lags: int) -> np.ndarray:
-    """Return ``Σ_blocks Σ_n x_n x_{n+k}`` for ``k = 0..lags``."""
-    out = np.zeros(lags + 1)
-    for x in blocks:
-        for k in range(min(lags, x.size - 1) + 1):
-            out[k] += float(x[:x.size - k] @ x[k:])
-    return out
+    def leftover(self, residual: Sequence[np.ndarray], *, named: bool = True) -> Leftover:
+        """
+        Return what ``residual`` (over the validation windows) holds beyond the noise.
 
-
-def _noise(residuals: Sequence[np.ndarray], windows: Sequence[Window], fs: float) -> _Noise:
-    """Return the noise autocovariance from the pre-trigger residual (trend removed)."""
-    parts = []
-    for r, w in zip(residuals, windows):
-        pre = r[:w.baseline]
-        if pre.size >= 8:
-            t = np.arange(pre.size)
-            parts.append(pre - np.polyval(np.polyfit(t, pre, 1), t))
-    if not parts:
-        raise DiagnosisError('no validation window has a pre-trigger of 8 samples or more: '
-                             'the noise cannot be measured; detect shots with a longer '
-                             'pre-trigger')
-    lags = max(1, min(round(NOISE_LAG_S * fs), min(p.size for p in parts) // 4))
-    counts = np.array([sum(max(p.size - k, 0) for p in parts) for k in range(lags + 1)])
-    autocovariance = _autocovariance_sums(parts, lags) / counts
-    weights = 1.0 - np.arange(lags + 1) / (lags + 1)
-    return _Noise(autocovariance, weights)
+        A model with a named effect is measured against its own noise floor (before the
+        triggers: the pressure noise plus the accelerometer noise through that model) and
+        may miss :data:`FORM_SHARE` of the base residual's excess besides the practical
+        allowance (see the module docs).
+        """
+        allowance = PRACTICAL_SHARE + (FORM_SHARE * self.excess if named else 0.0)
+        noise = self.noise
+        if named:  # its own noise floor: the accelerometer noise through this model
+            quiet = _quiet(residual, self.validation, self.fs)
+            if quiet:
+                noise = noise_model(quiet, self.noise_lag)
+        return leftover(residual, self.bounds, noise, self.fs, allowance=min(allowance, 1e6))
 
 
 def _peak_percent(windows: Sequence[Window], residuals: Sequence[np.ndarray]) -> float:
@@ -311,13 +381,327 @@ def _usable(source, notes: list[str]):
     return kept
 
 
-def _analyses(model: Model, validation) -> tuple:
-    """Return the residual analysis of ``model`` per validation recording, if available."""
+def _analyses(model: Model, validation, notes: list[str]) -> tuple:
+    """Return the residual analysis of ``model`` per validation recording (none on failure)."""
     try:
-        from .residual import analyse
-    except ImportError:  # the residual analysis is optional for the ranking
+        return tuple(analyse(model, s.recording, s.shots) for s in validation if s.shots)
+    except (SensorCompError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        notes.append(f'residual analysis: not run: {exc}')
         return ()
-    return tuple(analyse(model, s.recording, s.shots) for s in validation if s.shots)
+
+
+def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Window],
+                    notes: list[str]) -> tuple[tuple[int, int, int], tuple[str, ...]]:
+    """
+    Return the base orders ``(nf, nb, nk)`` and effects the candidates are compared with.
+
+    Without ``base``: ``orders`` and ``delay``. With it: its effects on a sensor base of at
+    most one mode (``nf`` at most that of :data:`BASE_ORDERS`; fewer when the model was
+    identified with fewer, as the data support) with the numerator on lags ``nk .. nf``,
+    ``nk`` at most 1 (the exact structure of a sampled ``nf``-th order sensor): poles beyond
+    the sensor's mode or an input delay of many samples stand in for an effect (a second
+    mode, a slow tail, a channel delay), which the diagnosis is there to name.
+    """
+    if base is None:
+        nf, nb = orders
+        if delay is None:
+            delay = estimate_delay([(w.acceleration[2:3], w.y) for w in calibration]).nk
+        return (nf, nb, delay), ()
+    base_effects = tuple(e['id'] for e in base.effects if e.get('id') in EFFECTS)
+    given = tuple(int(base.fit.get(f'base_{key}', value)) for key, value in (
+        ('nf', base.a.size - 1), ('nb', base.b.shape[1]), ('nk', base.nk)))
+    nf, nk = min(given[0], BASE_ORDERS[0]), min(given[2], 1)
+    physical = (nf, max(nf + 1 - nk, 1), nk)
+    text = (f'base: nf={physical[0]}, nb={physical[1]}, nk={physical[2]} with the given '
+            f'model\'s effects ({", ".join(base_effects) or "none"}), refitted on the '
+            f'calibration shots')
+    if given != physical:
+        text += (f'; the model\'s own structure (nf={given[0]}, nb={given[1]}, nk={given[2]}) '
+                 f'is not used: its extra poles or input delay may stand in for a missing '
+                 f'effect, which the candidates test')
+    notes.append(text)
+    return physical, base_effects
+
+
+def _context(calib, valid, fs: float, orders: tuple[int, int, int],
+             base_effects: tuple[str, ...], alpha: float, residual_analysis: bool,
+             progress, notes: list[str]) -> _Context:
+    """Fit the base model and measure its validation residual and the noise."""
+    cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
+        [s for s in valid if s.shots])
+    nf, nb, nk = orders
+    with progress('base model', 1) as bar:
+        base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk)
+        bar.advance()
+    prediction = base.predict(vw)
+    residual = [w.y - p for w, p in zip(vw, prediction.total)]
+    quiet = _quiet(residual, vw, fs)
+    if not quiet:
+        raise DiagnosisError('no validation window has a pre-trigger of 8 samples or more: '
+                             'the noise cannot be measured; detect shots with a longer '
+                             'pre-trigger')
+    noise = noise_model(quiet, max(1, round(NOISE_LAG_S * fs)))
+    model = base.model()
+    ringing = max(1, round(ringing_time_s(model) * fs))
+    shots = [shot for s in valid if s.shots for shot in s.shots]
+    bounds = [segment_bounds(shot, w.y.size, ringing) for shot, w in zip(shots, vw)]
+    analyses = ()
+    if residual_analysis:
+        with progress('residual analysis', 1) as bar:
+            analyses = _analyses(model, valid, notes)
+            bar.advance()
+    return _Context(fs, cw, vw, orders, base_effects, base, prediction, residual, noise,
+                    bounds, analyses, alpha)
+
+
+def _quiet(residual: Sequence[np.ndarray], windows: Sequence[Window],
+           fs: float) -> list[np.ndarray]:
+    """
+    Return the pre-trigger residual of every window, pickup removed: the noise to measure.
+
+    Per recording, a straight line per window and the mains lines (50 and 60 Hz with their
+    odd harmonics, in recording time) are fitted by least squares and removed, and the rest
+    scaled by ``√(n/(n − k))`` for the ``k`` coefficients: slow pickup and hum are not
+    taken for noise (the residual before the trigger then shows them as excess).
+    """
+    out = []
+    for source in sorted({w.source for w in windows}):
+        chosen = [(r, w) for r, w in zip(residual, windows)
+                  if w.source == source and w.baseline >= 8]
+        if not chosen:
+            continue
+        n = sum(w.baseline for _, w in chosen)
+        rows = []
+        offset = 0
+        for _, w in chosen:
+            for power in (0, 1):
+                row = np.zeros(n)
+                row[offset:offset + w.baseline] = np.linspace(-1, 1, w.baseline) ** power
+                rows.append(row)
+            offset += w.baseline
+        lines = np.vstack([np.hstack([line_columns(mains, start=w.start, n=w.baseline, fs=fs,
+                                                   baseline=0) for _, w in chosen])
+                           for mains in MAINS_HZ])
+        if n >= 8 * (len(rows) + lines.shape[0]):
+            rows += list(lines)
+        x = np.array(rows).T
+        y = np.concatenate([r[:w.baseline] for r, w in chosen])
+        coef, _, rank, _ = np.linalg.lstsq(x, y, rcond=1e-8)
+        rest = (y - x @ coef) * math.sqrt(n / max(n - rank, 1))
+        out += np.split(rest, np.cumsum([w.baseline for _, w in chosen])[:-1])
+    return out
+
+
+def _candidates(ids: Sequence[str], ctx: _Context, progress,
+                notes: list[str]) -> tuple[list[Ranked], list[Skipped]]:
+    """Fit and score every candidate; a failing one is a note, the others go on."""
+    ranked, skipped = [], []
+    modes = sorted((m for m in model_resonances(ctx.base.model()) if m[1] < MODE_ZETA),
+                   key=lambda m: m[1])
+    token = BASE_CONTEXT.set({'modes_khz': tuple(fn / 1e3 for fn, _ in modes)})
+    try:
+        _fit_each(ids, ctx, progress, notes, ranked, skipped)
+    finally:
+        BASE_CONTEXT.reset(token)
+    ranked.sort(key=lambda r: (not r.significant, -r.score))
+    return ranked, skipped
+
+
+def _fit_each(ids: Sequence[str], ctx: _Context, progress, notes: list[str],
+              ranked: list[Ranked], skipped: list[Skipped]) -> None:
+    """Fit and score each candidate into ``ranked`` (or ``skipped``, or a note)."""
+    nf, nb, nk = ctx.orders
+    with progress('effects', len(ids)) as bar:
+        for effect_id in ids:
+            effect = get_effect(effect_id)
+            reason = ('already in the base model' if effect_id in ctx.base_effects
+                      else effect.applicable(ctx.calibration))
+            if reason is not None:
+                skipped.append(Skipped(effect_id, reason))
+            else:
+                try:
+                    fit = fit_extended(ctx.calibration, effects=ctx.base_effects + (effect_id,),
+                                       fs=ctx.fs, nf=nf, nb=nb, nk=nk,
+                                       starts=ctx.base.denominators)
+                    ranked.append(_score(effect_id, fit, ctx))
+                except Exception as exc:  # noqa: B902 - one candidate must not stop the others
+                    why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
+                    notes.append(f'{effect_id}: not fitted: {type(exc).__name__}'
+                                 f'{": " + why if why else ""}')
+            bar.advance()
+
+
+def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.ndarray],
+               ctx: _Context) -> tuple[float, str, float]:
+    """Return ``(statistic, test, p-value)`` of an extension's improvement over the base."""
+    extra = prediction.disturbance_parameters - ctx.prediction.disturbance_parameters
+    if effect.acceleration_driven or extra <= 0:
+        delta = [p - b for p, b in zip(prediction.total, ctx.prediction.total)]
+        # The noise in each window is e − mean(e over the pre-trigger): its product with δ
+        # is that of e with δ̃, δ with its sum taken back over the pre-trigger.
+        shifted = []
+        for d, w in zip(delta, ctx.validation):
+            d = d.copy()
+            if w.baseline > 0:
+                d[:w.baseline] -= d.sum() / w.baseline
+            shifted.append(d)
+        variance = ctx.noise.variance_of(shifted)
+        product = sum(float(r @ d) for r, d in zip(ctx.residual, delta))
+        statistic = product / math.sqrt(variance) if variance > 0 else 0.0
+        return statistic, 'z', float(stats.norm.sf(statistic))
+    # Energy the validation-fitted regressors take from the residual (a projection).
+    before = [w.y - i for w, i in zip(ctx.validation, prediction.induced)]
+    taken = sum(float(b @ b - r @ r) for b, r in zip(before, residual))
+    statistic = taken / ctx.noise.long_run_variance
+    return statistic, 'chi2', float(stats.chi2.sf(statistic, extra))
+
+
+def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
+    """Score one extended fit on the validation windows."""
+    effect = get_effect(effect_id)
+    prediction = fit.predict(ctx.validation)
+    residual = [w.y - p for w, p in zip(ctx.validation, prediction.total)]
+    sse = sum(float(r @ r) for r in residual)
+    score = 1.0 - sse / ctx.sse
+    explained = (ctx.sse - sse) / (ctx.samples * ctx.noise.variance) \
+        if ctx.noise.variance > 0 else math.inf
+    statistic, test, p_value = _statistic(effect, prediction, residual, ctx)
+    parameters = fit.parameters(effect_id)
+    outcome = Outcome(score=score, parameters=parameters, statistic=statistic,
+                      p_value=p_value)
+    analysis = ctx.analyses[0] if ctx.analyses else None
+    try:
+        evidence = effect.evidence(analysis, outcome)
+    except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
+        evidence = Effect.evidence(effect, None, outcome)
+    units = {k: effect.parameters.get(k, '') for k in parameters}
+    doubt = effect.implausible(fit)
+    if doubt is None and not effect.acceleration_driven:
+        doubt = _after_triggers(prediction, residual, ctx)
+    if doubt is not None:
+        evidence = f'{evidence} Not counted: {doubt}.'
+    significant = (p_value < ctx.alpha and score >= MIN_SCORE
+                   and explained >= PRACTICAL_SHARE and doubt is None)
+    return Ranked(effect=effect_id, title=effect.title, score=float(score),
+                  parameters=parameters, evidence=evidence, significant=bool(significant),
+                  statistic=float(statistic), test=test, p_value=p_value,
+                  fit_percent=float(fit_percent([w.y for w in ctx.validation],
+                                                prediction.total)),
+                  peak_residual_percent=_peak_percent(ctx.validation, residual), units=units,
+                  explained=float(explained), leftover=ctx.leftover(residual), doubt=doubt,
+                  fit=fit)
+
+
+def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
+                    ctx: _Context) -> str | None:
+    """
+    Return why a disturbance's improvement is no pickup present before the shocks, or None.
+
+    Pickup such as mains hum is there before the triggers as after them. Before the onsets
+    the fitted disturbance ``d`` predicts the energy it removes, ``D = Σ d²`` (the residual
+    there being ``d`` plus noise); what it removes there is ``A = Σ (r_base² − r²)``, with
+    standard deviation ``2 √Var(eᵀd)`` under that hypothesis. ``A`` more than
+    :data:`BEFORE_Z` deviations below :data:`BEFORE_SHARE` of ``D`` (regressors that only
+    follow something the shocks bring give ``A ≈ −D``; a hum fitted beside another effect
+    a little less than ``D``) rejects it.
+    """
+    removed = expected = 0.0
+    parts = []
+    for r, b, w, d in zip(residual, ctx.bounds, ctx.residual, prediction.disturbance):
+        onset = b[1]
+        removed += float(w[:onset] @ w[:onset] - r[:onset] @ r[:onset])
+        expected += float(d[:onset] @ d[:onset])
+        parts.append(d[:onset])
+    spread = 2.0 * math.sqrt(ctx.noise.variance_of(parts))
+    if expected <= 0 or removed >= BEFORE_SHARE * expected - BEFORE_Z * spread:
+        return None
+    return (f'before the triggers it removes {removed / expected:.2f} of the energy it '
+            f'predicts there: what it follows comes with the shocks')
+
+
+def _pair(best: Ranked, others: Sequence[Ranked], ctx: _Context
+          ) -> tuple[Ranked, Leftover] | None:
+    """
+    Return the significant effect that, added to ``best``, leaves noise, and that leftover.
+
+    The two changes of the prediction (each fitted on the calibration shots) are added: for
+    effects that explain different parts of the residual this is what fitting both gives;
+    for two that explain the same part it removes that part twice and leaves more.
+    """
+    mine = best.fit.predict(ctx.validation).total
+    found = None
+    for other in others:
+        theirs = other.fit.predict(ctx.validation).total
+        residual = [w.y - a - b + c for w, a, b, c in zip(
+            ctx.validation, mine, theirs, ctx.prediction.total)]
+        left = ctx.leftover(residual)
+        if left.consistent and (found is None or left.energy_ratio < found[1].energy_ratio):
+            found = (other, left)
+    return found
+
+
+def _share(ctx: _Context, left: Leftover) -> float | None:
+    """Return the share of the base residual's excess energy a model with ``left`` removes."""
+    base = ctx.sse / (ctx.samples * ctx.noise.variance) if ctx.noise.variance > 0 else math.inf
+    if not math.isfinite(base) or base <= 1.0:
+        return None
+    return float(min(max((base - left.energy_ratio) / (base - 1.0), 0.0), 1.0))
+
+
+def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
+             ) -> tuple[str, str, tuple[str, ...], Leftover, float | None]:
+    """Return the verdict, its explanation, the named effects, their leftover and share."""
+    significant = [r for r in ranked if r.significant]
+    if not significant:
+        return _no_effect(ctx, base_left, ranked)
+    best = significant[0]
+    count = f'{len(significant)} significant effect(s)'
+    if best.leftover.consistent:
+        share = _share(ctx, best.leftover)
+        return ('missing_effect',
+                f'missing effect: {best.title} ({best.effect}) removes '
+                f'{100 * best.score:.1f} % of the validation residual energy '
+                f'(p = {best.p_value:.2g}); it leaves {best.leftover.describe()}, consistent '
+                f'with the noise; {count}', (best.effect,), best.leftover, share)
+    pair = _pair(best, significant[1:], ctx)
+    if pair is not None:
+        other, left = pair
+        return ('missing_effect',
+                f'missing effects: {best.title} ({best.effect}) and {other.title} '
+                f'({other.effect}) remove {100 * best.score:.1f} % and '
+                f'{100 * other.score:.1f} % of the validation residual energy; together '
+                f'they leave {left.describe()}, consistent with the noise (add the first, '
+                f'then diagnose again); {count}',
+                (best.effect, other.effect), left, _share(ctx, left))
+    share = _share(ctx, best.leftover)
+    part = '' if share is None else f' ({100 * share:.0f} % of what lies beyond the noise)'
+    return ('partly_explained',
+            f'partly explained: {best.title} ({best.effect}) removes {100 * best.score:.1f} % '
+            f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
+            f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
+            f'outside the catalogue remains; {count}',
+            (best.effect,), best.leftover, share)
+
+
+def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
+               ) -> tuple[str, str, tuple[str, ...], Leftover, None]:
+    """Return the verdict when no effect is significant: adequate or unexplained."""
+    failing = [a for a in ctx.analyses if not a.consistent_with_noise]
+    if base_left.consistent and not failing:
+        return ('adequate',
+                f'adequate: the base residual is consistent with noise ('
+                f'{base_left.describe()}, tolerance {base_left.tolerance:.3f}) and no effect '
+                f'improves it beyond noise', (), base_left, None)
+    why = (base_left.describe() if not base_left.consistent else
+           f'the residual analysis finds structure: {failing[0].summary()[0]}')
+    doubted = [r for r in ranked if r.doubt and r.explained >= PRACTICAL_SHARE
+               and r.p_value < ctx.alpha]
+    aside = ('' if not doubted else
+             f'; {doubted[0].title} ({doubted[0].effect}) removes '
+             f'{100 * doubted[0].score:.1f} % but is not counted: {doubted[0].doubt}')
+    return ('unexplained',
+            f'unexplained: the base residual is not noise ({why}) but no catalogued effect '
+            f'explains a relevant part of it beyond noise{aside}', (), base_left, None)
 
 
 def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | None = None,
@@ -371,134 +755,27 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     fs = rates.pop()
     if base is not None:
         base.check_rate(fs, model_name='the base model', data_name='every recording given')
-    cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
-        [s for s in valid if s.shots])
-    if not cw or not vw:
+    if not any(s.shots for s in calib) or not any(s.shots for s in valid):
         raise DiagnosisError('the diagnosis needs calibration and validation shots'
                              + (f' ({"; ".join(notes)})' if notes else ''))
-    if base is not None:
-        base_effects = tuple(e['id'] for e in base.effects if e.get('id') in EFFECTS)
-        nf, nb, nk = (int(base.fit.get(f'base_{key}', value)) for key, value in (
-            ('nf', base.a.size - 1), ('nb', base.b.shape[1]), ('nk', base.nk)))
-        notes.append(f'base structure from the given model (nf={nf}, nb={nb}, nk={nk}, '
-                     f'effects: {", ".join(base_effects) or "none"}), refitted on the '
-                     f'calibration shots')
-    else:
-        nf, nb = orders
-        base_effects = ()
-        if delay is None:
-            delay = estimate_delay([(w.acceleration[2:3], w.y) for w in cw]).nk
-        nk = delay
+    orders3, base_effects = _base_structure(
+        base, orders, delay, shot_windows([s for s in calib if s.shots]), notes)
     ids = list(candidates) if candidates is not None else [
         e for e in EFFECTS if e not in base_effects]
     for effect_id in ids:
         get_effect(effect_id)
-    with progress('base model', 1) as bar:
-        base_fit = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk)
-        bar.advance()
-    base_prediction = base_fit.predict(vw)
-    base_residual = [w.y - p for w, p in zip(vw, base_prediction.total)]
-    noise = _noise(base_residual, vw, fs)
-    sse_base = sum(float(r @ r) for r in base_residual)
-    n = sum(r.size for r in base_residual)
-    energy_ratio = sse_base / n / noise.variance
-    tolerance = 1 + MODEL_ALLOWANCE + ENERGY_Z * math.sqrt(
-        2 * (noise.autocovariance[0] ** 2 + 2 * np.sum(noise.autocovariance[1:] ** 2)) / n
-    ) / noise.variance
-    analyses = ()
-    if residual_analysis:
-        with progress('residual analysis', 1) as bar:
-            analyses = _analyses(base_fit.model(), valid)
-            bar.advance()
-    ranked, skipped = [], []
-    with progress('effects', len(ids)) as bar:
-        for effect_id in ids:
-            effect = get_effect(effect_id)
-            if effect_id in base_effects:
-                skipped.append(Skipped(effect_id, 'already in the base model'))
-            else:
-                reason = effect.applicable(cw)
-                if reason is not None:
-                    skipped.append(Skipped(effect_id, reason))
-                else:
-                    try:
-                        fit = fit_extended(cw, effects=base_effects + (effect_id,), fs=fs,
-                                           nf=nf, nb=nb, nk=nk,
-                                           starts=base_fit.denominators)
-                    except (IdentError, EffectError) as exc:
-                        skipped.append(Skipped(effect_id, f'the fit failed: {exc}'))
-                    else:
-                        ranked.append(_score(effect_id, fit, vw, base_prediction,
-                                             base_residual, noise, analyses,
-                                             alpha / max(len(ids), 1)))
-            bar.advance()
-    ranked.sort(key=lambda r: (not r.significant, -r.score))
-    consistent = energy_ratio <= tolerance and all(a.consistent_with_noise for a in analyses)
-    if any(r.significant for r in ranked):
-        verdict = 'missing_effect'
-        best = ranked[0]
-        explanation = (f'missing effect: {best.title} ({best.effect}) removes '
-                       f'{100 * best.score:.1f} % of the validation residual energy '
-                       f'(p = {best.p_value:.2g}); '
-                       f'{sum(r.significant for r in ranked)} significant effect(s)')
-    elif consistent:
-        verdict = 'adequate'
-        explanation = (f'adequate: the base residual is consistent with noise (mean square '
-                       f'{energy_ratio:.3f}× the noise variance, tolerance '
-                       f'{tolerance:.3f}) and no effect improves it beyond noise')
-    else:
-        verdict = 'unexplained'
-        why = (f'its mean square is {energy_ratio:.3f}× the noise variance (tolerance '
-               f'{tolerance:.3f})' if energy_ratio > tolerance
-               else 'the residual analysis finds structure')
-        explanation = (f'unexplained: the base residual is not noise ({why}) but no '
-                       f'catalogued effect explains it beyond noise')
+    ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
+                   residual_analysis, progress, notes)
+    ranked, skipped = _candidates(ids, ctx, progress, notes)
+    base_left = ctx.leftover(ctx.residual, named=False)
+    verdict, explanation, named, left, share = _verdict(ranked, ctx, base_left)
+    consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
     return Diagnosis(
-        verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=base_fit,
+        verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.base,
         base_effects=tuple(base_effects),
-        fit_percent=float(fit_percent([w.y for w in vw], base_prediction.total)),
-        peak_residual_percent=_peak_percent(vw, base_residual),
-        noise_sigma_pa=math.sqrt(noise.variance), energy_ratio=float(energy_ratio),
-        energy_tolerance=float(tolerance), consistent_with_noise=bool(consistent),
-        analyses=analyses, alpha=alpha, explanation=explanation, notes=tuple(notes))
-
-
-def _score(effect_id: str, fit: ExtendedFit, windows: Sequence[Window],
-           base_prediction: Prediction, base_residual: Sequence[np.ndarray], noise: _Noise,
-           analyses: tuple, alpha: float) -> Ranked:
-    """Score one extended fit on the validation windows."""
-    effect = get_effect(effect_id)
-    prediction = fit.predict(windows)
-    residual = [w.y - p for w, p in zip(windows, prediction.total)]
-    sse_base = sum(float(r @ r) for r in base_residual)
-    score = 1.0 - sum(float(r @ r) for r in residual) / sse_base
-    extra = prediction.disturbance_parameters - base_prediction.disturbance_parameters
-    if effect.acceleration_driven or extra <= 0:
-        delta = [p - b for p, b in zip(prediction.total, base_prediction.total)]
-        variance = noise.variance_of_product(delta)
-        product = sum(float(r @ d) for r, d in zip(base_residual, delta))
-        statistic = product / math.sqrt(variance) if variance > 0 else 0.0
-        test, p_value = 'z', float(stats.norm.sf(statistic))
-    else:
-        # Energy the validation-fitted regressors take from the residual (a projection).
-        before = [w.y - i for w, i in zip(windows, prediction.induced)]
-        taken = sum(float(b @ b - r @ r) for b, r in zip(before, residual))
-        statistic = taken / noise.long_run_variance
-        test, p_value = 'chi2', float(stats.chi2.sf(statistic, extra))
-    parameters = fit.parameters(effect_id)
-    outcome = Outcome(score=score, parameters=parameters, statistic=statistic,
-                      p_value=p_value)
-    analysis = analyses[0] if analyses else None
-    try:
-        evidence = effect.evidence(analysis, outcome)
-    except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
-        evidence = Effect.evidence(effect, None, outcome)
-    units = {k: effect.parameters.get(k, '') for k in parameters}
-    return Ranked(effect=effect_id, title=effect.title, score=float(score),
-                  parameters=parameters, evidence=evidence,
-                  significant=bool(p_value < alpha and score >= MIN_SCORE),
-                  statistic=float(statistic),
-                  test=test, p_value=p_value,
-                  fit_percent=float(fit_percent([w.y for w in windows], prediction.total)),
-                  peak_residual_percent=_peak_percent(windows, residual), units=units,
-                  fit=fit)
+        fit_percent=float(fit_percent([w.y for w in ctx.validation], ctx.prediction.total)),
+        peak_residual_percent=_peak_percent(ctx.validation, ctx.residual),
+        noise_sigma_pa=math.sqrt(ctx.noise.variance), energy_ratio=base_left.energy_ratio,
+        energy_tolerance=base_left.tolerance, consistent_with_noise=bool(consistent),
+        analyses=ctx.analyses, alpha=alpha, explanation=explanation, notes=tuple(notes),
+        named=named, leftover=left, base_leftover=base_left, explained_share=share)

@@ -11,9 +11,12 @@ ever straddles two windows.
   band ``2.58 √(Σ_w (n_w − k))/N`` of a white residual; ``white`` tests all L lags at once
   (Šidák-corrected band, 1 % family-wise false alarms). The residual of a correct model is
   the pressure noise *plus the accelerometer noise passed through the model*, which the
-  resonance colours; so the residual after the onset is also compared with the residual
-  before the trigger (``matches_pretrigger``): noise coloured like the noise before the
-  shock is no missing effect.
+  resonance colours (and an anti-alias filter may colour the pressure noise itself); so the
+  residual after the onset is also compared with the residual before the trigger
+  (``matches_pretrigger``), each lag against Bartlett's variance of the *noise's own*
+  autocorrelation (:mod:`sensor_comp.core.noise_floor`), not the white band: noise coloured
+  like the noise before the shock is no missing effect, nor is a difference smaller than
+  :data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE`.
 - **Independence**: ``r_εu(k) = Σ ε(t+k) u(t)/√(Σε² Σu²)`` for ``k = −L..L`` with u the
   axial (``a_z``) and lateral (``a_x``, ``a_y``) acceleration. A shock is short and strongly
   coloured, so the naive ``±z/√N`` band is far too narrow. The band uses Bartlett's variance
@@ -44,8 +47,12 @@ ever straddles two windows.
 - **Noise floor**: pre-trigger σ per shot (MAD, robust) and the sample-to-sample σ (MAD of
   first differences / √2, blind to hum and drift); ``consistent_with_noise`` needs the
   residual's mean square within the statistical tolerance of σ² (effective degrees of
-  freedom from the pre-trigger autocorrelation), whiteness (or colour matching the
-  pre-trigger), independence and no significant probe.
+  freedom from the pre-trigger autocorrelation) plus a practical allowance
+  (:data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE` of the noise energy), whiteness
+  (or colour matching the pre-trigger), and no lag of ``a_z`` and no significant probe
+  explaining that share of the noise energy or more (``relevant_probes``): with hundreds of
+  thousands of samples far smaller structure is significant, but no model change is
+  worth it.
 
 The default lag range L spans the model's slowest time constant (the dominant mode's
 envelope ``1/(ζ 2π f_n)`` or the slowest real pole), at least 0.5 ms and at most 2 ms, and
@@ -66,11 +73,13 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy import fft, linalg, signal, stats
+from scipy import signal, stats
 
 from .compare import compare, Comparison
 from .ident.simulate import simulate
 from .model import Model, ModelError
+from .noise_floor import (gram, noise_model, NoiseModel, PRACTICAL_SHARE,
+                          segment_bounds)
 from .shots import mad_sigma, segments, Shot
 from ..errors import SensorCompError
 from ..streams import G0, Recording
@@ -96,6 +105,8 @@ __all__ = [
     'analyse',
     'autocorrelation',
     'cross_correlation',
+    'model_resonances',
+    'ringing_time_s',
 ]
 
 #: Significance level of every test (99 % bands; family-wise over lags, bins and probes).
@@ -439,7 +450,8 @@ class ResidualAnalysis:
         pretrigger_excess: Pre-trigger RMS over ``white_sigma_pa`` (1 for white noise).
         pretrigger_excess_limit: Largest ``pretrigger_excess`` white noise gives (3 σ).
         energy_ratio: Residual mean square over ``noise_sigma_pa²``.
-        energy_tolerance: Largest ``energy_ratio`` noise alone gives (99 %, one-sided).
+        energy_tolerance: Largest ``energy_ratio`` noise alone gives (99 %, one-sided),
+            plus the practical allowance :data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE`.
         notes: What the user should know (shortened lag range, missing channels, ...).
 
     """
@@ -489,17 +501,35 @@ class ResidualAnalysis:
                       key=lambda n: -self.probes[n].fraction)
 
     @property
+    def relevant_probes(self) -> list[str]:
+        """
+        Return the significant probes that matter, most residual energy explained first.
+
+        A probe matters when what it explains is at least :data:`~sensor_comp.core.
+        noise_floor.PRACTICAL_SHARE` of the noise energy of the windows: with many samples
+        far smaller structure is significant, but not worth a model change.
+        """
+        return [n for n in self.significant_probes
+                if self.probes[n].fraction * self.energy_ratio >= PRACTICAL_SHARE]
+
+    @property
+    def relevant_dependence(self) -> bool:
+        """Return whether ``a_z`` at one lag explains a relevant share of the residual."""
+        c = self.cross['a_z']
+        return not c.passed and c.worst_value ** 2 * self.energy_ratio >= PRACTICAL_SHARE
+
+    @property
     def consistent_with_noise(self) -> bool:
         """
-        Return whether the residual is the noise floor and nothing else.
+        Return whether the residual is the noise floor and nothing else that matters.
 
-        Its mean square lies within the tolerance of the pre-trigger σ², it is white or
-        coloured like the pre-trigger noise, independent of ``a_z``, and no probe is
-        significant.
+        Its mean square lies within the tolerance of the pre-trigger σ² (with the practical
+        allowance), it is white or coloured like the pre-trigger noise, no lag of ``a_z``
+        and no probe explains a relevant share of it (:attr:`relevant_probes`).
         """
         return (self.energy_ratio <= self.energy_tolerance
-                and (self.white or self.matches_pretrigger) and self.independent
-                and not self.significant_probes)
+                and (self.white or self.matches_pretrigger) and not self.relevant_dependence
+                and not self.relevant_probes)
 
     def segment(self, name: str) -> SegmentEnergy:
         """
@@ -525,6 +555,7 @@ class ResidualAnalysis:
             'max_lag': self.max_lag, 'ringing_s': self.ringing_s, 'white': self.white,
             'matches_pretrigger': self.matches_pretrigger, 'independent': self.independent,
             'correlated_with_lateral': self.correlated_with_lateral,
+            'relevant_probes': self.relevant_probes,
             'consistent_with_noise': self.consistent_with_noise,
             'whiteness': self.whiteness.to_dict(), 'pretrigger': self.pretrigger.to_dict(),
             'cross': {k: c.to_dict() for k, c in self.cross.items()},
@@ -544,28 +575,6 @@ def _json(x: float) -> float | None:
 
 
 # --- pooled lagged products -------------------------------------------------------------
-
-def _gram(blocks: Sequence[np.ndarray], max_lag: int) -> np.ndarray:
-    """
-    Return ``out[max_lag + j, a, b] = Σ_w Σ_t x_a(t + j) x_b(t)`` for ``|j| <= max_lag``.
-
-    Each block is one window ``(k, n)``; products never cross windows.
-    """
-    k = blocks[0].shape[0]
-    out = np.zeros((2 * max_lag + 1, k, k))
-    for x in blocks:
-        n = x.shape[1]
-        m = min(max_lag, n - 1)
-        if n == 0:
-            continue
-        nfft = fft.next_fast_len(n + m, real=True)   # no circular wrap up to lag m
-        f = fft.rfft(x, nfft, axis=1)
-        c = fft.irfft(f[:, np.newaxis, :] * f[np.newaxis, :, :].conj(), nfft, axis=2)
-        out[max_lag:max_lag + m + 1] += np.moveaxis(c[:, :, :m + 1], 2, 0)
-        if m:
-            out[max_lag - m:max_lag] += np.moveaxis(c[:, :, nfft - m:], 2, 0)
-    return out
-
 
 def _pair_counts(lengths: Sequence[int], lags: np.ndarray) -> np.ndarray:
     """Return the number of products at each lag, pooled over windows."""
@@ -621,7 +630,7 @@ def autocorrelation(windows: Sequence[np.ndarray], *, max_lag: int,
         raise ResidualError(f'{name}: autocorrelation needs windows and max_lag >= 0, got '
                             f'{len(windows)} windows and max_lag {max_lag}')
     lengths = [w.size for w in windows]
-    g = _gram([w[np.newaxis] for w in windows if w.size], max_lag)[max_lag:, 0, 0]
+    g = gram([w[np.newaxis] for w in windows if w.size], max_lag)[max_lag:, 0, 0]
     lags = np.arange(max_lag + 1)
     values = g / g[0] if g[0] > 0 else np.zeros_like(g)
     sd = np.sqrt(_pair_counts(lengths, lags)) / max(sum(lengths), 1)
@@ -662,7 +671,7 @@ def cross_correlation(residual: Sequence[np.ndarray], inputs: Sequence[np.ndarra
                             f'{[u.shape for u in inputs]}')
     lengths = [w.size for w in residual]
     span = max(lengths) - 1
-    g = _gram([np.vstack([w, u]) for w, u in zip(residual, inputs)], span)[span:]
+    g = gram([np.vstack([w, u]) for w, u in zip(residual, inputs)], span)[span:]
     lags = np.arange(-max_lag, max_lag + 1)
     re, cu = g[:, 0, 0], g[:, 1, 1]
     if not (re[0] > 0 and cu[0] > 0):
@@ -725,6 +734,21 @@ def _dynamics(model: Model) -> _Dynamics:
     return _Dynamics(path, ringing, slowest, tuple(sorted(resonances)), note)
 
 
+def model_resonances(model: Model) -> tuple[tuple[float, float], ...]:
+    """Return ``(natural frequency in Hz, damping ratio)`` of every stable complex pole pair."""
+    return _dynamics(model).resonances
+
+
+def ringing_time_s(model: Model) -> float:
+    """
+    Return the length of the ringing segment after a pulse for ``model``, s.
+
+    :data:`RINGING_TIME_CONSTANTS` envelope time constants ``1/(ζ 2π f_n)`` of its dominant
+    mode, or :data:`OVERDAMPED_RINGING_S` for a model without one.
+    """
+    return _dynamics(model).ringing_s
+
+
 def _through(path: _Path, blocks: Sequence[np.ndarray]) -> list[np.ndarray]:
     """Return ``G·x`` per window, from rest."""
     return simulate(path, [np.asarray(x, dtype=np.float64) for x in blocks])
@@ -732,57 +756,9 @@ def _through(path: _Path, blocks: Sequence[np.ndarray]) -> list[np.ndarray]:
 
 # --- the noise before the trigger --------------------------------------------------------
 
-@dataclass(frozen=True)
-class _Noise:
-    acov: np.ndarray        # autocovariance per sample of the noise model, lags 0..m
-    mean_square: float      # pre-trigger mean square, Pa²
-    samples: int
-    order: int              # AR order chosen by BIC (0: white)
-    bartlett: float         # Σ_j ρ(j)² (variance factor of a mean square)
-
-
-def _noise(pre: Sequence[np.ndarray], max_lag: int) -> _Noise:
-    """
-    Fit the noise before the triggers with an AR model (order by BIC, at most 20).
-
-    A parametric spectrum is far steadier than raw lagged products of a few thousand
-    samples (whose sum over L lags wanders by ±√(4L/3N)); white noise gets order 0 and
-    then exactly ``σ² I``. The model's autocovariance runs to 4 L lags, Bartlett-tapered
-    so that every quadratic form built from it is a valid variance.
-    """
-    total = sum(p.size for p in pre)
-    top = min(_AR_MAX_ORDER, max(p.size for p in pre) - 1)
-    acov = _gram([p[np.newaxis] for p in pre if p.size], top)[top:, 0, 0] / total
-    if not acov[0] > 0:
-        return _Noise(np.zeros(1), 0.0, total, 0, 1.0)
-    order, ar = 0, np.zeros(0)
-    best = total * math.log(acov[0])
-    for p in range(1, top + 1):
-        coef = linalg.solve_toeplitz(acov[:p], acov[1:p + 1])
-        innovation = acov[0] - coef @ acov[1:p + 1]
-        if not innovation > 0:
-            break
-        bic = total * math.log(innovation) + p * math.log(total)
-        if bic < best:
-            best, order, ar = bic, p, coef
-    if order == 0:
-        model = acov[:1]
-    else:
-        # Yule–Walker reproduces the sample autocovariance up to the order; beyond it the
-        # AR recursion γ(j) = Σ a_i γ(j − i) continues it exactly.
-        m = 4 * max_lag
-        den = np.concatenate([[1.0], -ar])
-        zi = signal.lfiltic([1.0], den, acov[order:0:-1])
-        tail = signal.lfilter([1.0], den, np.zeros(max(m - order, 0)), zi=zi)[0]
-        model = np.concatenate([acov[:order + 1], tail])[:m + 1]
-        model = model * (1.0 - np.arange(model.size) / model.size)
-    rho = model / model[0]
-    return _Noise(model, float(acov[0]), total, order, float(1.0 + 2.0 * np.sum(rho[1:] ** 2)))
-
-
 # --- probes ------------------------------------------------------------------------------
 
-def _probe_stats(e: Sequence[np.ndarray], x: Sequence[np.ndarray], noise: _Noise, *,
+def _probe_stats(e: Sequence[np.ndarray], x: Sequence[np.ndarray], noise: NoiseModel, *,
                  nuisance: Sequence[np.ndarray] | None = None) -> tuple:
     """
     Return ``(fraction, fraction alone, Wald χ², dof, coefficients)`` of regressors ``x``.
@@ -817,11 +793,7 @@ def _probe_stats(e: Sequence[np.ndarray], x: Sequence[np.ndarray], noise: _Noise
         xd = xd - _coefficients(zd, xd.T).T @ zd
         ed = ed - zd.T @ _coefficients(zd, ed)
     score = xd @ ed
-    m = noise.acov.size - 1
-    g = _gram(np.split(xd, splits, axis=1), m)
-    cov = noise.acov[0] * g[m]
-    for j in range(1, m + 1):
-        cov = cov + noise.acov[j] * (g[m + j] + g[m - j])
+    cov = noise.covariance(np.split(xd, splits, axis=1))
     if np.any(cov):
         wald = float(score @ np.linalg.lstsq(cov, score, rcond=None)[0])
     else:
@@ -894,7 +866,7 @@ def _search(run, build, taus: Sequence[float]) -> tuple[tuple, float]:
 
 def _probes(e: list[np.ndarray], simulated: list[np.ndarray], accel: list[np.ndarray],
             shots: Sequence[Shot], bounds: list[tuple[int, int, int, int, int]],
-            dyn: _Dynamics, noise: _Noise, fs: float) -> dict[str, Probe]:
+            dyn: _Dynamics, noise: NoiseModel, fs: float) -> dict[str, Probe]:
     az = [a[2] for a in accel]
     output = [y[np.newaxis] for y in simulated]
     run = functools.partial(_probe_stats, e, noise=noise, nuisance=output)
@@ -1092,14 +1064,14 @@ def analyse(model: Model, recording: Recording, shots: Sequence[Shot], *,
         lag = limit
 
     ringing = max(1, round(dyn.ringing_s * fs))
-    bounds = [_bounds(s, w.size, ringing) for s, w in zip(shots, e)]
+    bounds = [segment_bounds(s, w.size, ringing) for s, w in zip(shots, e)]
     pre = [w[:b[0]] for w, b in zip(e, bounds)]
     n_pre = sum(p.size for p in pre)
     if n_pre < max(64, 2 * lag):
         raise ResidualError(f'only {n_pre} pre-trigger samples in the windows; the noise '
                             f'floor needs at least {max(64, 2 * lag)}: cut windows with a '
                             f'quiet pre-trigger (detect_shots pre_ms)')
-    noise = _noise(pre, lag)
+    noise = noise_model(pre, lag)
     pre_lag = min(lag, max(p.size for p in pre) - 1)
     pretrigger = autocorrelation(pre, max_lag=pre_lag, name='pre-trigger')
     cross = {}
@@ -1123,7 +1095,7 @@ def analyse(model: Model, recording: Recording, shots: Sequence[Shot], *,
     # One-sided 99 % tolerance of the log mean-square ratio: residual mean square of N
     # samples against a MAD σ² of the pre-trigger, both with Bartlett's effective count.
     tolerance = math.exp(float(stats.norm.isf(ALPHA)) * math.sqrt(
-        noise.bartlett * (2.0 / n_total + _MAD_LOG_VAR / n_pre)))
+        noise.bartlett * (2.0 / n_total + _MAD_LOG_VAR / n_pre))) + PRACTICAL_SHARE
     return ResidualAnalysis(
         label=comparison.label, fs=fs, n_samples=n_total, max_lag=int(lag),
         ringing_s=ringing / fs, whiteness=autocorrelation(e, max_lag=lag),
@@ -1140,14 +1112,6 @@ def analyse(model: Model, recording: Recording, shots: Sequence[Shot], *,
         energy_tolerance=tolerance, notes=tuple(notes))
 
 
-def _bounds(shot: Shot, n: int, ringing: int) -> tuple[int, int, int, int, int]:
-    """Return (noise stop, onset, pulse end, ringing end, n) in window samples."""
-    onset = min(max(shot.onset - shot.start, 0), n)
-    end = min(max(shot.end - shot.start, onset), n)
-    return (min(max(shot.baseline_stop - shot.start, 0), n), onset, end,
-            min(end + ringing, n), n)
-
-
 def _pooled_square(sigmas: Sequence[float], pre: Sequence[np.ndarray]) -> float:
     """Return the pre-trigger-length weighted mean of ``σ²`` (shots without σ left out)."""
     weights = np.array([p.size for p in pre], dtype=float)
@@ -1155,24 +1119,30 @@ def _pooled_square(sigmas: Sequence[float], pre: Sequence[np.ndarray]) -> float:
 
 
 def _matches(e: Sequence[np.ndarray], bounds: Sequence[tuple], pretrigger: Correlation,
-             noise: _Noise) -> bool:
-    """Return whether the residual after the onsets is correlated like before them."""
+             noise: NoiseModel) -> bool:
+    """
+    Return whether the residual after the onsets is correlated like before them.
+
+    ``r_after(k) − r_pre(k)`` of two stretches of the same noise has Bartlett's variance
+    of the noise's own autocorrelation (:meth:`~sensor_comp.core.noise_floor.NoiseModel.
+    autocorrelation_variance`) times ``1/N_after + 1/N_pre``; a difference counts when it
+    is outside its family-wise band and larger than :data:`~sensor_comp.core.noise_floor.
+    PRACTICAL_SHARE` (colour from less structure than that is no missing effect).
+    """
     lag = int(pretrigger.lags[-1])
     if lag < 1:
         return True
     after = autocorrelation([w[b[1]:] for w, b in zip(e, bounds)], max_lag=lag)
-    # r_after − r_pre of two independent stretches of the same noise: Bartlett variance
-    # (1/N_after + 1/N_pre) Σ ρ² per lag.
     lags = np.arange(1, lag + 1)
-    sd = np.sqrt(noise.bartlett * (
+    sd = np.sqrt(noise.autocorrelation_variance(lag)[1:] * (
         1.0 / np.maximum(_pair_counts([w.size - b[1] for w, b in zip(e, bounds)], lags), 1) +
         1.0 / np.maximum(_pair_counts([b[0] for b in bounds], lags), 1)))
-    return bool(np.all(np.abs(after.values[1:] - pretrigger.values[1:]) <=
-                       _sidak_z(lags.size) * sd))
+    band = np.maximum(_sidak_z(lags.size) * sd, PRACTICAL_SHARE)
+    return bool(np.all(np.abs(after.values[1:] - pretrigger.values[1:]) <= band))
 
 
 def _localise(shots: Sequence[Shot], e: Sequence[np.ndarray], bounds: Sequence[tuple],
-              noise: _Noise, fs: float
+              noise: NoiseModel, fs: float
               ) -> tuple[tuple[ShotResidual, ...], tuple[SegmentEnergy, ...], AmplitudeTrend]:
     """Return the per-shot results, the pooled segment energies and the amplitude trend."""
     pre = [w[:b[0]] for w, b in zip(e, bounds)]

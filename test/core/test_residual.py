@@ -54,13 +54,14 @@ def model(scale=1.0):
 
 
 def make(effect=None, *, shots=SHOTS, sigma=SIGMA, sigma_a=0.0, hum=0.0, seed=0,
-         gap_s=10e-3, random_input=False):
+         gap_s=10e-3, random_input=False, colour=None):
     """
     Return ``(recording, shots)``: quiet pre-trigger, pulse, post-trigger per shot.
 
     ``effect(acc, windows)`` returns pressure added to the true induced pressure;
     ``random_input`` replaces the half-sines by stationary band-limited Gaussian bursts
-    of one variance (a zero-mean, symmetric input).
+    of one variance (a zero-mean, symmetric input); ``colour`` (second-order sections)
+    filters the pressure noise, scaled back to ``sigma``.
     """
     rng = np.random.default_rng(seed)
     windows, pos = [], round(0.01 * FS)
@@ -88,7 +89,11 @@ def make(effect=None, *, shots=SHOTS, sigma=SIGMA, sigma_a=0.0, hum=0.0, seed=0,
     p = through(acc[2]) + (0.0 if effect is None else effect(acc, windows))
     t = np.arange(n) / FS
     p += hum * (np.sin(2 * np.pi * 50 * t + 0.3) + 0.3 * np.sin(2 * np.pi * 150 * t + 1.0))
-    p += sigma * rng.standard_normal(n)
+    noise = rng.standard_normal(n)
+    if colour is not None:
+        noise = signal.sosfilt(colour, noise)
+        noise /= noise.std()
+    p += sigma * noise
     measured = acc + sigma_a * rng.standard_normal(acc.shape)
     recording = Recording(fs=FS, t0_ns=0, pressure=p, acceleration=measured)
     out = []
@@ -434,3 +439,56 @@ def test_errors_name_the_problem():
         analyse(model(), recording, late)
     with pytest.raises(ResidualError, match='segments are'):
         analyse(model(), recording, shots).segment('ringdown')
+
+
+# --- coloured noise and the noise floor (issue 11) ----------------------------------------
+
+def test_coloured_noise_is_the_noise_floor_not_a_missing_effect():
+    # Pressure noise low-passed like an anti-alias filter leaves it (2nd order at 0.2 fs):
+    # strongly correlated at lag 1, so not white, but coloured exactly like the noise
+    # before the trigger, and the residual analysis must call it noise.
+    colour = signal.butter(2, 0.2 * FS, fs=FS, output='sos')
+    results = [analyse(model(), *make(sigma=SIGMA, colour=colour, seed=seed))
+               for seed in range(8)]
+    assert sum(not r.white for r in results) >= 7
+    assert sum(r.consistent_with_noise for r in results) >= 7
+    assert sum(r.matches_pretrigger for r in results) >= 7
+
+
+def test_bartlett_variance_of_the_noise_autocorrelation():
+    # A resonant AR(2) noise: the sample autocorrelation of 3000 samples scatters by
+    # Bartlett's formula, far from the white 1/N (lag 1: 40 times less, lag 10: 3 times more).
+    from sensor_comp.core.noise_floor import noise_model
+    rng = np.random.default_rng(5)
+    den = [1.0, -1.6, 0.9]
+    draws = []
+    for _ in range(300):
+        x = signal.lfilter([1.0], den, rng.standard_normal(3300))[300:]
+        draws.append([x[:x.size - k] @ x[k:] / (x @ x) for k in range(11)])
+    measured = 3000 * np.var(draws, axis=0)
+    noise = noise_model([signal.lfilter([1.0], den, rng.standard_normal(100_000))], 10)
+    predicted = noise.autocorrelation_variance(10)
+    assert noise.order >= 2
+    np.testing.assert_allclose(predicted[1:], measured[1:], rtol=0.35, atol=0.02)
+    assert predicted[1] < 0.1 < 1.0 < predicted[10]
+
+
+def test_leftover_is_noise_or_says_where_and_what_it_is():
+    from sensor_comp.core.noise_floor import leftover, noise_model
+    rng = np.random.default_rng(9)
+    windows = [rng.standard_normal(4000) for _ in range(4)]
+    bounds = [(900, 1000, 1200, 1600, 4000)] * 4
+    noise = noise_model([w[:900] for w in windows], 50)
+    clean = leftover(windows, bounds, noise, FS)
+    assert clean.consistent and abs(clean.energy_ratio - 1) < 0.1 and not clean.shape
+    # A 5 kHz ring in the tail of every window: 0.6 noise energies, all in the tail.
+    t = np.arange(2400) / FS
+    ring = [w.copy() for w in windows]
+    for r in ring:
+        r[1600:] += 2.2 * np.sin(2 * np.pi * 5e3 * t) * np.exp(-t / 5e-3)
+    found = leftover(ring, bounds, noise, FS)
+    assert not found.consistent and found.where.name == 'tail'
+    assert found.line_hz == pytest.approx(5e3, abs=150) and 'rings at 5' in found.shape
+    assert 'in the tail' in found.describe()
+    doc = json.loads(json.dumps(found.to_dict()))
+    assert doc['where'] == 'tail' and doc['consistent'] is False

@@ -25,6 +25,7 @@ curvature of the loss.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass, replace
 import math
 import re
@@ -39,13 +40,20 @@ if TYPE_CHECKING:
     from ..extended import Window
     from ..model import Model
 
-__all__ = ['Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical', 'Search', 'dc_delay_s',
-           'delta_std', 'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s',
-           'modifier_value', 'parameters_text', 'probe_of', 'row_of', 'segment_of', 'sentence',
-           'static_gain', 'stored_std', 'tail_share']
+__all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'ModelSpec', 'Outcome',
+           'Physical', 'Search', 'dc_delay_s', 'delta_std', 'effect_entry', 'entry_of',
+           'excess_delay_s', 'mechanics_delay_s', 'modifier_value', 'parameters_text',
+           'probe_of', 'row_of', 'segment_of', 'sentence', 'static_gain', 'stored_std',
+           'tail_share']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
+#: What an extension's fit may know about the base model beyond its spec, set by the
+#: diagnosis around its candidate fits: ``{'modes_khz': (...)}``, the base model's lightly
+#: damped modes (kHz), the sensor's own as a rule. None outside a diagnosis.
+BASE_CONTEXT: ContextVar[Mapping | None] = ContextVar('sensor_comp_base_context', default=None)
+#: A value searched on a log scale within this factor of a bound sits at that bound.
+EDGE_FACTOR = 1.05
 #: Physical parameters: name -> (value, standard deviation or None).
 Physical = dict[str, tuple[float, float | None]]
 
@@ -233,6 +241,32 @@ class Effect:
         return sentence([f'{self.title}: the extended model removes '
                          f'{100 * outcome.score:.1f} % of the validation residual energy'
                          f'{parameters_text(self, outcome.parameters)}'])
+
+    def implausible(self, fit) -> str | None:
+        """
+        Return why a fit of this effect is no physical reading of it, or None when it is one.
+
+        The improvement a fit brings is evidence of the effect only when the fitted model
+        carries it as the effect: without physical parameters (the fitted model lacks this
+        effect's parts, e.g. a second mode that took over the main one) or with a value
+        searched on a log scale at an end of its range (the data do not tell it, or
+        something else pulls it there: a "resonance" damped as much as allowed, a time
+        constant as short as allowed), the extension fits something else.
+
+        Args:
+            fit: The :class:`~sensor_comp.core.extended.ExtendedFit` with this effect.
+
+        """
+        if self.parameters and not fit.parameters(self.id):
+            return 'its physical parameters cannot be read from the fitted model'
+        for search in fit.spec.searches:
+            if search.key.partition('.')[0] != self.id or not search.log:
+                continue
+            value = fit.values[search.key]
+            if not search.low * EDGE_FACTOR < value < search.high / EDGE_FACTOR:
+                return (f'{search.key.partition(".")[2]} = {value:.4g} sits at an end of '
+                        f'its range ({search.low:g} to {search.high:g})')
+        return None
 
     def describe(self) -> str:
         """Return the effect for a catalogue listing (id, title, parameters, signature)."""

@@ -66,6 +66,13 @@ class ChannelDelay(Effect):
                else stored_std(model, self.id, 'delay_us'))
         return {'delay_us': (delay(model.a, model.b), std)}
 
+    def implausible(self, fit) -> str | None:
+        """Return why the fit is no delay: the generic checks, or a lead instead of a lag."""
+        why = super().implausible(fit)
+        if why is None and fit.parameters(self.id)['delay_us'][0] <= 0:
+            why = 'the fitted pressure path leads the acceleration rather than lagging it'
+        return why
+
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say what the rate probe and the delayed model find."""
         parts = []

@@ -8,8 +8,11 @@ to ``0.4 fs``) and damping ``Z`` (0.003 to 0.2) are found by bounded scalar sear
 the numerators (two more coefficients) then set how strongly each input drives it.
 Free extra poles would be too flexible: they also imitate a slow tail (amplifier
 high-pass, zero shift) or a derivative term; and the searched mode stays ±20 % away from
-the strongest ringing of the data, the sensor's own mode, which it could otherwise take
-over while the base denominator imitates a tail. The static gain of the second mode relative to
+the sensor's own mode, which it could otherwise take over while the base denominator
+imitates a tail: the base model's lightly damped mode when the diagnosis knows it
+(:data:`~sensor_comp.core.effects.base.BASE_CONTEXT`), else the strongest ringing of the
+data (which may be the second mode itself when the sensor's own lies above the shocks'
+band or the anti-alias filter). The static gain of the second mode relative to
 the main one comes from partial fractions of the ``a_z`` path.
 """
 
@@ -21,8 +24,8 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (delta_std, Effect, EffectError, ModelSpec, modifier_value, Outcome,
-                   parameters_text, Physical, row_of, Search, segment_of, sentence,
+from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, ModelSpec, modifier_value,
+                   Outcome, parameters_text, Physical, row_of, Search, segment_of, sentence,
                    stored_std)
 from ..ident.least_squares import delayed_numerator
 from ..inputs import mode_pair
@@ -34,7 +37,7 @@ FREQ, ZETA = 'second_resonance.freq_khz', 'second_resonance.zeta'
 MIN_KHZ = 1.0
 #: Largest damping ratio searched: a resonance rings.
 MAX_ZETA = 0.2
-#: Relative band around the data's strongest ringing (the sensor's own mode) not searched.
+#: Relative band around the sensor's own mode not searched.
 MAIN_BAND = 0.2
 
 
@@ -76,7 +79,8 @@ class SecondResonance(Effect):
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Pass every input through a searched mode; two more numerator coefficients."""
-        main = spec.ringing_khz
+        context = BASE_CONTEXT.get() or {}
+        main = (context.get('modes_khz') or (spec.ringing_khz,))[0]
         exclude = None if main is None else (main / (1 + MAIN_BAND), main * (1 + MAIN_BAND))
         searches = (Search(FREQ, MIN_KHZ, 0.4 * spec.fs / 1e3, log=True, grid=40,
                            start=0.1 * spec.fs / 1e3, exclude=exclude),
