@@ -28,7 +28,8 @@ printed at the end, or from a file with ``--summarise FILE``.
 The plan (``--seed``): catalogue effects × R = 0.5, 1.5, 5, out-of-catalogue effects at
 R = 1.5 and 5, and clean rigs in every rate band, cycled (each cycle moves every combination
 to the next rate band) until ``--cases`` rigs; ``--quick`` is the first cycle, 35 rigs.
-``--budget MIN`` stops launching cases after that many minutes (the rows so far count).
+``--budget MIN`` stops launching cases after that many minutes (the rows so far count);
+``--case N`` reruns one case of the plan, and ``--summarise`` keeps the last row of a case.
 """
 
 from __future__ import annotations
@@ -220,7 +221,7 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
         _with_effect(row, 'top', [calib], [valid], top)
     if row['effect'] in CATALOGUE:
         stage[0] = 'identify_true'
-        if top == row['effect']:
+        if top == row['effect'] and 'top' in row:
             row['true'] = row['top']
         else:
             _with_effect(row, 'true', [calib], [valid], row['effect'])
@@ -557,10 +558,16 @@ def summarise(rows: list[dict]) -> str:
     return '\n'.join(parts)
 
 
-def read_rows(path: str | Path) -> list[dict]:
-    """Return the rows of a JSON lines file."""
-    with open(path, encoding='utf-8') as stream:
-        return [json.loads(line) for line in stream if line.strip()]
+def read_rows(*paths: str | Path) -> list[dict]:
+    """Return the rows of JSON lines files, the last row of each case (a rerun replaces it)."""
+    rows = {}
+    for path in paths:
+        with open(path, encoding='utf-8') as stream:
+            for line in stream:
+                if line.strip():
+                    row = json.loads(line)
+                    rows[row['case'], row['seed']] = row
+    return sorted(rows.values(), key=lambda r: r['case'])
 
 
 def _progress(row: dict, done: int, total: int, began: float) -> str:
@@ -585,6 +592,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--budget', type=float, metavar='MIN',
                         help='start no case after this many minutes')
     parser.add_argument('--start', type=int, default=0, help='skip the first cases of the plan')
+    parser.add_argument('--case', type=int, action='append', metavar='N',
+                        help='run only case N of the plan (repeatable; e.g. to redo a row: '
+                             'the summary keeps the last row of a case)')
     parser.add_argument('--out', default=str(DEFAULT_OUT), help='JSON lines file of the rows')
     parser.add_argument('--append', action='store_true', help='append to --out')
     parser.add_argument('--via-csv', action='store_true',
@@ -593,10 +603,13 @@ def main(argv: list[str] | None = None) -> int:
                         help='print the summary of JSON lines files and exit')
     args = parser.parse_args(argv)
     if args.summarise:
-        print(summarise([row for path in args.summarise for row in read_rows(path)]))
+        print(summarise(read_rows(*args.summarise)))
         return 0
     count = len(_cycle()) if args.quick else args.cases
-    tasks = plan(count, args.seed)[args.start:]
+    if args.case:
+        tasks = [t for t in plan(max(args.case) + 1, args.seed) if t['case'] in args.case]
+    else:
+        tasks = plan(count, args.seed)[args.start:]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rows, began = [], time.perf_counter()
