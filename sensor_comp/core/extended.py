@@ -340,8 +340,10 @@ def slowest_pole_s(spec: ModelSpec) -> float | None:
     shortest time constant those searches may take.
     """
     keys = _timed_keys(spec)
-    lows = [s.low for s in spec.searches if s.key in keys]
-    return min(lows) * 1e-3 if lows else None
+    lows = [s.low * 1e-3 for s in spec.searches if s.key in keys]
+    if spec.slowest_pole_s is not None:
+        lows.append(spec.slowest_pole_s)
+    return min(lows) if lows else None
 
 
 def _timed_keys(spec: ModelSpec) -> set[str]:
@@ -586,7 +588,8 @@ def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
 
 def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,
                  nf: int = 2, nb: int = 2, nk: int = 1,
-                 starts: Sequence[np.ndarray] = ()) -> ExtendedFit:
+                 starts: Sequence[np.ndarray] = (),
+                 slowest_pole_s: float | None = None) -> ExtendedFit:
     """
     Fit a base output-error model plus effects on shot windows.
 
@@ -600,6 +603,9 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         nk: Input delay of the base model, samples.
         starts: Base-order denominators to start from (e.g. another fit's
             :attr:`ExtendedFit.denominators`) instead of searching for them again.
+        slowest_pole_s: Slowest time constant the model's own poles may have, s (see
+            :func:`slowest_pole_s`; the diagnosis holds the base alike, so that it cannot
+            imitate a tail its extensions may not); None: only the effects' bound.
 
     Returns:
         The fit, with the physical parameters of every effect.
@@ -620,7 +626,8 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         reason = effect.applicable(windows)
         if reason is not None:
             raise EffectError(f'cannot fit {effect.id}: {reason}')
-    spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs))
+    spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs),
+                     slowest_pole_s=slowest_pole_s)
     for effect in chosen:
         spec = effect.extend(spec)
     spec = _bound_time_constants(spec, max(w.y.size for w in windows) / fs)

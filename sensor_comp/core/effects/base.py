@@ -119,6 +119,8 @@ class ModelSpec:
         fs: Sample rate in Hz (search ranges may depend on it).
         ringing_khz: Frequency of the strongest ringing after the pulses in the data, kHz
             (the sensor's own mode, as a rule), or None.
+        slowest_pole_s: Slowest time constant the model's own poles may have, s, or None
+            (besides the bound the effects' searched time constants set).
 
     """
 
@@ -131,6 +133,7 @@ class ModelSpec:
     disturbances: tuple[str, ...] = ()
     fs: float = 1e6
     ringing_khz: float | None = None
+    slowest_pole_s: float | None = None
 
     def with_inputs(self, *bases: str) -> ModelSpec:
         """Return the spec with further input channel bases."""
