@@ -8,7 +8,9 @@ and scored on the VALIDATION shots, which it has never seen:
 - **base**: a given model's effects on a sensor base of at most one mode, sampled exactly
   (``nf ≤ 2``, numerator on lags ``nk..nf``, ``nk ≤ 1``), refitted on the calibration
   shots: the orders and delay a free structure search chose are not used, because extra
-  poles or a delay of many samples stand in for the effects the diagnosis is to name.
+  poles or a delay of many samples stand in for the effects the diagnosis is to name; and
+  no pole of any fit may be slower than :data:`SLOWEST_POLE_S` (a slow real pole with a
+  zero at 1 imitates an amplifier high-pass or a zero shift exactly).
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
 - **noise**: the base residual before the triggers (a straight line per window and the
@@ -112,6 +114,10 @@ MODE_ZETA = 0.2
 BEFORE_SHARE, BEFORE_Z = 0.5, 4.0
 #: Mains frequencies whose lines are removed from the noise before the triggers, Hz.
 MAINS_HZ = (50.0, 60.0)
+#: Slowest time constant the sensor's own poles may take in every fit of the diagnosis, s:
+#: a sensor mode is fast (kHz); a slower pole imitates a tail (an amplifier high-pass, a
+#: zero shift), which the base must not absorb while the extensions for it may not.
+SLOWEST_POLE_S = 1e-3
 #: Least score (fraction of the base residual energy removed) a significant effect needs:
 #: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
 MIN_SCORE = 0.005
@@ -431,7 +437,8 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
         [s for s in valid if s.shots])
     nf, nb, nk = orders
     with progress('base model', 1) as bar:
-        base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk)
+        base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            slowest_pole_s=SLOWEST_POLE_S)
         bar.advance()
     prediction = base.predict(vw)
     residual = [w.y - p for w, p in zip(vw, prediction.total)]
@@ -522,7 +529,8 @@ def _fit_each(ids: Sequence[str], ctx: _Context, progress, notes: list[str],
                 try:
                     fit = fit_extended(ctx.calibration, effects=ctx.base_effects + (effect_id,),
                                        fs=ctx.fs, nf=nf, nb=nb, nk=nk,
-                                       starts=ctx.base.denominators)
+                                       starts=ctx.base.denominators,
+                                       slowest_pole_s=SLOWEST_POLE_S)
                     ranked.append(_score(effect_id, fit, ctx))
                 except Exception as exc:  # noqa: B902 - one candidate must not stop the others
                     why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''

@@ -67,11 +67,17 @@ class ChannelDelay(Effect):
         return {'delay_us': (delay(model.a, model.b), std)}
 
     def implausible(self, fit) -> str | None:
-        """Return why the fit is no delay: the generic checks, or a lead instead of a lag."""
+        """Return why the fit is no delay: the generic checks, a lead, or an absurd lag."""
         why = super().implausible(fit)
-        if why is None and fit.parameters(self.id)['delay_us'][0] <= 0:
-            why = 'the fitted pressure path leads the acceleration rather than lagging it'
-        return why
+        if why is not None:
+            return why
+        delay = fit.parameters(self.id)['delay_us'][0]
+        if delay <= 0:
+            return 'the fitted pressure path leads the acceleration rather than lagging it'
+        if delay > 1.5 * MAX_DELAY_US:
+            return (f'the fitted path lags by {delay:.4g} µs, far beyond the {MAX_DELAY_US:g} µs '
+                    f'searched: its poles imitate something slower than a delay')
+        return None
 
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say what the rate probe and the delayed model find."""

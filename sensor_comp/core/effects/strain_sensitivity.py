@@ -25,6 +25,7 @@ the jump. At low frequencies a small channel delay looks like a negative ``c``.
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
 from .base import (delta_std, Effect, excess_delay_s, ModelSpec, Outcome, parameters_text,
                    Physical, probe_of, row_of, sentence, static_gain, stored_std)
@@ -38,6 +39,9 @@ G_PER_MS = G0 * 1e3
 SMOOTHING_CORNER = 0.1
 #: Damping of the derivative's smoothing low pass (a Butterworth-like corner).
 SMOOTHING_ZETA = 0.7
+#: Largest plausible strain coefficient as a time, ``|c/S|`` in ms: the strain term then
+#: equals the axial response shifted by that time at low frequencies.
+MAX_LEAD_MS = 1.0
 
 
 class StrainSensitivity(Effect):
@@ -77,6 +81,21 @@ class StrainSensitivity(Effect):
         std = (delta_std(coefficient, model.a, model.b, covariance) if covariance is not None
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
         return {'pa_per_g_per_ms': (coefficient(model.a, model.b), std)}
+
+    def implausible(self, fit) -> str | None:
+        """Return why the fit is no base strain: the generic checks or an absurd lead."""
+        why = super().implausible(fit)
+        if why is not None:
+            return why
+        model = fit.model()
+        row = row_of(model, 'a')
+        per_g = static_gain(model.a, model.b, row) * G0
+        coefficient = fit.parameters(self.id)['pa_per_g_per_ms'][0]
+        lead_ms = coefficient / per_g if per_g else math.inf
+        if not abs(lead_ms) <= MAX_LEAD_MS:
+            return (f'the strain term equals the axial response {abs(lead_ms):.3g} ms ahead or '
+                    f'behind: no strain of a sensor mount, the paths imitate something else')
+        return None
 
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say what the jerk probe and the da/dt path explain."""

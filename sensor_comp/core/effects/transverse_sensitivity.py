@@ -69,6 +69,15 @@ class TransverseSensitivity(Effect):
             out[name] = (func(model.a, model.b), std)
         return out
 
+    def implausible(self, fit) -> str | None:
+        """Return why the fit is no transverse sensitivity: a lateral path above the axial."""
+        why = super().implausible(fit)
+        ratio = fit.parameters(self.id)['ratio'][0] if why is None else 0.0
+        if why is None and not ratio <= 1.0:
+            why = (f'the lateral sensitivity is {ratio:.3g} times the axial one: the lateral '
+                   f'paths imitate something else')
+        return why
+
     def evidence(self, analysis, outcome: Outcome) -> str:
         """Say what the lateral probe and the lateral paths explain."""
         parts = []
