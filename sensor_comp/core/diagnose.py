@@ -38,7 +38,10 @@ and scored on the VALIDATION shots, which it has never seen:
   bias accelerometer noise gives an output-error fit) AND the fit reads as the effect
   (:meth:`~sensor_comp.core.effects.Effect.implausible`: physical parameters readable, no
   searched value at an end of its range, a delay that lags; a disturbance must also
-  remove before the triggers what it predicts there).
+  remove before the triggers what it predicts there) AND it removes at least
+  :data:`NAME_SHARE` of the base residual's energy beyond the noise (an effect that
+  follows a small part of something else is no answer; such an effect is ``relevant``
+  but not named).
 - **leftover**: what each model leaves against its own noise floor
   (:func:`~sensor_comp.core.noise_floor.leftover`): its energy in noise units, overall and
   before the trigger, during the pulse, in the ringing and in the tail, and what the
@@ -49,8 +52,9 @@ and scored on the VALIDATION shots, which it has never seen:
 The verdict:
 
 - ``'missing_effect'``: the best significant effect (significant ones ranked first, each
-  group by score) leaves a residual consistent with the noise, or it and a second
-  significant one do together (their changes added, as fitted on the calibration shots);
+  group by score) leaves a residual consistent with the noise, or it and a second one do
+  together (their changes added, as fitted on the calibration shots; the second is
+  significant when it removes :data:`NAME_SHARE` of what the first leaves);
 - ``'partly_explained'``: the best significant effect removes part of the residual but
   leaves one the noise does not account for (a second effect, or one outside the
   catalogue): the explanation gives the explained share, the leftover in noise units and
@@ -70,7 +74,7 @@ no shock) are left out of both sets, each with a note.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 
 import numpy as np
@@ -103,8 +107,13 @@ VERDICTS = ('missing_effect', 'partly_explained', 'adequate', 'unexplained')
 NOISE_LAG_S = 0.5e-3
 #: Share of the base residual's energy beyond the noise that a model with the right effect
 #: may still leave (its catalogue form is close to, not exactly, the physics), besides
-#: the practical allowance: a few per cent of a large effect is no second effect.
-FORM_SHARE = 0.05
+#: the practical allowance, at most :data:`FORM_CAP` noise energies (RMS about 1.2 σ): a few
+#: per cent of a large effect is no second effect.
+FORM_SHARE, FORM_CAP = 0.05, 0.4
+#: Least share of the base residual's energy beyond the noise an effect must remove to be
+#: named (a second effect: of what the first leaves): a catalogue effect that follows a
+#: small part of something else is no answer, however significant.
+NAME_SHARE = 0.5
 #: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
 #: a searched second mode keeps away from.
 MODE_ZETA = 0.2
@@ -138,7 +147,8 @@ class Ranked:
         score: Fraction of the base model's validation residual energy removed.
         parameters: Physical parameters ``name -> (value, std or None)``.
         evidence: One human sentence with numbers.
-        significant: The improvement is beyond noise and matters (see the module docs).
+        significant: The improvement is beyond noise, matters, reads as the effect and is
+            large enough to name it (see the module docs).
         statistic: ``z`` (acceleration-driven) or χ² (disturbance).
         test: ``'z'`` or ``'chi2'``.
         p_value: Probability of the statistic or more from noise alone.
@@ -146,6 +156,9 @@ class Ranked:
         peak_residual_percent: Worst validation shot's peak residual, % of its peak.
         units: Unit of each parameter.
         explained: Energy removed, in noise energies of the validation windows.
+        excess_share: Share of the base residual's energy beyond the noise removed (for a
+            second effect: of what the first leaves, added to it).
+        relevant: Beyond noise, matters and reads as the effect, named or not.
         leftover: What the extended model leaves against the noise.
         doubt: Why the fit is no physical reading of the effect (then it is not
             significant), or None (:meth:`~sensor_comp.core.effects.Effect.implausible`).
@@ -166,6 +179,8 @@ class Ranked:
     peak_residual_percent: float
     units: dict = field(default_factory=dict)
     explained: float = 0.0
+    excess_share: float = 0.0
+    relevant: bool = False
     leftover: Leftover | None = field(default=None, repr=False, compare=False)
     doubt: str | None = None
     fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
@@ -180,7 +195,9 @@ class Ranked:
                 'statistic': _json(self.statistic), 'test': self.test,
                 'p_value': _json(self.p_value), 'fit_percent': _json(self.fit_percent),
                 'peak_residual_percent': _json(self.peak_residual_percent),
-                'explained_noise_energy': _json(self.explained), 'doubt': self.doubt,
+                'explained_noise_energy': _json(self.explained),
+                'excess_share': _json(self.excess_share), 'relevant': self.relevant,
+                'doubt': self.doubt,
                 'leftover': None if self.leftover is None else self.leftover.to_dict()}
 
 
@@ -346,7 +363,8 @@ class _Context:
         may miss :data:`FORM_SHARE` of the base residual's excess besides the practical
         allowance (see the module docs).
         """
-        allowance = PRACTICAL_SHARE + (FORM_SHARE * self.excess if named else 0.0)
+        allowance = PRACTICAL_SHARE + (min(FORM_SHARE * self.excess, FORM_CAP)
+                                       if named else 0.0)
         noise = self.noise
         if named:  # its own noise floor: the accelerometer noise through this model
             quiet = _quiet(residual, self.validation, self.fs)
@@ -588,15 +606,18 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         doubt = _after_triggers(prediction, residual, ctx)
     if doubt is not None:
         evidence = f'{evidence} Not counted: {doubt}.'
-    significant = (p_value < ctx.alpha and score >= MIN_SCORE
-                   and explained >= PRACTICAL_SHARE and doubt is None)
+    relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
+                and doubt is None)
+    share = explained / ctx.excess if ctx.excess > 0 else 0.0
     return Ranked(effect=effect_id, title=effect.title, score=float(score),
-                  parameters=parameters, evidence=evidence, significant=bool(significant),
+                  parameters=parameters, evidence=evidence,
+                  significant=bool(relevant and share >= NAME_SHARE),
                   statistic=float(statistic), test=test, p_value=p_value,
                   fit_percent=float(fit_percent([w.y for w in ctx.validation],
                                                 prediction.total)),
                   peak_residual_percent=_peak_percent(ctx.validation, residual), units=units,
-                  explained=float(explained), leftover=ctx.leftover(residual), doubt=doubt,
+                  explained=float(explained), excess_share=float(share),
+                  relevant=bool(relevant), leftover=ctx.leftover(residual), doubt=doubt,
                   fit=fit)
 
 
@@ -627,25 +648,32 @@ def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
             f'predicts there: what it follows comes with the shocks')
 
 
-def _pair(best: Ranked, others: Sequence[Ranked], ctx: _Context
-          ) -> tuple[Ranked, Leftover] | None:
+def _second(best: Ranked, others: Sequence[Ranked], ctx: _Context
+            ) -> tuple[Ranked, Leftover] | None:
     """
-    Return the significant effect that, added to ``best``, leaves noise, and that leftover.
+    Return the relevant effect that, added to ``best``, removes most of what it leaves.
 
     The two changes of the prediction (each fitted on the calibration shots) are added: for
     effects that explain different parts of the residual this is what fitting both gives;
-    for two that explain the same part it removes that part twice and leaves more.
+    for two that explain the same part it removes that part twice and leaves more. The
+    effect comes back with its :attr:`Ranked.excess_share` of what ``best`` leaves beyond
+    the noise, significant when that reaches :data:`NAME_SHARE`; with the pair's leftover.
     """
     mine = best.fit.predict(ctx.validation).total
+    rest = best.leftover.energy_ratio - 1.0
     found = None
     for other in others:
         theirs = other.fit.predict(ctx.validation).total
         residual = [w.y - a - b + c for w, a, b, c in zip(
             ctx.validation, mine, theirs, ctx.prediction.total)]
         left = ctx.leftover(residual)
-        if left.consistent and (found is None or left.energy_ratio < found[1].energy_ratio):
+        if found is None or left.energy_ratio < found[1].energy_ratio:
             found = (other, left)
-    return found
+    if found is None or not rest > 0:
+        return None
+    other, left = found
+    share = (best.leftover.energy_ratio - left.energy_ratio) / rest
+    return replace(other, excess_share=float(share), significant=share >= NAME_SHARE), left
 
 
 def _share(ctx: _Context, left: Leftover) -> float | None:
@@ -657,38 +685,40 @@ def _share(ctx: _Context, left: Leftover) -> float | None:
 
 
 def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
-             ) -> tuple[str, str, tuple[str, ...], Leftover, float | None]:
+             ) -> tuple[str, str, tuple[str, ...], Leftover, float | None, list[Ranked]]:
     """Return the verdict, its explanation, the named effects, their leftover and share."""
+    ranked = list(ranked)
     significant = [r for r in ranked if r.significant]
     if not significant:
-        return _no_effect(ctx, base_left, ranked)
+        return (*_no_effect(ctx, base_left, ranked), ranked)
     best = significant[0]
-    count = f'{len(significant)} significant effect(s)'
     if best.leftover.consistent:
-        share = _share(ctx, best.leftover)
         return ('missing_effect',
                 f'missing effect: {best.title} ({best.effect}) removes '
                 f'{100 * best.score:.1f} % of the validation residual energy '
                 f'(p = {best.p_value:.2g}); it leaves {best.leftover.describe()}, consistent '
-                f'with the noise; {count}', (best.effect,), best.leftover, share)
-    pair = _pair(best, significant[1:], ctx)
-    if pair is not None:
-        other, left = pair
-        return ('missing_effect',
-                f'missing effects: {best.title} ({best.effect}) and {other.title} '
-                f'({other.effect}) remove {100 * best.score:.1f} % and '
-                f'{100 * other.score:.1f} % of the validation residual energy; together '
-                f'they leave {left.describe()}, consistent with the noise (add the first, '
-                f'then diagnose again); {count}',
-                (best.effect, other.effect), left, _share(ctx, left))
+                f'with the noise', (best.effect,), best.leftover,
+                _share(ctx, best.leftover), ranked)
+    second = _second(best, [r for r in ranked if r.relevant and r is not best], ctx)
+    if second is not None and second[0].significant:
+        other, left = second
+        ranked = sorted((other if r.effect == other.effect else r for r in ranked),
+                        key=lambda r: (not r.significant, -r.score))
+        if left.consistent:
+            return ('missing_effect',
+                    f'missing effects: {best.title} ({best.effect}) and {other.title} '
+                    f'({other.effect}) remove {100 * best.score:.1f} % and '
+                    f'{100 * other.score:.1f} % of the validation residual energy; together '
+                    f'they leave {left.describe()}, consistent with the noise (add the '
+                    f'first, then diagnose again)', (best.effect, other.effect), left,
+                    _share(ctx, left), ranked)
     share = _share(ctx, best.leftover)
     part = '' if share is None else f' ({100 * share:.0f} % of what lies beyond the noise)'
     return ('partly_explained',
             f'partly explained: {best.title} ({best.effect}) removes {100 * best.score:.1f} % '
             f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
             f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
-            f'outside the catalogue remains; {count}',
-            (best.effect,), best.leftover, share)
+            f'outside the catalogue remains', (best.effect,), best.leftover, share, ranked)
 
 
 def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
@@ -702,11 +732,17 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
                 f'improves it beyond noise', (), base_left, None)
     why = (base_left.describe() if not base_left.consistent else
            f'the residual analysis finds structure: {failing[0].summary()[0]}')
+    aside = ''
+    small = [r for r in ranked if r.relevant]
     doubted = [r for r in ranked if r.doubt and r.explained >= PRACTICAL_SHARE
                and r.p_value < ctx.alpha]
-    aside = ('' if not doubted else
-             f'; {doubted[0].title} ({doubted[0].effect}) removes '
-             f'{100 * doubted[0].score:.1f} % but is not counted: {doubted[0].doubt}')
+    if small:
+        aside = (f'; the most, {small[0].title} ({small[0].effect}), removes '
+                 f'{100 * small[0].excess_share:.0f} % of what lies beyond the noise: too '
+                 f'little to name it')
+    elif doubted:
+        aside = (f'; {doubted[0].title} ({doubted[0].effect}) removes '
+                 f'{100 * doubted[0].score:.1f} % but is not counted: {doubted[0].doubt}')
     return ('unexplained',
             f'unexplained: the base residual is not noise ({why}) but no catalogued effect '
             f'explains a relevant part of it beyond noise{aside}', (), base_left, None)
@@ -776,7 +812,7 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
                    residual_analysis, progress, notes)
     ranked, skipped = _candidates(ids, ctx, progress, notes)
     base_left = ctx.leftover(ctx.residual, named=False)
-    verdict, explanation, named, left, share = _verdict(ranked, ctx, base_left)
+    verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
     return Diagnosis(
         verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.base,
