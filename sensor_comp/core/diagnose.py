@@ -156,8 +156,9 @@ class Ranked:
         peak_residual_percent: Worst validation shot's peak residual, % of its peak.
         units: Unit of each parameter.
         explained: Energy removed, in noise energies of the validation windows.
-        excess_share: Share of the base residual's energy beyond the noise removed (for a
-            second effect: of what the first leaves, added to it).
+        excess_share: Share of the residual's energy beyond the noise it removes: of the
+            removed energy plus what the extended model leaves beyond its own noise floor
+            (for a second effect: of what the first leaves, added to it).
         relevant: Beyond noise, matters and reads as the effect, named or not.
         leftover: What the extended model leaves against the noise.
         doubt: Why the fit is no physical reading of the effect (then it is not
@@ -608,7 +609,10 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         evidence = f'{evidence} Not counted: {doubt}.'
     relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
                 and doubt is None)
-    share = explained / ctx.excess if ctx.excess > 0 else 0.0
+    left = ctx.leftover(residual)
+    # Against the extended model's own noise floor: the accelerometer noise through a
+    # wrong base can raise the base's floor above the residual's own mean square.
+    share = _share(ctx, left) or 0.0
     return Ranked(effect=effect_id, title=effect.title, score=float(score),
                   parameters=parameters, evidence=evidence,
                   significant=bool(relevant and share >= NAME_SHARE),
@@ -617,7 +621,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
                                                 prediction.total)),
                   peak_residual_percent=_peak_percent(ctx.validation, residual), units=units,
                   explained=float(explained), excess_share=float(share),
-                  relevant=bool(relevant), leftover=ctx.leftover(residual), doubt=doubt,
+                  relevant=bool(relevant), leftover=left, doubt=doubt,
                   fit=fit)
 
 
@@ -677,11 +681,17 @@ def _second(best: Ranked, others: Sequence[Ranked], ctx: _Context
 
 
 def _share(ctx: _Context, left: Leftover) -> float | None:
-    """Return the share of the base residual's excess energy a model with ``left`` removes."""
-    base = ctx.sse / (ctx.samples * ctx.noise.variance) if ctx.noise.variance > 0 else math.inf
-    if not math.isfinite(base) or base <= 1.0:
+    """
+    Return the share of what lies beyond the noise that a model leaving ``left`` removes.
+
+    The energy it removes from the base residual over that plus what it leaves beyond its
+    own noise floor; None when it removes nothing.
+    """
+    energy = ctx.samples * left.noise_variance
+    removed = ctx.sse - left.energy_ratio * energy
+    if not removed > 0:
         return None
-    return float(min(max((base - left.energy_ratio) / (base - 1.0), 0.0), 1.0))
+    return float(removed / (removed + max(left.energy_ratio - 1.0, 0.0) * energy))
 
 
 def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover

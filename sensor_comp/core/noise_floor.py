@@ -287,6 +287,7 @@ class Leftover:
             excess).
         slow_share: Share of the excess spectrum below :data:`SLOW_HZ`.
         consistent: The residual is the noise (overall and in every segment).
+        noise_variance: The noise variance it is measured against, Pa².
 
     """
 
@@ -297,6 +298,7 @@ class Leftover:
     line_hz: float | None = None
     slow_share: float = 0.0
     consistent: bool = True
+    noise_variance: float = 0.0
 
     @property
     def excess(self) -> float:
@@ -334,6 +336,7 @@ class Leftover:
                 'consistent': self.consistent, 'where': self.where.name,
                 'shape': self.shape, 'line_hz': _json(self.line_hz),
                 'slow_share': _json(self.slow_share),
+                'noise_sigma_pa': _json(math.sqrt(self.noise_variance)),
                 'segments': [s.to_dict() for s in self.segments],
                 'description': self.describe()}
 
@@ -388,7 +391,7 @@ def leftover(residual: Sequence[np.ndarray], bounds: Sequence[tuple[int, int, in
     shape, line, slow = '', None, 0.0
     if not consistent:
         shape, line, slow = _shape(residual, bounds, noise, fs)
-    return Leftover(ratio, tolerance, tuple(segments), shape, line, slow, consistent)
+    return Leftover(ratio, tolerance, tuple(segments), shape, line, slow, consistent, sigma2)
 
 
 def _shape(residual: Sequence[np.ndarray], bounds: Sequence[tuple], noise: NoiseModel,
