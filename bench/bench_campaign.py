@@ -46,7 +46,7 @@ import time
 import pyarrow.csv as pa_csv
 
 from sensor_comp.campaign import read_models, run_campaign
-from sensor_comp.campaign.discover import load_recording
+from sensor_comp.io.recording_file import load_recording
 from sensor_comp.core.compare import compare
 from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.core.model import load

@@ -34,15 +34,11 @@ from pathlib import Path
 from ..errors import SensorCompError
 from ..streams import Recording
 
-__all__ = ['CSV_SUFFIXES', 'FRAME_ID', 'RECORDING_SUFFIXES', 'CampaignError', 'SensorMap',
-           'discover', 'load_recording', 'sensor_of']
+__all__ = ['FRAME_ID', 'RECORDING_SUFFIXES', 'CampaignError', 'SensorMap', 'discover',
+           'sensor_of']
 
 #: Suffixes of the recordings a folder search finds.
 RECORDING_SUFFIXES = ('.mcap', '.csv')
-
-#: Suffixes read as oscilloscope CSV exports (:mod:`sensor_comp.io.csv_import`); any other
-#: file is read as an MCAP bag.
-CSV_SUFFIXES = ('.csv', '.tsv', '.txt')
 
 #: ``sensor_key`` value that names the sensor by the recording's frame id (hardware id).
 FRAME_ID = 'frame_id'
@@ -116,24 +112,6 @@ class SensorMap:
             raise CampaignError(f'sensor map {self.source}: {path} matches the patterns of '
                                 f'{" and ".join(found)}; a recording holds one sensor')
         return found[0] if found else None
-
-
-def load_recording(path: str | os.PathLike) -> Recording:
-    """
-    Read one recording of the campaign: a CSV export by its suffix, else an MCAP bag.
-
-    A bag cut short in its data section is refused (``sensor-comp repair`` saves what
-    survived), so that no recording is analysed silently shortened.
-
-    Raises:
-        SensorCompError: If it does not read (the message names the file and the damage).
-
-    """
-    if os.fspath(path).lower().endswith(CSV_SUFFIXES):
-        from ..io.csv_import import read_csv
-        return read_csv(path)
-    from ..io.bag_reader import read_recording
-    return read_recording(path, on_truncated='raise')
 
 
 def sensor_of(recording: Recording, *, key: str = FRAME_ID) -> tuple[str, str | None]:

@@ -20,10 +20,11 @@ import os
 
 import numpy as np
 
-from .discover import CampaignError, load_recording
+from .discover import CampaignError
 from ..core.identify import identify, ShotSource
 from ..core.model import load, Model, ModelError, Source
 from ..core.shots import Shot
+from ..io.recording_file import load_recording
 
 __all__ = ['ALL_SENSORS', 'IdentifyOptions', 'ModelFile', 'Pick', 'identify_sensor',
            'model_for', 'pick_shots', 'read_models']

@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from .discover import FRAME_ID, load_recording, sensor_of
+from .discover import FRAME_ID, sensor_of
 from .models import model_for, ModelFile
 from .table import failure_row, TABLE_VERSION
 from .. import __version__
@@ -37,6 +37,7 @@ from ..core.compare import compare
 from ..core.identify import ShotSource
 from ..core.shots import Shot
 from ..errors import SensorCompError
+from ..io.recording_file import load_recording
 from ..streams import Recording
 
 __all__ = ['BagResult', 'ShotOptions', 'analyse_bag']

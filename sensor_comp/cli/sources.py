@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 from ..core.identify import ShotSource
 from ..core.model import load, Model, ModelError
 from ..errors import SensorCompError
 from ..files import check_output
-from ..streams import Recording
+from ..io.recording_file import load_recording
 
-__all__ = ['add_force', 'check_plots', 'load_model', 'load_recording', 'load_shots',
-           'progress_factory', 'usable_source']
+__all__ = ['add_force', 'check_plots', 'load_model', 'load_shots', 'progress_factory',
+           'usable_source']
 
 
 def add_force(parser, *, help: str = 'replace an existing output file even if it is of '
@@ -24,41 +23,6 @@ def add_force(parser, *, help: str = 'replace an existing output file even if it
     a model; an input is never replaced, whatever the flag.
     """
     parser.add_argument('--force', action='store_true', help=help)
-
-
-def load_recording(path: str) -> Recording:
-    """
-    Read a recording from an MCAP bag or an oscilloscope CSV export.
-
-    A bag is recognised by its ``.mcap`` suffix, as a rosbag2 directory, or by its first
-    bytes whatever its name. A bag cut short in its data section (a killed recorder) is
-    refused with the advice to run ``sensor-comp repair``, so that what was lost is
-    reported once and the analysis never runs on a silently shortened recording.
-
-    Raises:
-        SensorCompError: If the file is missing or of an unknown kind, or does not read.
-
-    """
-    if not os.path.exists(path):
-        raise SensorCompError(f'{path}: no such file')
-    suffix = Path(path).suffix.lower()
-    if suffix in ('.csv', '.tsv', '.txt'):
-        from ..io.csv_import import read_csv
-        return read_csv(path)
-    if suffix in ('.mcap', '.db3') or os.path.isdir(path) or _looks_like_a_bag(path):
-        from ..io.bag_reader import read_recording
-        return read_recording(path, on_truncated='raise')
-    raise SensorCompError(f'{path}: expected an MCAP bag (.mcap) or a CSV export (.csv), '
-                          f'got {suffix or "a file without extension"}')
-
-
-def _looks_like_a_bag(path: str) -> bool:
-    from ..io.bag_reader import MCAP_MAGIC
-    try:
-        with open(path, 'rb') as f:
-            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
-    except OSError:
-        return False
 
 
 def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,

@@ -18,7 +18,7 @@ import pytest
 
 from sensor_comp.campaign import (CampaignError, IdentifyOptions, read_models, run_campaign,
                                   SCHEMA, SensorMap, SYNCHRONOUS)
-from sensor_comp.campaign.discover import load_recording
+from sensor_comp.io.recording_file import load_recording
 from sensor_comp.cli.main import main
 from sensor_comp.core.compare import compare
 from sensor_comp.core.identify import ShotSource
