@@ -4,16 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 
 from .options import add_threshold
-from .sources import load_model, load_shots, progress_factory
-from ..core.model import Model, Source
+from .sources import load_model, load_shots, run_diagnosis
 from ..core.noise_floor import PRACTICAL_SHARE
-from ..errors import SensorCompError
 
-__all__ = ['calibration_sources', 'register', 'run', 'run_diagnosis']
+__all__ = ['register', 'run']
 
 
 def register(subparsers) -> None:
@@ -36,47 +32,6 @@ def register(subparsers) -> None:
                         help='print JSON with at least verdict and ranking')
     add_threshold(parser)
     parser.set_defaults(func=run)
-
-
-def calibration_sources(model: Model, paths: list[str] | None, *,
-                        threshold_g: float | None = None) -> list:
-    """
-    Return the calibration recordings with their shots: ``paths`` or the model's provenance.
-
-    Raises:
-        SensorCompError: When the model names no calibration file that still exists.
-
-    """
-    if paths:
-        return [load_shots(p, threshold_g=threshold_g) for p in paths]
-    sources: list[Source] = [s for s in model.provenance
-                             if any(isinstance(shot, dict) and shot.get('role') == 'calibration'
-                                    for shot in s.shots)]
-    missing = [s.path for s in sources if not os.path.exists(s.path)]
-    if not sources or missing:
-        raise SensorCompError(
-            'the calibration recordings of the model are needed to fit the candidate effects'
-            + (f'; not found: {", ".join(missing)}' if missing else
-               ': the model file names none') + '; give them with --calibration')
-    loaded = []
-    for source in sources:
-        if Source.from_file(source.path).sha256 != source.sha256:
-            print(f'warning: {source.path} changed since the model was identified (sha256 '
-                  f'differs)', file=sys.stderr)
-        loaded.append(load_shots(source.path, threshold_g=threshold_g))
-    return loaded
-
-
-def run_diagnosis(args: argparse.Namespace, model: Model, validation):
-    """Run the diagnosis of ``model`` on ``validation`` with the command's options."""
-    from ..core.diagnose import diagnose
-    threshold = getattr(args, 'threshold', None)
-    calibration = calibration_sources(model, args.calibration, threshold_g=threshold)
-    for source in calibration:
-        model.check_rate(source.recording.fs, model_name=f'model {args.model}',
-                         data_name=f'calibration recording {source.name}')
-    return diagnose(calibration, [validation], base=model, candidates=args.candidates,
-                    progress=progress_factory(args.quiet or getattr(args, 'json', False)))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from .diagnose import run_diagnosis
 from .options import add_threshold
-from .sources import add_force, load_model, usable_source
+from .sources import add_force, load_model, run_diagnosis, usable_source
 from ..core.compare import compare
 from ..core.report import html_report, write_report
 from ..core.residual import analyse

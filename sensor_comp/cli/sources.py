@@ -1,17 +1,19 @@
-"""Load recordings and models named on the command line, with clear errors; ``--force``."""
+"""Load what a command names (recordings, models, calibration), with clear errors; ``--force``."""
 
 from __future__ import annotations
 
+import argparse
 import os
+import sys
 
 from ..core.identify import ShotSource
-from ..core.model import load, Model, ModelError
+from ..core.model import load, Model, ModelError, Source
 from ..errors import SensorCompError
 from ..files import check_output
 from ..io.recording_file import load_recording
 
-__all__ = ['add_force', 'check_plots', 'load_model', 'load_shots', 'progress_factory',
-           'usable_source']
+__all__ = ['add_force', 'calibration_sources', 'check_plots', 'load_model', 'load_shots',
+           'progress_factory', 'run_diagnosis', 'usable_source']
 
 
 def add_force(parser, *, help: str = 'replace an existing output file even if it is of '
@@ -115,3 +117,44 @@ def usable_source(path: str, models: dict[str, Model], *, windows=None,
         raise SensorCompError(f'{path}: no usable shot ({"; ".join(warnings)})')
     units = source.check_units()
     return source, warnings + ([units] if units else [])
+
+
+def calibration_sources(model: Model, paths: list[str] | None, *,
+                        threshold_g: float | None = None) -> list:
+    """
+    Return the calibration recordings with their shots: ``paths`` or the model's provenance.
+
+    Raises:
+        SensorCompError: When the model names no calibration file that still exists.
+
+    """
+    if paths:
+        return [load_shots(p, threshold_g=threshold_g) for p in paths]
+    sources: list[Source] = [s for s in model.provenance
+                             if any(isinstance(shot, dict) and shot.get('role') == 'calibration'
+                                    for shot in s.shots)]
+    missing = [s.path for s in sources if not os.path.exists(s.path)]
+    if not sources or missing:
+        raise SensorCompError(
+            'the calibration recordings of the model are needed to fit the candidate effects'
+            + (f'; not found: {", ".join(missing)}' if missing else
+               ': the model file names none') + '; give them with --calibration')
+    loaded = []
+    for source in sources:
+        if Source.from_file(source.path).sha256 != source.sha256:
+            print(f'warning: {source.path} changed since the model was identified (sha256 '
+                  f'differs)', file=sys.stderr)
+        loaded.append(load_shots(source.path, threshold_g=threshold_g))
+    return loaded
+
+
+def run_diagnosis(args: argparse.Namespace, model: Model, validation):
+    """Run the diagnosis of ``model`` on ``validation`` with the command's options."""
+    from ..core.diagnose import diagnose
+    threshold = getattr(args, 'threshold', None)
+    calibration = calibration_sources(model, args.calibration, threshold_g=threshold)
+    for source in calibration:
+        model.check_rate(source.recording.fs, model_name=f'model {args.model}',
+                         data_name=f'calibration recording {source.name}')
+    return diagnose(calibration, [validation], base=model, candidates=args.candidates,
+                    progress=progress_factory(args.quiet or getattr(args, 'json', False)))
