@@ -74,7 +74,7 @@ import numpy as np
 from scipy import signal
 
 from .effects import disturbance_trackers, Effect, EFFECTS
-from .extended import Window
+from .windows import Window
 from .ident.least_squares import delayed_numerator
 from .ident.polynomials import max_root_radius
 from .inputs import (fractional_delay, input_channels, InputError, mode_pair, needs_rate,

@@ -70,7 +70,8 @@ import numpy as np
 from .compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from .effects import EffectError, ordered
-from .extended import fit_extended, shot_windows
+from .extended import fit_extended
+from .windows import shot_windows
 from .ident import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                     fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
                     Selection, simulate)

@@ -29,7 +29,7 @@ from contextvars import ContextVar
 from dataclasses import dataclass, replace
 import math
 import re
-from typing import ClassVar, TYPE_CHECKING
+from typing import ClassVar, Protocol, TYPE_CHECKING
 
 import numpy as np
 
@@ -37,14 +37,13 @@ from ..inputs import AXES, mode_pair, parse_channel
 from ...errors import SensorCompError
 
 if TYPE_CHECKING:
-    from ..extended import Window
-    from ..model import Model
+    from ..windows import Window
 
-__all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'ModelSpec', 'Outcome',
-           'Physical', 'Search', 'dc_delay_s', 'delta_std', 'effect_entry', 'entry_of',
-           'excess_delay_s', 'mechanics_delay_s', 'modifier_value', 'parameters_text',
-           'probe_of', 'row_of', 'segment_of', 'sentence', 'static_gain', 'stored_std',
-           'tail_share']
+__all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FittedModel', 'ModelSpec',
+           'Outcome', 'Physical', 'Search', 'dc_delay_s', 'delta_std', 'effect_entry',
+           'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
+           'parameters_text', 'probe_of', 'row_of', 'segment_of', 'sentence', 'static_gain',
+           'stored_std', 'tail_share']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -60,6 +59,22 @@ Physical = dict[str, tuple[float, float | None]]
 
 class EffectError(SensorCompError, ValueError):
     """An effect is unknown, cannot be fitted on the data, or a model lacks its parts."""
+
+
+class FittedModel(Protocol):
+    """
+    What an effect reads from a fitted model (:class:`sensor_comp.core.model.Model`).
+
+    A protocol, not an import: the model file validates effect ids against the catalogue,
+    so the catalogue must not import the model back.
+    """
+
+    fs: float
+    inputs: tuple[str, ...]
+    b: np.ndarray
+    a: np.ndarray
+    nk: int
+    effects: tuple[Mapping, ...]
 
 
 @dataclass(frozen=True)
@@ -199,7 +214,7 @@ class Effect:
         """Return ``spec`` with this effect's extension."""
         raise NotImplementedError
 
-    def physical(self, model: Model, *, covariance: np.ndarray | None = None) -> Physical:
+    def physical(self, model: FittedModel, *, covariance: np.ndarray | None = None) -> Physical:
         """
         Return the physical parameters ``name -> (value, std or None)`` of a fitted model.
 
@@ -318,7 +333,7 @@ def sentence(parts: Sequence[str]) -> str:
     return text[:1].upper() + text[1:] + '.'
 
 
-def row_of(model: Model, kind: str, axis: str = 'z') -> int:
+def row_of(model: FittedModel, kind: str, axis: str = 'z') -> int:
     """
     Return the row of ``model.inputs`` whose channel is ``kind`` on ``axis``.
 
@@ -334,7 +349,7 @@ def row_of(model: Model, kind: str, axis: str = 'z') -> int:
                       f'{", ".join(model.inputs)})')
 
 
-def modifier_value(model: Model, modifier: str) -> float:
+def modifier_value(model: FittedModel, modifier: str) -> float:
     """
     Return the value of ``@modifier=`` in the model's inputs (the same on every input).
 
@@ -372,7 +387,7 @@ def mechanics_delay_s(a: np.ndarray, fs: float) -> float:
     return float(sum((-1.0 / (fs * np.log(complex(z)))).real for z in poles))
 
 
-def excess_delay_s(model: Model, a: np.ndarray, b: np.ndarray, row: int) -> float:
+def excess_delay_s(model: FittedModel, a: np.ndarray, b: np.ndarray, row: int) -> float:
     """
     Return how far the input ``row``'s path lags its mechanics at DC, in s.
 
@@ -434,7 +449,7 @@ def delta_std(func: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b:
     return math.sqrt(variance) if variance >= 0 and math.isfinite(variance) else None
 
 
-def entry_of(model: Model, effect_id: str) -> Mapping:
+def entry_of(model: FittedModel, effect_id: str) -> Mapping:
     """
     Return the model's ``effects`` entry with ``effect_id``.
 
@@ -449,7 +464,7 @@ def entry_of(model: Model, effect_id: str) -> Mapping:
                       f'{", ".join(e.get("id", "?") for e in model.effects) or "none"})')
 
 
-def stored_std(model: Model, effect_id: str, name: str) -> float | None:
+def stored_std(model: FittedModel, effect_id: str, name: str) -> float | None:
     """Return the standard deviation stored for a parameter in the model's entry, or None."""
     try:
         value = (entry_of(model, effect_id).get('std') or {}).get(name)
