@@ -80,11 +80,11 @@ import math
 import numpy as np
 from scipy import stats
 
-from .effects import Effect, EFFECTS, get_effect, Outcome, Physical
+from .effects import Effect, EffectError, EFFECTS, get_effect, Outcome, Physical
 from .effects.base import BASE_CONTEXT
 from .effects.mains_hum import line_columns
 from .extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
-from .ident import estimate_delay, fit_percent
+from .ident import estimate_delay, fit_percent, IdentError
 from .identify import ShotSource
 from .model import Model
 from .noise_floor import (Leftover, leftover, noise_model, NoiseModel, PRACTICAL_SHARE,
@@ -456,8 +456,13 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
         [s for s in valid if s.shots])
     nf, nb, nk = orders
     with progress('base model', 1) as bar:
-        base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            slowest_pole_s=SLOWEST_POLE_S)
+        try:
+            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                                slowest_pole_s=SLOWEST_POLE_S)
+        except (IdentError, EffectError) as exc:  # as free as the given model, then
+            notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:g} ms '
+                         f'({exc}); fitted without that bound')
+            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk)
         bar.advance()
     prediction = base.predict(vw)
     residual = [w.y - p for w, p in zip(vw, prediction.total)]
