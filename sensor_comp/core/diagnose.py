@@ -87,8 +87,8 @@ from .extended import ExtendedFit, fit_extended, Prediction, shot_windows, Windo
 from .ident import estimate_delay, fit_percent, IdentError
 from .identify import ShotSource
 from .model import Model
-from .noise_floor import (Leftover, leftover, noise_model, NoiseModel, PRACTICAL_SHARE,
-                          segment_bounds)
+from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseModel,
+                          PRACTICAL_SHARE, segment_bounds)
 from .progress import ProgressFactory, Silent
 from .residual import analyse, model_resonances, ringing_time_s
 from .shots import split_calibration
@@ -189,15 +189,15 @@ class Ranked:
     def to_dict(self) -> dict:
         """Return the JSON-ready entry."""
         return {'effect': self.effect, 'title': self.title, 'score': self.score,
-                'parameters': {k: {'value': _json(v), 'std': _json(s),
+                'parameters': {k: {'value': json_number(v), 'std': json_number(s),
                                    'unit': self.units.get(k, '')}
                                for k, (v, s) in self.parameters.items()},
                 'evidence': self.evidence, 'significant': self.significant,
-                'statistic': _json(self.statistic), 'test': self.test,
-                'p_value': _json(self.p_value), 'fit_percent': _json(self.fit_percent),
-                'peak_residual_percent': _json(self.peak_residual_percent),
-                'explained_noise_energy': _json(self.explained),
-                'excess_share': _json(self.excess_share), 'relevant': self.relevant,
+                'statistic': json_number(self.statistic), 'test': self.test,
+                'p_value': json_number(self.p_value), 'fit_percent': json_number(self.fit_percent),
+                'peak_residual_percent': json_number(self.peak_residual_percent),
+                'explained_noise_energy': json_number(self.explained),
+                'excess_share': json_number(self.excess_share), 'relevant': self.relevant,
                 'doubt': self.doubt,
                 'leftover': None if self.leftover is None else self.leftover.to_dict()}
 
@@ -296,27 +296,23 @@ class Diagnosis:
     def to_dict(self) -> dict:
         """Return the JSON-ready diagnosis (``verdict``, ``ranking``, ``leftover``, ...)."""
         return {'verdict': self.verdict, 'named': list(self.named),
-                'explained_share': _json(self.explained_share),
+                'explained_share': json_number(self.explained_share),
                 'leftover': None if self.leftover is None else self.leftover.to_dict(),
                 'ranking': [r.to_dict() for r in self.ranking],
                 'skipped': [s.to_dict() for s in self.skipped],
                 'base': {'effects': list(self.base_effects), 'inputs': list(self.base.inputs),
                          'orders': {'nf': self.base.spec.nf, 'nb': self.base.spec.nb,
                                     'nk': self.base.spec.nk},
-                         'fit_percent': _json(self.fit_percent),
-                         'peak_residual_percent': _json(self.peak_residual_percent),
+                         'fit_percent': json_number(self.fit_percent),
+                         'peak_residual_percent': json_number(self.peak_residual_percent),
                          'leftover': (None if self.base_leftover is None
                                       else self.base_leftover.to_dict())},
-                'noise_sigma_pa': _json(self.noise_sigma_pa),
-                'energy_ratio': _json(self.energy_ratio),
-                'energy_tolerance': _json(self.energy_tolerance),
+                'noise_sigma_pa': json_number(self.noise_sigma_pa),
+                'energy_ratio': json_number(self.energy_ratio),
+                'energy_tolerance': json_number(self.energy_tolerance),
                 'consistent_with_noise': self.consistent_with_noise, 'alpha': self.alpha,
                 'explanation': self.explanation, 'notes': list(self.notes),
                 'residual': [a.to_dict() for a in self.analyses]}
-
-
-def _json(x):
-    return None if x is None or not math.isfinite(x) else float(x)
 
 
 @dataclass(frozen=True, eq=False)

@@ -33,7 +33,8 @@ import numpy as np
 from scipy import fft, linalg, signal, stats
 
 __all__ = ['LEFTOVER_Z', 'PRACTICAL_SHARE', 'SEGMENTS', 'Leftover', 'NoiseModel',
-           'SegmentExcess', 'gram', 'leftover', 'noise_model', 'segment_bounds']
+           'SegmentExcess', 'gram', 'json_number', 'leftover', 'noise_model',
+           'segment_bounds']
 
 #: Structure below this share of the windows' noise energy is not worth a model change.
 PRACTICAL_SHARE = 0.05
@@ -268,8 +269,8 @@ class SegmentExcess:
     def to_dict(self) -> dict:
         """Return the numbers as JSON-ready values."""
         return {'name': self.name, 'samples': self.samples,
-                'rms_ratio': _json(self.rms_ratio), 'excess': _json(self.excess),
-                'limit': _json(self.limit), 'above': self.above}
+                'rms_ratio': json_number(self.rms_ratio), 'excess': json_number(self.excess),
+                'limit': json_number(self.limit), 'above': self.above}
 
 
 @dataclass(frozen=True)
@@ -331,17 +332,18 @@ class Leftover:
 
     def to_dict(self) -> dict:
         """Return the numbers as JSON-ready values."""
-        return {'energy_ratio': _json(self.energy_ratio), 'excess': _json(self.excess),
-                'rms_ratio': _json(self.rms_ratio), 'tolerance': _json(self.tolerance),
+        return {'energy_ratio': json_number(self.energy_ratio), 'excess': json_number(self.excess),
+                'rms_ratio': json_number(self.rms_ratio), 'tolerance': json_number(self.tolerance),
                 'consistent': self.consistent, 'where': self.where.name,
-                'shape': self.shape, 'line_hz': _json(self.line_hz),
-                'slow_share': _json(self.slow_share),
-                'noise_sigma_pa': _json(math.sqrt(self.noise_variance)),
+                'shape': self.shape, 'line_hz': json_number(self.line_hz),
+                'slow_share': json_number(self.slow_share),
+                'noise_sigma_pa': json_number(math.sqrt(self.noise_variance)),
                 'segments': [s.to_dict() for s in self.segments],
                 'description': self.describe()}
 
 
-def _json(x):
+def json_number(x: float | None) -> float | None:
+    """Return ``x`` as a JSON-ready float, None for None, NaN or infinity."""
     return None if x is None or not math.isfinite(x) else float(x)
 
 

@@ -78,7 +78,7 @@ from scipy import signal, stats
 from .compare import compare, Comparison
 from .ident.simulate import simulate
 from .model import Model, ModelError
-from .noise_floor import (gram, noise_model, NoiseModel, PRACTICAL_SHARE,
+from .noise_floor import (gram, json_number, noise_model, NoiseModel, PRACTICAL_SHARE,
                           segment_bounds)
 from .shots import mad_sigma, segments, Shot
 from ..errors import SensorCompError
@@ -253,7 +253,7 @@ class Probe(NamedTuple):
                 'p_value': self.p_value, 'significant': self.significant, 'dof': self.dof,
                 'fraction_alone': self.fraction_alone,
                 'coefficients': list(self.coefficients),
-                'parameters': {k: _json(v) for k, v in self.parameters.items()}}
+                'parameters': {k: json_number(v) for k, v in self.parameters.items()}}
 
 
 @dataclass(frozen=True)
@@ -282,8 +282,8 @@ class SegmentEnergy:
         """Return the numbers as JSON-ready values."""
         return {'name': self.name, 'samples': self.samples,
                 'energy_fraction': self.energy_fraction,
-                'sample_fraction': self.sample_fraction, 'rms_pa': _json(self.rms_pa),
-                'rms_ratio': _json(self.rms_ratio)}
+                'sample_fraction': self.sample_fraction, 'rms_pa': json_number(self.rms_pa),
+                'rms_ratio': json_number(self.rms_ratio)}
 
 
 @dataclass(frozen=True)
@@ -327,9 +327,9 @@ class ShotResidual:
     def to_dict(self) -> dict:
         """Return the numbers (no arrays) as JSON-ready values."""
         return {'index': self.index, 'peak_g': self.peak_g, 'width_ms': self.width_ms,
-                'noise_sigma_pa': _json(self.noise_sigma_pa),
-                'white_sigma_pa': _json(self.white_sigma_pa), 'rms_pa': self.rms_pa,
-                'excess_rms_pa': _json(self.excess_rms_pa),
+                'noise_sigma_pa': json_number(self.noise_sigma_pa),
+                'white_sigma_pa': json_number(self.white_sigma_pa), 'rms_pa': self.rms_pa,
+                'excess_rms_pa': json_number(self.excess_rms_pa),
                 'segments': [s.to_dict() for s in self.segments]}
 
 
@@ -420,7 +420,7 @@ class AmplitudeTrend:
         return {'exponent': self.exponent, 'stderr': self.stderr,
                 'ci95': None if self.ci95 is None else list(self.ci95),
                 'peak_g': list(self.peak_g),
-                'excess_rms_pa': [_json(v) for v in self.excess_rms_pa],
+                'excess_rms_pa': [json_number(v) for v in self.excess_rms_pa],
                 'used': list(self.used), 'reason': self.reason, 'scale_pa': self.scale_pa}
 
 
@@ -568,10 +568,6 @@ class ResidualAnalysis:
             'pretrigger_excess_limit': self.pretrigger_excess_limit,
             'energy_ratio': self.energy_ratio, 'energy_tolerance': self.energy_tolerance,
             'notes': list(self.notes), 'summary': self.summary()}
-
-
-def _json(x: float) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
 
 
 # --- pooled lagged products -------------------------------------------------------------
