@@ -27,7 +27,9 @@ parameter it does not have is logged with the closest name it has):
 - ``block_size`` (samples per block, default 1000).
 - ``pacing`` (default ``realtime``): ``realtime`` publishes each block when its last sample
   would have been acquired, a number ``k`` does so ``k`` times faster, ``fast`` publishes as
-  fast as the subscribers take the blocks.
+  fast as DDS delivers the blocks. Nothing is lost, but a subscriber slower than the source
+  buffers what it has not handled yet in memory (keep-all queues): give a factor when the
+  subscribers are slower than the source.
 - ``loop`` (bool, default false): start over at the end; stamps keep running on, so the
   streams stay contiguous.
 - ``stamp_origin`` (``now`` or ``source``; default ``now``): stamp the first sample with the
@@ -255,13 +257,15 @@ class Acquisition(Node):
                             encode_block(p, stamp_ns=stamp, frame_id=frame), threading.Event())
                 self.blocks_published += 1
                 self.samples_published += a.shape[-1]
+                if self.speed is None:
+                    time.sleep(0)  # unpaced: let the subscribers' threads of this process run
             passes += 1
             if not self.loop:
                 return
 
     def _describe_pacing(self) -> str:
         if self.speed is None:
-            return 'as fast as the subscribers take them'
+            return 'as fast as DDS delivers them'
         return 'in real time' if self.speed == 1 else f'{self.speed:g}x real time'
 
 

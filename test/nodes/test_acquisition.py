@@ -110,7 +110,9 @@ def test_looping_keeps_the_stamps_running_on(context, make_node, in_thread, make
                                  raw=True)
     listener.create_subscription(DiagnosticArray, 'stream_info', len, LATCHED_QOS, raw=True)
     stop_spinning = spin(listener)
-    node = make_acquisition(**SIM, block_size=3000, pacing='fast', loop=True,
+    # Paced (5x: a pass in 17 ms), not 'fast': an unpaced publisher thread can starve this
+    # process's listener while its queue grows without bound (CI saw 6 of 30 000 blocks).
+    node = make_acquisition(**SIM, block_size=3000, pacing=5.0, loop=True,
                             stamp_origin='source', wait_for_subscribers=1)
     _, join = in_thread(node.run)
     n = node.recording.n_samples
