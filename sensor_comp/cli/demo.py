@@ -23,7 +23,7 @@ from ..core.report import html_report, write_report
 from ..core.residual import analyse
 from ..files import check_output, OutputError
 
-__all__ = ['register', 'run']
+__all__ = ['next_step', 'register', 'run']
 
 #: The bundled pair the demo runs on (which effect it hides is for the demo to find out).
 CALIBRATION = 'case_i_calib.mcap'
@@ -79,15 +79,14 @@ def run(args: argparse.Namespace) -> int:
 
     print('\n3. diagnose: which physical effect is missing?')
     diagnosis = diagnose([calibration], [validation], base=base, progress=progress)
-    print(f'   verdict: {diagnosis.verdict}')
     for entry in diagnosis.ranking[:3]:
         print(f'   {entry.effect:24s} score {entry.score:.3f}'
               f'{"  (significant)" if entry.significant else ""}')
-    if diagnosis.verdict != 'missing_effect':
-        print('   nothing to add: the model is as good as this data can tell')
+    effect, lines = next_step(diagnosis)
+    for line in lines:
+        print(f'   {line}')
+    if effect is None:
         return 0
-    effect = diagnosis.ranking[0].effect
-    print(f'   evidence: {diagnosis.ranking[0].evidence}')
 
     print(f'\n4. add {effect} and identify again')
     extended = identify([calibration], validation=[validation], structure='oe',
@@ -114,6 +113,35 @@ def run(args: argparse.Namespace) -> int:
           f'into {out / "compensated.mcap"}')
     print(f'report: {report}')
     return 0
+
+
+def next_step(diagnosis) -> tuple[str | None, list[str]]:
+    """
+    Return the effect the demo adds after ``diagnosis`` (None: it stops) and what it prints.
+
+    Every verdict of :data:`~sensor_comp.core.diagnose.VERDICTS` is handled: with
+    ``missing_effect`` the named effect is added; with ``partly_explained`` too, saying
+    that it leaves a residual beyond the noise (so the fall is partial); ``adequate`` and
+    ``unexplained`` add nothing, for different reasons.
+
+    Raises:
+        ValueError: For a verdict that is none of these.
+
+    """
+    lines = [f'verdict: {diagnosis.verdict}', diagnosis.explanation]
+    if diagnosis.verdict in ('missing_effect', 'partly_explained'):
+        effect = diagnosis.named[0]
+        entry = diagnosis.entry(effect)
+        lines.append(f'evidence: {entry.evidence}')
+        if diagnosis.verdict == 'partly_explained':
+            lines.append(f'{effect} is added, but it leaves a residual beyond the noise: '
+                         f'expect only part of the error to fall')
+    elif diagnosis.verdict in ('adequate', 'unexplained'):
+        effect = None
+    else:
+        raise ValueError(f'unknown verdict {diagnosis.verdict!r}')
+    lines.append(f'next: {diagnosis.next_step}')
+    return effect, lines
 
 
 def _output_folder(folder: str, *, inputs: tuple[str, ...], force: bool) -> Path:

@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f'verdict: {diagnosis.verdict}')
     print(f'  {diagnosis.explanation}')
+    print(f'  next: {diagnosis.next_step}')
     left = diagnosis.leftover
     if left is not None:
         share = diagnosis.explained_share

@@ -94,8 +94,8 @@ from .residual import analyse, model_resonances, ringing_time_s
 from .shots import split_calibration
 from ..errors import SensorCompError
 
-__all__ = ['ALPHA', 'VERDICTS', 'Diagnosis', 'DiagnosisError', 'Ranked', 'Skipped',
-           'diagnose']
+__all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
+           'Ranked', 'Skipped', 'diagnose']
 
 #: Base structure ``(nf, nb)`` and delay: a sampled 2nd-order sensor, exactly.
 BASE_ORDERS, BASE_DELAY = (2, 3), 0
@@ -103,6 +103,21 @@ BASE_ORDERS, BASE_DELAY = (2, 3), 0
 ALPHA = 1e-3
 #: Possible verdicts.
 VERDICTS = ('missing_effect', 'partly_explained', 'adequate', 'unexplained')
+#: What each verdict asks of the user next, by verdict: every consumer (command line, demo,
+#: report, node) shows it, so a new verdict must come with one.
+NEXT_STEP = {
+    'missing_effect': 'add the named effect (identify --effect ID) and compare again',
+    'partly_explained': 'add the named effect, then diagnose again: what it leaves is beyond '
+                        'the noise (a second effect, or one outside the catalogue: see where '
+                        'the leftover lies)',
+    'adequate': 'nothing to add: the model is as good as this data can tell',
+    'unexplained': 'no catalogued effect explains the residual: see where the leftover lies '
+                   '(before the trigger, pulse, ringing, tail) and check the rig',
+}
+#: Verdicts that call for the user's attention (a warning on ``/diagnostics``, not green in
+#: the report): every verdict but ``'adequate'``.
+ATTENTION = {'missing_effect': True, 'partly_explained': True, 'adequate': False,
+             'unexplained': True}
 #: Lag range of the noise model, s (its autocovariance runs over four times as many lags).
 NOISE_LAG_S = 0.5e-3
 #: Share of the base residual's energy beyond the noise that a model with the right effect
@@ -268,6 +283,11 @@ class Diagnosis:
     explained_share: float | None = None
 
     @property
+    def next_step(self) -> str:
+        """Return what the verdict asks of the user next (:data:`NEXT_STEP`)."""
+        return NEXT_STEP[self.verdict]
+
+    @property
     def significant(self) -> list[str]:
         """Return the ids of the significant effects, best first."""
         return [r.effect for r in self.ranking if r.significant]
@@ -311,7 +331,8 @@ class Diagnosis:
                 'energy_ratio': json_number(self.energy_ratio),
                 'energy_tolerance': json_number(self.energy_tolerance),
                 'consistent_with_noise': self.consistent_with_noise, 'alpha': self.alpha,
-                'explanation': self.explanation, 'notes': list(self.notes),
+                'explanation': self.explanation, 'next_step': self.next_step,
+                'notes': list(self.notes),
                 'residual': [a.to_dict() for a in self.analyses]}
 
 

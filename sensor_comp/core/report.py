@@ -20,6 +20,7 @@ import os
 from matplotlib.figure import Figure
 
 from .compare import Comparison, format_table
+from .diagnose import ATTENTION, NEXT_STEP, VERDICTS
 from .plots import comparison_figure, comparison_residual_figure
 from .residual import ResidualAnalysis
 from .residual_plots import (amplitude_figure, cross_correlation_figure, probes_figure,
@@ -28,7 +29,7 @@ from .shots import Shot, shot_table
 from .. import __version__
 from ..files import write_text_atomically
 
-__all__ = ['embedded_png', 'html_report', 'write_report']
+__all__ = ['embedded_png', 'html_report', 'verdict_html', 'write_report']
 
 _STYLE = """
 body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
@@ -37,7 +38,7 @@ pre { background: #f6f6f6; padding: .8em; overflow-x: auto; font-size: .85em; }
 img { max-width: 100%; } table { border-collapse: collapse; }
 td, th { border: 1px solid #ccc; padding: .3em .6em; text-align: left; }
 .verdict { font-size: 1.2em; font-weight: bold; }
-.ok { color: #1a7f37; } .bad { color: #b3261e; }
+.ok { color: #1a7f37; } .bad { color: #b3261e; } .partly { color: #9a6700; }
 """
 
 
@@ -110,9 +111,7 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
              f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC. '
              + ''.join(f'<br>{html.escape(s)}' for s in sources) + '</p>']
     if diagnosis is not None:
-        verdict = str(diagnosis.get('verdict'))
-        css = 'ok' if verdict == 'adequate' else 'bad'
-        parts.append(f'<p class="verdict {css}">Verdict: {html.escape(verdict)}</p>')
+        parts.append(verdict_html(diagnosis))
     parts.append('<h2>1. Shots</h2>' + _pre(shot_table(shots)))
     parts.append('<h2>2. Model against measurement</h2>'
                  '<p>Each model simulated from the measured acceleration over every shot '
@@ -141,6 +140,30 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
                      + _pre(format_table(after)) + embedded_png(comparison_figure(after))
                      + embedded_png(comparison_residual_figure(after)))
     parts.append('</body></html>')
+    return '\n'.join(parts)
+
+
+def verdict_html(diagnosis: Mapping) -> str:
+    """
+    Return the verdict paragraph of the report: the verdict, its explanation, the next step.
+
+    Every verdict of :data:`~sensor_comp.core.diagnose.VERDICTS` has its colour
+    (:data:`~sensor_comp.core.diagnose.ATTENTION`: green only for ``adequate``; amber for a
+    ``partly_explained`` named effect, red for the others) and its next step
+    (:data:`~sensor_comp.core.diagnose.NEXT_STEP`); an unknown one is shown as such, in red.
+    """
+    verdict = str(diagnosis.get('verdict'))
+    if verdict not in VERDICTS:
+        return (f'<p class="verdict bad">Verdict: {html.escape(verdict)} (unknown to this '
+                f'version)</p>')
+    css = ('partly' if verdict == 'partly_explained' else
+           'bad' if ATTENTION[verdict] else 'ok')
+    named = ', '.join(diagnosis.get('named') or ())
+    parts = [f'<p class="verdict {css}">Verdict: {html.escape(verdict)}'
+             + (f' ({html.escape(named)})' if named else '') + '</p>']
+    if diagnosis.get('explanation'):
+        parts.append(f'<p>{html.escape(str(diagnosis["explanation"]))}</p>')
+    parts.append(f'<p>Next: {html.escape(NEXT_STEP[verdict])}</p>')
     return '\n'.join(parts)
 
 

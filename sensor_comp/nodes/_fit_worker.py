@@ -112,7 +112,11 @@ def diagnose_fit(calibration: tuple[ShotSource, ...], validation: tuple[ShotSour
         found = diagnose(calibration, validation, base=model)
     except SensorCompError as exc:
         return Diagnosis({'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)})
-    verdict = {'diagnosis_verdict': found.verdict}
+    verdict = {'diagnosis_verdict': found.verdict, 'diagnosis_next_step': found.next_step}
+    if found.named:
+        verdict['diagnosis_named'] = ' + '.join(found.named)
+    if found.leftover is not None:
+        verdict['diagnosis_leftover_noise_energy'] = found.leftover.energy_ratio
     if found.ranking:
         top = found.ranking[0]
         verdict.update({'diagnosis_top_effect': top.effect,

@@ -46,8 +46,10 @@ parameter it does not have is logged with the closest name it has):
 - ``diagnose`` (bool, default true): after each fit, run the diagnosis
   (:func:`~sensor_comp.core.diagnose.diagnose`) of the new model on the same calibration
   and validation shots, in the worker thread once the model is published, and add its
-  verdict and top-ranked effect to ``/diagnostics`` (level WARN for ``missing_effect`` or
-  ``unexplained``).
+  verdict, the effects it names, what they leave (in noise energies), the next step and the
+  top-ranked effect to ``/diagnostics`` (level WARN for every verdict but ``adequate``:
+  ``missing_effect``, ``partly_explained``, ``unexplained``, and a diagnosis that
+  ``failed``).
 - ``diagnostics_period`` (s, default 1.0), ``fit_timeout`` (s the service waits for a
   fit, default 300).
 
@@ -122,6 +124,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
+from ..core.diagnose import ATTENTION
 from ..core.effects import EFFECTS
 from ..core.identify import STRUCTURES
 from ..core.live_shots import LiveShots, ShotWindow
@@ -142,7 +145,7 @@ from .qos import LATCHED_QOS, latched_qos
 from .transport import (DEFAULT_NAMESPACE, merge_stream_infos, message_class, publish_raw,
                         subscribe_blocks, take_queued)
 
-__all__ = ['Identification', 'main']
+__all__ = ['Identification', 'main', 'verdict_status']
 
 #: Status name on ``/diagnostics``.
 STATUS_NAME = 'sensor_comp: identification'
@@ -654,12 +657,10 @@ class Identification(Node):
         if model is not None:
             values.update(_statistics(model))
             values.update(self.verdict)
-            if level == DiagnosticStatus.OK and self.verdict.get('diagnosis_verdict') in (
-                    'missing_effect', 'unexplained'):
+            warn, text = verdict_status(self.verdict)
+            if level == DiagnosticStatus.OK and warn:
                 level = DiagnosticStatus.WARN
-                message += (f'; diagnosis: {self.verdict["diagnosis_verdict"]}'
-                            + (f' ({self.verdict["diagnosis_top_effect"]})'
-                               if 'diagnosis_top_effect' in self.verdict else ''))
+                message += f'; {text}'
         self._diagnostics.publish(diagnostics(self, name=STATUS_NAME, level=level,
                                               message=message, values=values))
 
@@ -673,6 +674,37 @@ class Identification(Node):
         self._worker.shutdown(wait=True, cancel_futures=True)
         self._retire_process()  # the fit thread has retired it, unless it never ran
         super().destroy_node()
+
+
+def verdict_status(verdict: dict) -> tuple[bool, str]:
+    """
+    Return whether a diagnosis calls for a warning, and its text for ``/diagnostics``.
+
+    ``verdict``: the ``diagnosis_*`` values (:func:`~sensor_comp.nodes._fit_worker.
+    diagnose_fit`); empty before the first diagnosis (no warning). Every verdict of
+    :data:`~sensor_comp.core.diagnose.VERDICTS` is handled by :data:`ATTENTION`, plus
+    ``'failed'`` (the diagnosis could not run: a warning with the reason).
+
+    Raises:
+        KeyError: For a verdict that is none of these (a new verdict must be handled here).
+
+    """
+    name = verdict.get('diagnosis_verdict')
+    if name is None:
+        return False, ''
+    if name == 'failed':
+        return True, f'diagnosis failed: {verdict.get("diagnosis_error", "")}'
+    warn = ATTENTION[name]
+    if name in ('missing_effect', 'partly_explained'):
+        detail = verdict.get('diagnosis_named', '')
+        left = verdict.get('diagnosis_leftover_noise_energy')
+        if left is not None:
+            detail += f'; leaves {left:.2f}× the noise energy'
+    elif name == 'unexplained':
+        detail = 'no catalogued effect explains the residual'
+    else:  # adequate
+        detail = 'residual consistent with the noise'
+    return warn, f'diagnosis: {name} ({detail})'
 
 
 def _statistics(model: Model) -> dict:

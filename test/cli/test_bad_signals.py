@@ -158,3 +158,18 @@ def test_no_shot_has_no_traceback_in_a_real_process(calibration, tmp_path):
     assert run.returncode == 1
     assert run.stderr.startswith(f'sensor-comp: error: {quiet}: no shot found')
     assert 'Traceback' not in run.stderr
+
+
+def test_diagnose_prints_the_verdict_why_and_the_next_step(model_files, validation, capsys):
+    import json
+    from sensor_comp.core.diagnose import NEXT_STEP, VERDICTS
+    argv = ['diagnose', model_files['oe'], validation.path, '--effect', 'zero_shift']
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.splitlines()
+    verdict = lines[0].removeprefix('verdict: ')
+    assert verdict in VERDICTS, lines
+    assert lines[1].startswith(f'  {verdict.replace("_", " ")}:')
+    assert lines[2] == f'  next: {NEXT_STEP[verdict]}'
+    assert main([*argv, '--json']) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc['verdict'] == verdict and doc['next_step'] == NEXT_STEP[verdict]

@@ -349,7 +349,7 @@ def test_sensitivity_ranges():
 
 
 def test_diagnose_leaves_defective_shots_out_with_a_note_and_checks_the_rate(tmp_path):
-    from sensor_comp.core.diagnose import diagnose
+    from sensor_comp.core.diagnose import diagnose, VERDICTS
     from sensor_comp.core.model import ModelError
     rec = rig().recording
     shots = detect_shots(rec)
@@ -364,7 +364,7 @@ def test_diagnose_leaves_defective_shots_out_with_a_note_and_checks_the_rate(tmp
         f'non-finite sample(s) (NaN: a stream gap or bad data), the first at sample ' \
         f'{shots[2].peak} ({shots[2].peak / FS:.6f} s)'
     # Without the exclusion the NaN would have stopped the fit (segments refuses it).
-    assert result.verdict in ('adequate', 'missing_effect', 'unexplained')
+    assert result.verdict in VERDICTS
     model = fit(rec).model
     fast = type(model)(**{**model.__dict__, 'fs': 1e6})
     with pytest.raises(ModelError, match=r'the base model was identified at 1e\+06 Hz but every '

@@ -372,3 +372,57 @@ def test_a_candidate_whose_fit_fails_is_a_note_and_the_others_go_on(monkeypatch)
     assert [r.effect for r in result.ranking][0] == 'nonlinear_sensitivity'
     assert 'second_resonance' not in [r.effect for r in result.ranking]
     assert result.verdict == 'missing_effect'
+
+
+def _fake_diagnosis(verdict):
+    """Return a diagnosis-like object with ``verdict`` (what the consumers read)."""
+    from types import SimpleNamespace
+    from sensor_comp.core.diagnose import NEXT_STEP
+    named = ('zero_shift',) if verdict in ('missing_effect', 'partly_explained') else ()
+    entry = SimpleNamespace(effect='zero_shift', evidence='removes 42 % (p = 1e-9)')
+    return SimpleNamespace(verdict=verdict, named=named, explanation=f'{verdict}: why',
+                           next_step=NEXT_STEP[verdict], entry=lambda effect: entry,
+                           to_dict=lambda: {'verdict': verdict, 'named': list(named),
+                                            'explanation': f'{verdict}: why'})
+
+
+def test_every_verdict_has_a_next_step_and_an_attention_flag():
+    from sensor_comp.core.diagnose import ATTENTION, NEXT_STEP, VERDICTS
+    assert set(NEXT_STEP) == set(VERDICTS) == set(ATTENTION)
+    assert set(VERDICTS) == {'missing_effect', 'partly_explained', 'adequate', 'unexplained'}
+    assert [v for v in VERDICTS if not ATTENTION[v]] == ['adequate']
+    # The module documentation defines each verdict.
+    from sensor_comp.core import diagnose as module
+    assert all(f"``'{v}'``" in module.__doc__ for v in VERDICTS)
+
+
+@pytest.mark.parametrize('verdict', ['missing_effect', 'partly_explained', 'adequate',
+                                     'unexplained'])
+def test_the_demo_and_the_report_handle_every_verdict(verdict):
+    from sensor_comp.cli.demo import next_step
+    from sensor_comp.core.diagnose import NEXT_STEP
+    from sensor_comp.core.report import verdict_html
+    fake = _fake_diagnosis(verdict)
+    effect, lines = next_step(fake)
+    # The demo adds the named effect when one is named, and says why it stops otherwise.
+    assert effect == {'missing_effect': 'zero_shift', 'partly_explained': 'zero_shift',
+                      'adequate': None, 'unexplained': None}[verdict]
+    assert lines[0] == f'verdict: {verdict}' and lines[-1] == f'next: {NEXT_STEP[verdict]}'
+    assert ('leaves a residual beyond the noise' in ' '.join(lines)) == (
+        verdict == 'partly_explained')
+    assert not any('nothing to add' in line for line in lines) or verdict == 'adequate'
+    text = verdict_html(fake.to_dict())
+    css = {'missing_effect': 'bad', 'partly_explained': 'partly', 'adequate': 'ok',
+           'unexplained': 'bad'}[verdict]
+    assert f'<p class="verdict {css}">Verdict: {verdict}' in text
+    assert f'{verdict}: why' in text and NEXT_STEP[verdict].split(':')[0] in text
+    assert ('(zero_shift)' in text) == (verdict in ('missing_effect', 'partly_explained'))
+
+
+def test_an_unknown_verdict_is_refused_by_the_demo_and_flagged_by_the_report():
+    from sensor_comp.cli.demo import next_step
+    from sensor_comp.core.report import verdict_html
+    from types import SimpleNamespace
+    with pytest.raises(ValueError, match="unknown verdict 'maybe'"):
+        next_step(SimpleNamespace(verdict='maybe', explanation='', named=()))
+    assert 'class="verdict bad">Verdict: maybe (unknown' in verdict_html({'verdict': 'maybe'})

@@ -506,3 +506,35 @@ def test_every_fault_is_logged_and_skipped_and_the_model_is_the_offline_fit(
                                           + counts['overlapping_samples'])
     assert status['malformed_messages'] == str(stream.malformed)
     assert status['shots_kept'] == '4' and status['shots_rejected'] == '0'
+
+
+@pytest.mark.parametrize('verdict, warn, words', [
+    ('adequate', False, 'diagnosis: adequate (residual consistent with the noise)'),
+    ('missing_effect', True, 'diagnosis: missing_effect (zero_shift; leaves 1.02× the noise '
+                             'energy)'),
+    ('partly_explained', True, 'diagnosis: partly_explained (zero_shift; leaves 7.50× the '
+                               'noise energy)'),
+    ('unexplained', True, 'diagnosis: unexplained (no catalogued effect explains the '
+                          'residual)'),
+    ('failed', True, 'diagnosis failed: no shots'),
+])
+def test_every_verdict_has_its_level_and_text_on_diagnostics(verdict, warn, words):
+    from sensor_comp.core.diagnose import VERDICTS
+    from sensor_comp.nodes.identification import verdict_status
+    assert verdict in VERDICTS or verdict == 'failed'
+    values = {'diagnosis_verdict': verdict, 'diagnosis_error': 'no shots'}
+    if verdict in ('missing_effect', 'partly_explained'):
+        values.update(diagnosis_named='zero_shift', diagnosis_leftover_noise_energy=(
+            1.02 if verdict == 'missing_effect' else 7.5))
+    assert verdict_status(values) == (warn, words)
+
+
+def test_every_verdict_of_the_core_is_handled_on_diagnostics():
+    from sensor_comp.core.diagnose import VERDICTS
+    from sensor_comp.nodes.identification import verdict_status
+    assert verdict_status({}) == (False, '')
+    for verdict in VERDICTS:
+        assert verdict_status({'diagnosis_verdict': verdict})[1].startswith(
+            f'diagnosis: {verdict} (')
+    with pytest.raises(KeyError):
+        verdict_status({'diagnosis_verdict': 'maybe'})
