@@ -1,23 +1,8 @@
 """
 Measured against simulated induced pressure per shot, as MATLAB's ``compare`` reports it.
 
-Each model is *simulated* (not one-step predicted) from the measured acceleration over every
-shot window, from a zero state at the window start (windows start in the quiet
-pre-trigger), with the windows' baselines removed (:func:`~sensor_comp.core.shots.segments`).
-Per shot and model:
-
-- fit % ``100·(1 − ‖y − ŷ‖/‖y − ȳ‖)``; the overall fit takes the norms over all the windows
-  together (each window's own mean), so it depends on the window lengths, which are given
-  with every shot;
-- peak error: the model's peak (largest-magnitude value, sign kept) minus the measured one,
-  in MPa and in % of the measured peak (the seed paper: 0.1448 vs 0.1402 MPa);
-- peak residual: peak ``|y − ŷ|`` in % of peak ``|y|``, the compensated residual of the
-  window (the paper's < 11 %); the overall value is the worst shot.
-
-A model with disturbance effects (mains hum) has them in ``ŷ`` too, fitted by least squares
-on the windows' residual, all windows of the recording together
-(:func:`~sensor_comp.core.compensation.window_disturbances`): what the diagnosis credits the
-effect with, and what offline compensation removes.
+Models are simulated from rest over each baseline-removed shot window; fit %, peak error
+and peak residual per shot. Definitions: ``doc/compare.md``.
 """
 
 from __future__ import annotations
@@ -49,21 +34,21 @@ def _signed_peak(x: np.ndarray) -> float:
 @dataclass(frozen=True)
 class ShotComparison:
     """
-    One model against one shot window.
+    One model against one shot window (times in s since the recording start; pressures in Pa).
 
     Args:
         index: The shot's index.
-        start_s: Window start in seconds since the recording start.
-        stop_s: Window end in seconds.
+        start_s: Window start.
+        stop_s: Window end.
         fit_percent: Fit of the simulation in this window.
         peak_mpa: Measured peak (largest magnitude, sign kept) in MPa.
         model_peak_mpa: Simulated peak in MPa.
         peak_error_mpa: ``model_peak_mpa − peak_mpa``.
         peak_error_percent: The peak error in % of ``|peak_mpa|``.
         peak_residual_percent: Peak ``|y − ŷ|`` in % of peak ``|y|``.
-        t: Sample times in s since the recording start (not in :meth:`to_dict`).
-        measured: Measured pressure in the window, Pa, baseline removed (denoised if asked).
-        simulated: Simulated induced pressure, Pa (plus the model's disturbances, if any).
+        t: Sample times (not in :meth:`to_dict`).
+        measured: Measured pressure, baseline removed (denoised if asked).
+        simulated: Simulated induced pressure (plus the model's disturbances, if any).
 
     """
 
@@ -133,15 +118,13 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     Compare several models with the measured pressure of the same shots.
 
     Args:
-        models: Models with ``b``, ``a``, ``nk``, ``inputs`` and ``fs``; a single model is
-            accepted too.
+        models: Models with ``b``, ``a``, ``nk``, ``inputs`` and ``fs`` (or a single one).
         recording: Pressure and acceleration.
         shots: The shots to compare on (say which: calibration or validation).
         labels: One name per model; default the model's ``label``/``name``/``structure``
             attribute or ``'model i'``.
-        denoise: Applied once to each measured window before comparing (e.g. an
-            :class:`~sensor_comp.core.denoise.EmdDenoiser`); None compares with the
-            measured pressure.
+        denoise: Applied once to each measured window before comparing, e.g. an
+            :class:`~sensor_comp.core.denoise.EmdDenoiser`.
 
     Returns:
         One :class:`Comparison` per model, in order.
@@ -206,11 +189,7 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
 
 
 def format_table(comparisons: Sequence[Comparison]) -> str:
-    """
-    Return a text table: one row per shot, fit / peak error / residual per model.
-
-    The last row holds the overall fit and the worst residual of each model.
-    """
+    """Return a text table: a row per shot, fit / peak error / residual per model, then overall."""
     if not comparisons:
         return 'no models compared\n'
     cell = f'{"fit %":>7} {"peak err %":>10} {"resid %":>8}'

@@ -1,67 +1,9 @@
 """
 EMD denoising of one shot window (emd-signal's ``PyEMD.EMD``), and of many in parallel.
 
-Empirical mode decomposition splits a window into intrinsic mode functions (IMFs), roughly
-one octave each from the highest frequencies down, plus a residue (trend). On white noise it
-acts as a dyadic filter bank (Flandrin, Rilling & Gonçalves, IEEE SPL 11(2), 2004): the
-energy of noise IMF ``k`` falls geometrically with ``k``. The selection rule here uses that
-model (chosen over an IMF–signal correlation threshold because it needs no tuning to the
-signal's amplitude and states what it assumes: white noise):
-
-1. The first IMF is taken as noise; its robust scale ``σ₁ = median|IMF₁| / 0.6745`` (robust
-   to the shock leaking into it) fixes the white-noise energy expected in every IMF,
-   ``E₁ = c₁ N σ₁²`` and ``E_k = c N σ₁² ρ^-k`` for ``k ≥ 2``.
-2. The reconstruction keeps the IMFs from the first one whose energy exceeds
-   ``factor`` × its noise energy, and every slower IMF and the residue after it (partial
-   reconstruction; slower IMFs hold the shock's energy, and a stray slow noise IMF is
-   cheap to keep).
-
-``factor = 2`` is the mean-square-error break-even: an IMF holding signal energy ``S`` and
-noise energy ``W`` costs ``S`` when dropped and ``W`` when kept, so it is worth keeping when
-``S + W > 2 W``. The IMF energies of noise scatter by less than ±0.2 in log2 for ``k ≤ 5``,
-so a noise IMF passes ``factor = 2`` by chance very rarely. Coloured noise (e.g. amplifier
-low-pass) breaks the white-noise model: then IMF1 underestimates the noise in slower IMFs.
-
-Cost. The denoised window is the window minus the noise IMFs, so the decomposition stops
-at the first IMF that holds signal: the slower IMFs are never separated (they and the
-residue are kept whole). The sifting (:data:`SIFTING`) is chosen for speed at equal
-quality:
-
-- a fixed 5 sifting iterations per IMF (PyEMD's ``FIXE = 5``) instead of emd-signal's
-  default stopping test (energy-ratio test plus extrema/zero-crossing count), which took
-  ~110 iterations for IMF 1 of a 26 k-sample window of noise, 50–70 for IMFs 2 and 3. A
-  fixed, small number of siftings is the usual choice for noise-assisted EMD (Wu & Huang
-  2009 recommend ~10; 5 to 10 keep the dyadic filter bank), and it makes the cost
-  predictable;
-- cubic splines (Huang's; ``akima`` and ``pchip`` were slower here) and ``simple``
-  extrema (``parabol`` adds work per extremum and moves extrema off the sample grid).
-
-The white-noise constants depend on the sifting and were calibrated for each (white
-Gaussian noise, 10k–20k samples, 24 runs; ``python -m bench.bench_emd --calibrate``
-repeats it): for :data:`SIFTING` ``c₁ = 2^-0.49``, ``c = 2^0.09``, ``ρ = 2^1.07`` (closer
-to Flandrin's ``ρ = 2.01`` than the default sifting's ``2^0.89``). Against the earlier
-default sifting (:data:`REFERENCE_SIFTING`), on the simulator's ten Table-2 shot windows
-(26 k samples, 1 MS/s) the denoised windows differ by 0.16 σ of the noise RMS (1.1 % of the
-windows' RMS), while both stay 0.23 σ from the clean pressure, and a model identified from
-them has the same validation fit (``bench/bench_emd.py`` measures all of it); a window
-takes ~0.07 s instead of ~1 s.
-
-Parallel windows (:func:`denoise_windows`, :meth:`EmdDenoiser.map`): the windows are
-shared between this process and helper processes (:data:`PROCESSES` in all), each a
-:class:`sensor_comp.worker.Worker` (a fresh interpreter: no fork, no import of the
-caller's ``__main__``). Below
-:data:`MIN_POOL_SAMPLES` samples the helpers' start-up (~0.5 s) is not worth it and the
-windows run here; so they do when the load average leaves no core free, inside a
-``multiprocessing`` worker (the caller already runs in parallel), or with
-``SENSOR_COMP_EMD_PROCESSES=1`` in the environment (a process sharing its cores with a live
-node). A helper that dies leaves its window to this process.
-
-The window is scaled to unit RMS before sifting, because emd-signal's stopping thresholds
-(``range_thr``, ``total_power_thr``) are absolute, and its scale-dependent ``svar_thr`` test
-is disabled; the result is then independent of the unit.
-
-EMD costs super-linear time: run it per shot window, never on a whole recording;
-:data:`MAX_SAMPLES` guards that.
+IMFs whose energy matches a calibrated white-noise model are removed (partial
+reconstruction). The rule, the sifting choice, its calibration and timings:
+``doc/denoising.md``.
 """
 
 from __future__ import annotations
@@ -104,7 +46,7 @@ class DenoiseError(SensorCompError, ValueError):
 @dataclass(frozen=True)
 class Sifting:
     """
-    PyEMD settings and the white-noise IMF energies calibrated for them (see module docs).
+    PyEMD settings and the white-noise IMF energies calibrated for them.
 
     Args:
         options: Keyword arguments of ``PyEMD.EMD``.
@@ -143,16 +85,13 @@ REFERENCE_SIFTING = Sifting(options=(('svar_thr', 0.0),), log2_imf1=-0.61, log2_
 def white_noise_energy(n_imfs: int, n_samples: int, sigma1: float, *,
                        sifting: Sifting = SIFTING) -> np.ndarray:
     """
-    Return the energy expected in each of ``n_imfs`` IMFs of white noise.
+    Return the energy (sum of squares) expected in each of ``n_imfs`` IMFs of white noise.
 
     Args:
         n_imfs: Number of IMFs.
         n_samples: Window length.
         sigma1: Robust scale of IMF1 (``median|IMF₁| / 0.6745``).
         sifting: The sifting the IMFs come from.
-
-    Returns:
-        ``(n_imfs,)`` energies (sums of squares).
 
     """
     k = np.arange(1, n_imfs + 1, dtype=float)
@@ -169,10 +108,8 @@ class DenoiseResult:
     Args:
         signal: The denoised window (same length and unit as the input).
         removed: Number of IMFs removed as noise (IMF 1 to ``removed``).
-        n_imfs: Number of IMFs separated: the noise IMFs and the first one holding signal
-            (the slower ones are kept with the residue, never separated).
-        imf_energy: Energy (sum of squares) of each IMF separated, in the input unit
-            squared.
+        n_imfs: IMFs separated: the noise IMFs and the first signal IMF.
+        imf_energy: Energy of each IMF separated, in the input unit squared.
         noise_energy: White-noise energy expected in each IMF separated.
         noise_rms: Estimated RMS of the white noise in the input.
         seconds: Wall time of the decomposition.
@@ -219,16 +156,13 @@ def _check(x: np.ndarray, factor: float, max_samples: int) -> np.ndarray:
 def emd_denoise(x: np.ndarray, *, factor: float = DEFAULT_FACTOR,
                 max_samples: int = MAX_SAMPLES, sifting: Sifting = SIFTING) -> DenoiseResult:
     """
-    Denoise one window by EMD partial reconstruction (see the module doc for the rule).
+    Denoise one window by EMD partial reconstruction.
 
     Args:
         x: ``(n,)`` window, e.g. pressure in Pa with its baseline removed.
         factor: Energy multiple of the white-noise model that marks the first kept IMF.
         max_samples: Refuse longer windows (cost).
         sifting: PyEMD settings and their white-noise model.
-
-    Returns:
-        The denoised window and the selection.
 
     Raises:
         DenoiseError: On a non-1-D or non-finite window, or one longer than ``max_samples``.
@@ -273,14 +207,10 @@ def pool_size(total_samples: int, processes: int | None = None) -> int:
     """
     Return how many processes should share windows of ``total_samples`` (1: this one only).
 
-    Helpers are worth their start-up only for :data:`MIN_POOL_SAMPLES` or more, never in
-    a ``multiprocessing`` worker, and by default (``processes`` None) only on cores the
-    load average leaves free (on a busy machine they add start-up and gain nothing).
-
     Args:
         total_samples: Samples in all the windows.
         processes: Wanted processes; default ``SENSOR_COMP_EMD_PROCESSES`` or
-            :data:`PROCESSES`, within the free cores.
+            :data:`PROCESSES`, within the cores the load average leaves free.
 
     """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
@@ -303,18 +233,16 @@ def denoise_windows(windows: Sequence[np.ndarray], *, factor: float = DEFAULT_FA
                     processes: int | None = None,
                     done: Callable[[], None] | None = None) -> list[DenoiseResult]:
     """
-    Denoise many windows, in parallel processes when worth it (see the module docs).
+    Denoise many windows, in parallel processes when worth it (``doc/denoising.md``).
 
     Args:
         windows: ``(n,)`` windows.
-        factor: As in :func:`emd_denoise`.
-        max_samples: As in :func:`emd_denoise`.
-        sifting: As in :func:`emd_denoise`.
+        factor: As in :func:`emd_denoise`; so are ``max_samples`` and ``sifting``.
         processes: Processes sharing the windows (see :func:`pool_size`).
         done: Called once per window denoised (a progress bar), in this thread.
 
     Returns:
-        One result per window, in order; each equals :func:`emd_denoise` of the window.
+        One result per window, in order, each as :func:`emd_denoise` gives it.
 
     Raises:
         DenoiseError: For the first bad window (in order).
@@ -414,14 +342,8 @@ class EmdDenoiser:
     """
     A callable for :func:`sensor_comp.core.shots.segments` that keeps its results.
 
-    Args:
-        factor: As in :func:`emd_denoise`.
-        max_samples: As in :func:`emd_denoise`.
-        sifting: As in :func:`emd_denoise`.
-
-    Attributes:
-        results: One :class:`DenoiseResult` per window denoised, in call order (for reports).
-
+    Args are those of :func:`emd_denoise`; ``results`` holds one :class:`DenoiseResult` per
+    window, in call order (for reports).
     """
 
     def __init__(self, *, factor: float = DEFAULT_FACTOR, max_samples: int = MAX_SAMPLES,
@@ -442,10 +364,6 @@ class EmdDenoiser:
             done: Callable[[], None] | None = None) -> list[np.ndarray]:
         """
         Return every window denoised (in parallel when worth it) and record the results.
-
-        Args:
-            windows: ``(n,)`` windows.
-            done: Called once per window denoised (a progress bar).
 
         Raises:
             DenoiseError: For the first bad window.

@@ -1,48 +1,9 @@
 """
 Model input channels computed from acceleration, block by block, with carried state.
 
-A model names its inputs (``Model.inputs``); this module turns an acceleration block
-``(3, w)`` in m/s² (rows x, y, z; z = sensor axis) into those rows. Identification windows
-and the streaming compensation filter both go through :func:`input_channels`, so the model
-sees the same channels offline and online. A name carries every parameter its channel
-needs, so a model file alone reproduces its channels.
-
-A name is a base channel followed by optional modifiers, ``base[@modifier=value...]``.
-
-Base channels:
-
-- ``a_x``, ``a_y``, ``a_z``: acceleration along one axis, m/s².
-- ``da_x``, ``da_y``, ``da_z``: its time derivative (backward difference × ``fs``), m/s³.
-  The previous sample is carried in ``state`` so that blocks of any size give the same
-  channel as the whole signal; the first sample of a stream or window has derivative 0
-  (windows start at rest).
-- ``a_z_abs_a_z``: ``a_z·|a_z|``, m²/s⁴ (a sensitivity that changes with the load).
-- ``peak_a_z(tau_ms=T)``: a leaky peak detector of ``|a_z|``, m/s²: it follows ``|a_z|``
-  up and decays with the time constant ``T`` ms, ``p[n] = max(|a_z[n]|, p[n−1]·ρ)`` with
-  ``ρ = exp(−1/(T·fs))``: after a shock it is the shock's peak decaying exponentially (a
-  shot-triggered offset such as a zero shift).
-
-Modifiers, applied in the order written (all are linear and time-invariant):
-
-- ``@delay_us=D``: delay by ``D`` µs ≥ 0, fractional samples included, by an 8-tap
-  Lagrange interpolator (its error for a sine at ``f`` is at most
-  ``∏_j |d − j| (2πf/fs)⁸/8!`` of its amplitude, ``d`` the delay within the taps: 1e-7 at
-  ``f = fs/20`` for a centred delay, 2e-6 for a delay under 3 samples; far below any
-  measurement noise here).
-- ``@highpass_ms=T``: the first-order high-pass ``T s/(T s + 1)`` of a charge amplifier
-  with time constant ``T`` ms (matched pole ``exp(−1/(T·fs))``, zero at ``z = 1``).
-- ``@mode=F,Z``: a lightly damped mode at ``F`` kHz with damping ratio ``Z`` (``0 < Z <
-  1``): the all-pole filter ``P(1)/P(q)`` with ``P`` the matched pole pair
-  ``exp((−Z ± j√(1−Z²))·2πF/fs)``, unit gain at DC. A model whose inputs all pass it has
-  the pair as extra poles of its common denominator.
-
-Stateful stages (derivative, peak detector, modifiers) carry their state in ``state``;
-a non-finite sample gives a non-finite output and restarts the stage from rest after it.
-So does a stage output that overflows (a corrupted block of values near 1e308): that
-sample is NaN and the stage restarts from rest after it, as the compensation filter does
-(:mod:`sensor_comp.core.compensation`); a carried state of Inf would otherwise make the
-stage NaN until the next non-finite input.
-Parameter values are written with ``repr`` precision, so names round-trip exactly.
+Names such as ``a_z``, ``da_z``, ``peak_a_z(tau_ms=T)`` with modifiers (``@delay_us=D``,
+``@highpass_ms=T``, ``@mode=F,Z``); offline and online go through :func:`input_channels`.
+The grammar and the numerics: ``doc/model-inputs.md``.
 """
 
 from __future__ import annotations
@@ -85,8 +46,7 @@ class Channel:
         kind: ``'a'``, ``'da'``, ``'a_abs_a'`` or ``'peak'``.
         axis: Row of the acceleration block it reads.
         tau_ms: Decay time constant of a ``peak`` channel, else None.
-        modifiers: ``(modifier, value)`` pairs in the order they apply (``mode``: a
-            ``(kHz, damping)`` pair).
+        modifiers: ``(modifier, value)`` pairs in order (``mode``: a ``(kHz, damping)`` pair).
 
     """
 
@@ -123,7 +83,7 @@ def _number(text: str, name: str, what: str, *, positive: bool) -> float:
 
 def parse_channel(name: str) -> Channel:
     """
-    Parse a model input name (see the module docs).
+    Parse a model input name (``doc/model-inputs.md``).
 
     Raises:
         InputError: On an unknown base or modifier, or a bad parameter value.
@@ -175,22 +135,15 @@ def mode_pair(freq_khz: float, zeta: float, fs: float) -> np.ndarray:
 
 
 def needs_rate(names: Sequence[str]) -> bool:
-    """
-    Return whether any of ``names`` needs the sample rate (derivatives, time constants).
-
-    Raises:
-        InputError: On an unknown name.
-
-    """
+    """Return whether any of ``names`` needs the sample rate; raise InputError on unknown ones."""
     return any(parse_channel(name).needs_rate for name in names)
 
 
 def fractional_delay(delay: float) -> np.ndarray:
     """
-    Return FIR taps delaying a signal by ``delay`` samples (>= 0): ``y = lfilter(taps, 1, x)``.
+    Return FIR taps delaying by ``delay`` samples (>= 0): ``y = lfilter(taps, 1, x)``.
 
-    Whole samples become leading zeros; the rest is a Lagrange interpolator of order
-    :data:`LAGRANGE_ORDER` centred on the fractional delay where the delay allows it.
+    Whole samples become leading zeros, the rest a centred Lagrange interpolator.
     """
     n = LAGRANGE_ORDER
     start = max(0, math.floor(delay - (n - 1) / 2))
@@ -282,17 +235,14 @@ def _leaky_peak(tau_ms: float, fs: float):
 def input_channels(names: Sequence[str], acceleration: np.ndarray,
                    state: MutableMapping[str, object], *, fs: float | None = None) -> np.ndarray:
     """
-    Return the model input rows for one acceleration block.
+    Return the ``(len(names), w)`` model input rows for one acceleration block.
 
     Args:
-        names: Input names, e.g. ``('a_z',)`` (see the module docs).
+        names: Input names, e.g. ``('a_z',)``.
         acceleration: ``(3, w)`` block in m/s²; ``w`` may be 0 or 1.
-        state: Carried across the blocks of one stream; start each stream or window with a
-            fresh empty dict. Updated in place.
+        state: Carried across the blocks of one stream, updated in place; start each stream
+            or window with a fresh empty dict.
         fs: Sample rate in Hz; needed by derivatives, time constants and delays.
-
-    Returns:
-        ``(len(names), w)`` float64 array.
 
     Raises:
         InputError: On an unknown name, a block that is not ``(3, w)``, or an input that

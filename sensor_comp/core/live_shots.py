@@ -1,11 +1,8 @@
 """
 Shots found live in block streams: a rolling buffer, its shot windows, and their provenance.
 
-What the ``identification`` node does with the blocks it receives, without ROS: a
-:class:`LiveShots` buffer takes paired blocks and returns each complete shot once as a
-:class:`ShotWindow` (a copy of its samples); :func:`provenance_shots` rebuilds, in a
-recording of the same streams, the shots a live model lists in its provenance, so that
-:func:`~sensor_comp.core.identify.identify` run offline on them gives the same model.
+The ``identification`` node's shot finding without ROS, and :func:`provenance_shots` to
+redo a live model offline (``doc/nodes.md``, live shot detection).
 """
 
 from __future__ import annotations
@@ -36,8 +33,8 @@ class ShotWindow:
     Attributes:
         shot: The shot; sample indices count from the first sample the node received.
         stamp_ns: Acquisition time of the window's first sample.
-        pressure: ``(n,)`` raw pressure of the window in Pa.
-        acceleration: ``(3, n)`` acceleration of the window in m/s².
+        pressure: ``(n,)`` raw pressure in Pa.
+        acceleration: ``(3, n)`` acceleration in m/s².
 
     """
 
@@ -51,10 +48,7 @@ class LiveShots:
     """
     Assemble paired blocks into a rolling buffer and find the shots that are complete.
 
-    Stream sample indices count from the first sample received; a stamp gap becomes NaN
-    samples (a gap longer than the buffer empties it). The blocks come from a
-    :class:`~sensor_comp.core.streaming.BlockPairer`, which has dropped the overlapping and
-    out-of-order ones.
+    Indices count from the first sample received; a stamp gap becomes NaN samples.
     """
 
     def __init__(self, *, fs: float, threshold_g: float | None, pre_ms: float,
@@ -90,7 +84,7 @@ class LiveShots:
     def add(self, stamp: int, block: np.ndarray, missing: int
             ) -> list[tuple[ShotWindow, str | None]]:
         """
-        Append a block pair; return the shots now complete, each with a reason to skip.
+        Append a block pair; return the shots now complete, each with a reason to skip or None.
 
         Args:
             stamp: Stamp of the block's first sample.
@@ -134,15 +128,9 @@ class LiveShots:
 
     def _may_hold_shot(self, fresh_axial: np.ndarray) -> bool:
         """
-        Return whether detection must run on this scan.
+        Return whether detection must run on this scan (it is skipped when it cannot find news).
 
-        Detection costs ~5 ms per 80 000 samples (several medians of the buffer), and at
-        1 MS/s a scan comes every 18 ms. It runs only when it can find something new: when
-        a new sample reaches 3/4 of the least level that could trigger (the threshold, or
-        8 noise σ for the automatic one, from the latest detection; a Gaussian noise
-        sample exceeds 6 σ with probability 2e-9), and while a shot found waits to
-        settle, once it can be taken (its pulse end plus ``settle``; a quarter scan early,
-        as the end may move by a few samples with the buffer's median).
+        Why and the thresholds: ``doc/nodes.md``, live shot detection.
         """
         if self._quiet is None:
             return True
@@ -204,17 +192,7 @@ def provenance_shots(model: Model, recording: Recording) -> tuple[Shot, ...]:
     """
     Return the shots a live model was fitted and validated on, in a recording's samples.
 
-    The ``identification`` node lists its windows in the model's provenance (stamps,
-    indices, baselines); with a recording of the same streams (e.g. made by the recorder)
-    this gives the shots to run :func:`~sensor_comp.core.identify.identify` on offline,
-    which reproduces the model.
-
-    Args:
-        model: A model published by the ``identification`` node.
-        recording: A recording of the streams the node received.
-
-    Returns:
-        The shots, in the order they were kept.
+    Running :func:`~sensor_comp.core.identify.identify` on them offline reproduces the model.
 
     Raises:
         ShotError: If the model has no live provenance, or a window lies outside the

@@ -1,31 +1,8 @@
 """
 The identified sensor model: polynomials, physics view, provenance and its JSON file.
 
-A :class:`Model` is what identification hands to compensation: the discrete transfer
-functions ``B_i(q)/A(q) q^-nk`` from each input (``'a_z'`` first: axial acceleration in
-m/s²; later effect channels) to the acceleration-induced pressure in Pa, at sample rate
-``fs``, plus everything needed to trust and reproduce it.
-
-The file is JSON with a versioned schema (:data:`SCHEMA`)::
-
-    {"schema": "sensor_comp.model/1", "fs": 1000000.0, "structure": "oe",
-     "orders": {"na": 2, "nb": 2, "nc": 0, "nd": 0, "nk": 1},
-     "inputs": ["a_z"], "numerators": {"a_z": [...]}, "denominator": [1.0, ...],
-     "noise": {"c": null, "d": null},
-     "std": {"numerators": {"a_z": [...]}, "denominator": [0.0, ...], "c": null, "d": null},
-     "charge_sensitivity_pC_per_MPa": 100.0,
-     "continuous": {...}, "fit": {...}, "provenance": [...], "effects": [],
-     "created": "2025-01-01T00:00:00Z", "sensor_comp_version": "0.1.0"}
-
-``continuous`` (natural frequency, damping, static sensitivity) is derived from the
-polynomials and written for readers; :func:`load` recomputes it instead of trusting it.
-
-Every input name must be one :mod:`sensor_comp.core.inputs` can compute and every effect id
-one of the catalogue (:data:`sensor_comp.core.effects.EFFECTS`): a file from a newer version
-naming something this one does not know is refused, never half-applied.
-
-Plausible sensitivities (:data:`PLAUSIBLE_MPA_PER_G`) catch recordings in the wrong unit;
-see :func:`sensitivity_problem`.
+A :class:`Model` is what identification hands to compensation. File schema, validation
+rules and the sensitivity plausibility ranges: ``doc/model-file.md``.
 """
 
 from __future__ import annotations
@@ -97,21 +74,14 @@ class ModelError(SensorCompError, ValueError):
 def sensitivity_problem(mpa_per_g: float, *, what: str = 'the static sensitivity'
                         ) -> tuple[bool, str] | None:
     """
-    Return ``(fatal, why)`` when a static acceleration sensitivity looks like a unit mistake.
+    Return ``(fatal, why)`` when a static sensitivity looks like a unit mistake, else None.
 
-    ``mpa_per_g`` is a sensitivity as shots show it (peak pressure over peak acceleration)
-    or as a model's static gain. Outside :data:`PLAUSIBLE_MPA_PER_G` no pressure sensor has
-    it (``fatal``); outside :data:`TYPICAL_MPA_PER_G` only an unusual one does (a warning: a
-    kPa reading taken for Pa moves the seed paper's 1.4e-4 MPa/g to 1.4e-7, still
-    plausible). The message names the unit mistakes that would bring the value into the
-    typical range, and the fix.
+    Outside :data:`PLAUSIBLE_MPA_PER_G` it is fatal, outside :data:`TYPICAL_MPA_PER_G` a
+    warning; the message names the unit mistakes that would explain it.
 
     Args:
-        mpa_per_g: The sensitivity.
+        mpa_per_g: Peak pressure over peak acceleration of shots, or a model's static gain.
         what: What it is, to begin the message.
-
-    Returns:
-        None for a typical sensitivity.
 
     """
     size = abs(mpa_per_g)
@@ -149,8 +119,7 @@ class Source:
     Args:
         path: File name as given (bag or CSV).
         sha256: Hex SHA-256 of the file's bytes.
-        shots: The shots used from it (indices, or dicts such as
-            ``{'index': 3, 'start': 120000, 'stop': 130000}``).
+        shots: The shots used (indices, or dicts with ``index``, ``start``, ``stop``).
 
     """
 
@@ -184,17 +153,15 @@ class Source:
 @dataclass(frozen=True)
 class ContinuousView:
     """
-    The physics of the model's input ``0`` path in continuous-time terms.
+    The continuous-time physics of the input-0 path.
 
     Attributes:
-        natural_frequency_hz: Undamped natural frequency of the dominant complex pole pair
-            (the pair with the highest resonance peak), or None when overdamped.
-        damping_ratio: Damping ratio of that pair, or None when overdamped.
-        overdamped: True when the denominator has no complex pole pair.
-        time_constants_s: Time constants of the positive real poles, slowest first.
+        natural_frequency_hz: Of the pole pair with the highest resonance; None if overdamped.
+        damping_ratio: Of that pair; None if overdamped.
+        overdamped: True when there is no complex pole pair.
+        time_constants_s: Of the positive real poles, slowest first.
         static_gain: DC gain ``B_i(1)/A(1)`` of every input (Pa per input unit).
-        sensitivity_MPa_per_g: Static acceleration sensitivity of input 0 in MPa/g
-            (``static_gain[0] · G0 / 1e6``).
+        sensitivity_MPa_per_g: ``static_gain[0] · G0 / 1e6``.
         sensitivity_pC_per_g: The same in pC/g when the charge sensitivity is known.
 
     """
@@ -236,21 +203,17 @@ def _optional_poly(value, what: str, *, monic: bool) -> np.ndarray | None:
 @dataclass(frozen=True, eq=False)
 class Model:
     """
-    An identified input → induced-pressure model (immutable; see the module docs).
+    An identified input → induced-pressure model, immutable (see ``doc/model-file.md``).
 
     Args:
         fs: Sample rate in Hz the polynomials belong to.
-        structure: One of ``'arx'``, ``'armax'``, ``'ararx'``, ``'oe'``.
+        structure: ``'arx'``, ``'armax'``, ``'ararx'`` or ``'oe'``.
         inputs: Input names, ``('a_z',)`` for the base model.
         b: Numerators ``(n_inputs, nb)``; ``b[i, j]`` multiplies ``u_i(k − nk − j)``.
-        a: Common denominator ``[1, a1, ..., ana]``.
+        a: Common monic denominator ``[1, a1, ..., ana]``.
         nk: Input delay in samples.
-        c: Noise numerator ``[1, c1, ...]`` or None.
-        d: Noise denominator ``[1, d1, ...]`` or None.
-        b_std: Standard deviations of ``b`` or None.
-        a_std: Standard deviations of ``a`` (0 for the leading 1) or None.
-        c_std: Standard deviations of ``c`` or None.
-        d_std: Standard deviations of ``d`` or None.
+        c: Noise numerator or None; ``d``: noise denominator or None.
+        b_std: Standard deviations of ``b`` (``a_std``, ``c_std``, ``d_std`` likewise), or None.
         charge_sensitivity_pC_per_MPa: The pressure sensor's charge sensitivity, if known.
         fit: Fit statistics (names to numbers, booleans or strings).
         provenance: The recordings and shots the model comes from.
@@ -338,14 +301,10 @@ class Model:
             fs: Sample rate of the data it was estimated from, in Hz.
             inputs: One name per estimate input.
             charge_sensitivity_pC_per_MPa: The sensor's charge sensitivity, if known.
-            fit: Extra fit statistics (e.g. validation fit %), merged over the estimate's
-                own (:meth:`Estimate.statistics`).
+            fit: Extra statistics, merged over :meth:`Estimate.statistics`.
             provenance: Source recordings.
             effects: Effect descriptions.
             created: ISO time; now (UTC) when None.
-
-        Returns:
-            The model.
 
         Raises:
             ModelError: When the inputs do not match the estimate or a value is bad.
@@ -365,13 +324,7 @@ class Model:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Model:
-        """
-        Read a model file; the same as the module function :func:`load`.
-
-        Raises:
-            ModelError: See :func:`load`.
-
-        """
+        """Read a model file; see :func:`load`."""
         return load(path)
 
     @property
@@ -387,7 +340,7 @@ class Model:
         DC gain ``B_i(1)/A(1)`` of each input (Pa per input unit).
 
         Raises:
-            ModelError: If the denominator has a pole at ``z = 1`` (infinite DC gain).
+            ModelError: If the denominator has a pole at ``z = 1``.
 
         """
         den = float(np.sum(self.a))
@@ -396,13 +349,7 @@ class Model:
         return self.b.sum(axis=1) / den
 
     def check_stable(self, *, margin: float = 0.0) -> None:
-        """
-        Raise unless every pole lies inside ``|z| < 1 − margin``.
-
-        Raises:
-            ModelError: Naming the largest pole radius, for an unstable model.
-
-        """
+        """Raise :class:`ModelError` unless every pole lies inside ``|z| < 1 − margin``."""
         radius = max_root_radius(self.a)
         if not radius < 1.0 - margin:
             raise ModelError(f'the model is unstable: a pole of the denominator {self.a.tolist()}'
@@ -412,13 +359,7 @@ class Model:
 
     def check_rate(self, fs: float, *, model_name: str = 'the model',
                    data_name: str = 'the recording') -> None:
-        """
-        Raise unless ``fs`` is the model's sample rate (its polynomials belong to one rate).
-
-        Raises:
-            ModelError: Naming both rates and both sources.
-
-        """
+        """Raise :class:`ModelError` unless ``fs`` is the model's sample rate."""
         if not math.isclose(self.fs, fs, rel_tol=1e-9):
             raise ModelError(f'{model_name} was identified at {self.fs:g} Hz but {data_name} '
                              f'is sampled at {fs:g} Hz: a discrete model belongs to one rate; '
@@ -426,10 +367,9 @@ class Model:
 
     def continuous(self) -> ContinuousView:
         """
-        Return the continuous-time view of the input-0 path (see :class:`ContinuousView`).
+        Return the continuous-time view of the input-0 path (poles map by ``s = fs · ln z``).
 
-        Poles map by ``s = fs · ln z``; negative real poles (alternating sign) have no
-        continuous counterpart and are left out.
+        Negative real poles have no continuous counterpart and are left out.
         """
         poles = np.roots(self.a) if self.a.size > 1 else np.empty(0)
         pairs = [z for z in poles if z.imag > 1e-12]
@@ -479,7 +419,7 @@ class Model:
 
     def save(self, path: str | os.PathLike) -> None:
         """
-        Write the model as JSON to ``path`` atomically (temporary file, then rename).
+        Write the model as JSON to ``path`` atomically.
 
         Raises:
             ModelError: If the file cannot be written.
@@ -572,18 +512,11 @@ def _numbers(value, where: str) -> list[float]:
 
 def load(path: str | os.PathLike) -> Model:
     """
-    Read a model file written by :meth:`Model.save`.
-
-    Args:
-        path: The JSON file.
-
-    Returns:
-        The model (its continuous-time view is recomputed, not read).
+    Read a model file written by :meth:`Model.save`; its continuous view is recomputed.
 
     Raises:
-        ModelError: If the file cannot be read or parsed, has another schema or version,
-            lacks a key, has a value of the wrong type, a non-finite number or inconsistent
-            orders.
+        ModelError: If the file cannot be read or parsed, has another schema or version, lacks
+            a key, or has a wrong type, a non-finite number or inconsistent orders.
 
     """
     where = f'model file {os.fspath(path)!r}'
@@ -715,7 +648,7 @@ def _source(entry, where: str) -> Source:
 def frequency_response(model: Model, *, n: int = 1024,
                        f_hz: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the frequency response of every input path (as the seed paper's Fig. 13).
+    Return the frequency response of every input path (the seed paper's Fig. 13).
 
     Args:
         model: The model.
@@ -723,8 +656,8 @@ def frequency_response(model: Model, *, n: int = 1024,
         f_hz: Frequencies in Hz to evaluate instead.
 
     Returns:
-        ``(f_hz, h)``: frequencies ``(n,)`` and complex responses ``(n_inputs, n)`` in Pa
-        per input unit (including the delay ``nk``).
+        ``(f_hz, h)``: frequencies ``(n,)`` and complex responses ``(n_inputs, n)`` in Pa per
+        input unit, including the delay ``nk``.
 
     """
     f = (np.geomspace(model.fs * 1e-5, model.fs / 2, n) if f_hz is None
@@ -738,13 +671,8 @@ def step_response(model: Model, *, duration_s: float) -> tuple[np.ndarray, np.nd
     """
     Return the response to a unit step on each input, from rest (the paper's Fig. 14).
 
-    Args:
-        model: The model.
-        duration_s: Length of the response in seconds.
-
     Returns:
-        ``(t, y)``: times ``(n,)`` in s and responses ``(n_inputs, n)`` in Pa per input
-        unit.
+        ``(t, y)``: times ``(n,)`` in s and responses ``(n_inputs, n)`` in Pa per input unit.
 
     Raises:
         ModelError: If ``duration_s`` is not positive.

@@ -1,15 +1,8 @@
 """
-Report figures (matplotlib, Agg canvas, never a display) in the seed paper's style.
-
-- :func:`overlay_figure`: measured against simulated pressure per shot (paper Fig. 12).
-- :func:`residual_figure`: residual after compensation per shot (Fig. 15).
-- :func:`frequency_response_figure`, :func:`step_response_figure`: model responses from
-  plain arrays (Figs. 13–14), so any model representation can be drawn.
-- :func:`comparison_figure`, :func:`comparison_residual_figure`: the same from
-  :class:`~sensor_comp.core.compare.Comparison` results.
+Report figures in the seed paper's style (Figs. 12–15; matplotlib Agg, never a display).
 
 Every function returns the :class:`~matplotlib.figure.Figure` and writes a PNG when ``path``
-is given. Pressures are drawn in MPa, times in ms from each window's start.
+is given. Pressures are in MPa, times in ms from each window's start (``doc/compare.md``).
 """
 
 from __future__ import annotations
@@ -71,13 +64,10 @@ def overlay_figure(times: Sequence[np.ndarray], measured: Sequence[np.ndarray],
 
     Args:
         times: Per shot, sample times in s.
-        measured: Per shot, measured pressure in Pa.
+        measured: Per shot, measured pressure in Pa (the first line of each panel).
         simulated: Model label → per shot simulated pressure in Pa.
         titles: One panel title per shot; default ``'shot i'``.
         path: Write a PNG here.
-
-    Returns:
-        The figure; in each panel the first line is the measurement, then one per model.
 
     Raises:
         PlotError: When the traces do not match the time axes.
@@ -108,12 +98,9 @@ def residual_figure(times: Sequence[np.ndarray], residuals: Mapping[str, Sequenc
     Args:
         times: Per shot, sample times in s.
         residuals: Label → per shot compensated pressure (measured − model) in Pa.
-        measured: Per shot, the uncompensated pressure in Pa, drawn thin for scale.
+        measured: Per shot, the uncompensated pressure, drawn thin and first for scale.
         titles: One panel title per shot; default ``'shot i'``.
         path: Write a PNG here.
-
-    Returns:
-        The figure; in each panel the uncompensated line (if given) comes first.
 
     Raises:
         PlotError: When the traces do not match the time axes.
@@ -141,19 +128,10 @@ def frequency_response_figure(f: np.ndarray, responses: Mapping[str, np.ndarray]
                               unit: str = 'Pa/(m/s²)',
                               path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw magnitude (dB) and phase (degrees) of complex frequency responses (Fig. 13).
-
-    Args:
-        f: Frequencies in Hz (positive, for the log axis).
-        responses: Label → complex response at ``f``.
-        unit: Unit of the response, for the magnitude label (dB re 1 unit).
-        path: Write a PNG here.
-
-    Returns:
-        The figure: axes 0 magnitude in dB, axes 1 unwrapped phase in degrees.
+    Draw magnitude (dB re 1 ``unit``, axes 0) and unwrapped phase (°, axes 1) (Fig. 13).
 
     Raises:
-        PlotError: When a response does not match ``f``.
+        PlotError: When a response does not match ``f`` (Hz, positive).
 
     """
     f = np.asarray(f, dtype=np.float64)
@@ -182,19 +160,10 @@ def step_response_figure(t: np.ndarray, responses: Mapping[str, np.ndarray], *,
                          unit: str = 'Pa per m/s²',
                          path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw step responses against time in ms (Fig. 14).
-
-    Args:
-        t: Times in s.
-        responses: Label → response at ``t`` to a unit input step.
-        unit: Unit of the response.
-        path: Write a PNG here.
-
-    Returns:
-        The figure (one axes, one line per response).
+    Draw step responses to a unit input step against time in ms, one line each (Fig. 14).
 
     Raises:
-        PlotError: When a response does not match ``t``.
+        PlotError: When a response does not match ``t`` (s).
 
     """
     t = np.asarray(t, dtype=np.float64)
@@ -228,13 +197,7 @@ def _traces(comparisons: Sequence[Comparison]) -> tuple[list, list, list[str]]:
 
 def comparison_figure(comparisons: Sequence[Comparison], *,
                       path: str | os.PathLike | None = None) -> Figure:
-    """
-    Draw :func:`overlay_figure` for models compared on the same shots.
-
-    Raises:
-        PlotError: With no comparison or comparisons over different shots.
-
-    """
+    """Draw :func:`overlay_figure` for models compared on the same shots; else PlotError."""
     times, measured, titles = _traces(comparisons)
     return overlay_figure(times, measured,
                           {c.label: [s.simulated for s in c.shots] for c in comparisons},
@@ -243,13 +206,7 @@ def comparison_figure(comparisons: Sequence[Comparison], *,
 
 def comparison_residual_figure(comparisons: Sequence[Comparison], *,
                                path: str | os.PathLike | None = None) -> Figure:
-    """
-    Draw :func:`residual_figure` (measured − simulated) for compared models.
-
-    Raises:
-        PlotError: With no comparison or comparisons over different shots.
-
-    """
+    """Draw :func:`residual_figure` for models compared on the same shots; else PlotError."""
     times, measured, titles = _traces(comparisons)
     residuals = {c.label: [s.measured - s.simulated for s in c.shots] for c in comparisons}
     return residual_figure(times, residuals, measured=measured, titles=titles, path=path)

@@ -1,21 +1,9 @@
 """
 Figures of a residual analysis (matplotlib, Agg canvas, never a display).
 
-- :func:`whiteness_figure`: residual autocorrelation with its 99 % bands, and the
-  pre-trigger noise's for comparison.
-- :func:`cross_correlation_figure`: residual–acceleration cross-correlation (``a_z``,
-  ``a_x``, ``a_y``) with the Bartlett bands.
-- :func:`segments_figure`: the residual per shot, coloured by segment (pre-trigger, pulse,
-  ringing, tail), with the ±3σ noise level.
-- :func:`spectrum_figure`: the pooled residual spectrum, its median level, the peak
-  threshold, the significant peaks and the model's resonances.
-- :func:`amplitude_figure`: excess residual against peak acceleration (log-log) with the
-  fitted exponent.
-- :func:`probes_figure`: the share of the residual each probe explains.
-
-Every function takes a :class:`~sensor_comp.core.residual.ResidualAnalysis`, returns the
-:class:`~matplotlib.figure.Figure` and writes a PNG when ``path`` is given. Lags are drawn
-in µs, pressures in kPa (residuals are small), times in ms from each window's start.
+Each function takes a :class:`~sensor_comp.core.residual.ResidualAnalysis`, returns the
+:class:`~matplotlib.figure.Figure` and writes a PNG when ``path`` is given. Lags are in µs,
+pressures in kPa, times in ms from each window's start.
 """
 
 from __future__ import annotations
@@ -54,15 +42,8 @@ def whiteness_figure(analysis: ResidualAnalysis, *,
     """
     Draw the residual autocorrelation for lags 1..L with its bands.
 
-    Args:
-        analysis: The residual analysis.
-        path: Write a PNG here.
-
-    Returns:
-        The figure: one axes, first line the residual autocorrelation (lag 0 left out:
-        it is 1), then the per-lag and family-wise bands, then the pre-trigger noise's
-        autocorrelation.
-
+    Lines in order: the residual's autocorrelation, the per-lag and family-wise 99 % bands, the
+    pre-trigger noise's autocorrelation.
     """
     fig, (ax,) = _figure(1)
     w = analysis.whiteness
@@ -87,14 +68,8 @@ def cross_correlation_figure(analysis: ResidualAnalysis, *,
     """
     Draw the residual–acceleration cross-correlations, one panel per channel.
 
-    Args:
-        analysis: The residual analysis.
-        path: Write a PNG here.
-
-    Returns:
-        The figure: panels ``a_z``, ``a_x``, ``a_y`` (positive lags: residual after the
-        acceleration), each with the correlation first, then its bands.
-
+    Panels ``a_z``, ``a_x``, ``a_y`` (positive lags: residual after the acceleration), each
+    with the correlation first, then its Bartlett bands.
     """
     names = list(analysis.cross)
     fig, axes = _figure(len(names), rows_of=len(names))
@@ -111,16 +86,10 @@ def cross_correlation_figure(analysis: ResidualAnalysis, *,
 def segments_figure(analysis: ResidualAnalysis, *,
                     path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw the residual of every shot window, coloured by segment.
+    Draw the residual of every shot window, one panel per shot, coloured by segment.
 
-    Args:
-        analysis: The residual analysis.
-        path: Write a PNG here.
-
-    Returns:
-        The figure: one panel per shot; in each, one line per non-empty segment in the
-        order of :data:`~sensor_comp.core.residual.SEGMENTS` (labelled by segment name and
-        energy share), then the ±3σ pre-trigger noise lines.
+    One line per non-empty segment in the order of :data:`~sensor_comp.core.residual.SEGMENTS`
+    (labelled with name and energy share), then the ±3σ pre-trigger noise lines.
 
     Raises:
         PlotError: When the analysis holds no shot.
@@ -155,17 +124,10 @@ def segments_figure(analysis: ResidualAnalysis, *,
 def spectrum_figure(analysis: ResidualAnalysis, *,
                     path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw the pooled residual spectrum with its significant peaks.
+    Draw the pooled residual spectrum (Pa²/Hz, log) against kHz with its significant peaks.
 
-    Args:
-        analysis: The residual analysis.
-        path: Write a PNG here.
-
-    Returns:
-        The figure: one axes with the spectral density (Pa²/Hz, log scale) against kHz,
-        its median level, the peak threshold, the peaks (red: no model resonance there,
-        green: the model resonates there) and the model's resonances (vertical lines).
-
+    Also its median level, the peak threshold, the peaks (red: no model resonance there,
+    green: the model resonates there) and the model's resonances (vertical lines).
     """
     sp = analysis.spectrum
     fig, (ax,) = _figure(1)
@@ -194,15 +156,8 @@ def amplitude_figure(analysis: ResidualAnalysis, *,
     """
     Draw the excess residual of each shot against its peak acceleration, log-log.
 
-    Args:
-        analysis: The residual analysis.
-        path: Write a PNG here.
-
-    Returns:
-        The figure: one axes with the shots used by the fit (first line, markers), then the
-        fitted power law when there is one; shots whose residual did not rise above the
-        noise are listed in the title.
-
+    The fitted shots first (markers), then the fitted power law if any; shots whose residual
+    did not rise above the noise are listed in the title.
     """
     trend = analysis.amplitude
     fig, (ax,) = _figure(1)
@@ -231,17 +186,10 @@ def amplitude_figure(analysis: ResidualAnalysis, *,
 def probes_figure(analysis: ResidualAnalysis, *,
                   path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw the share of the residual energy each probe explains.
+    Draw the share of the residual energy each probe explains, most explaining on top.
 
-    Args:
-        analysis: The residual analysis.
-        path: Write a PNG here.
-
-    Returns:
-        The figure: one axes of horizontal bars, most explaining probe on top; the first
-        container holds the fraction with a gain correction (red: significant), the
-        second the probe alone.
-
+    Two bar containers: the fraction with a gain correction (red: significant), then the probe
+    alone.
     """
     names = sorted(analysis.probes, key=lambda n: analysis.probes[n].fraction)
     probes = [analysis.probes[n] for n in names]

@@ -53,7 +53,7 @@ def shot_windows(sources: Sequence, *,
 
     Args:
         sources: Objects with ``recording`` and ``shots`` (e.g.
-            :class:`~sensor_comp.core.identify.ShotSource`), one recording each.
+            :class:`~sensor_comp.core.identify.ShotSource`).
         denoise: Applied to each window's pressure (as in :func:`segments`).
 
     Raises:
@@ -73,11 +73,10 @@ def shot_windows(sources: Sequence, *,
 
 def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
     """
-    Return the frequency of the strongest ringing after the pulses, kHz (None: no pulse end).
+    Return the frequency in kHz of the strongest ringing after the pulses (None: no pulse end).
 
-    The peak of the pooled spectrum of the pressure over :data:`EARLY_S` after each pulse
-    (quadratic trend removed, so that a slow tail does not count; Hann window,
-    zero-padded), at frequencies of at least two cycles in that time.
+    The peak of the pooled spectrum over :data:`EARLY_S` after each pulse (quadratic trend
+    removed, Hann window, zero-padded), at two cycles or more in that time.
     """
     parts = [w.y[w.end:w.end + round(EARLY_S * fs)] for w in windows
              if w.end is not None and w.y.size - w.end >= 16]
