@@ -1,19 +1,10 @@
 """
 Bag, message and file input/output; pure Python, no ROS import.
 
-The entry points below load on first use (``import sensor_comp.io`` imports none of them):
-
-- read: :func:`read_recording`, :func:`read_streams`, :class:`BagReader`
-  (:mod:`~sensor_comp.io.bag_reader`; the MCAP format is :mod:`~sensor_comp.io.mcap_records`);
-- write: :func:`write_recording`, :func:`write_streams`, :class:`BagWriter`
-  (:mod:`~sensor_comp.io.bag_writer`); :func:`topic_name` and the rosbag2 layout
-  (:mod:`~sensor_comp.io.rosbag2_layout`);
-- import and repair: :func:`read_csv` (:mod:`~sensor_comp.io.csv_import`),
-  :func:`repair_bag` (:mod:`~sensor_comp.io.repair`);
-- errors: :class:`BagError`, :class:`TruncatedBagError`, :class:`CsvError`.
-
-Messages (CDR, ``sensor_msgs/msg/Image`` blocks) are :mod:`~sensor_comp.io.messages` and
-:mod:`~sensor_comp.io.cdr`.
+Entry points load on first use: :func:`read_recording`, :func:`read_streams`,
+:class:`BagReader`, :func:`write_recording`, :func:`write_streams`, :class:`BagWriter`,
+:func:`topic_name`, :func:`read_csv`, :func:`repair_bag` and the errors. See
+``doc/recording.md``.
 """
 
 from ..lazy import lazy_exports

@@ -1,14 +1,7 @@
 """
 Write rosbag2-compatible MCAP bags (``ros2 bag play``, ``rosbags``, Foxglove read them).
 
-The layout follows rosbag2's MCAP storage (see :mod:`sensor_comp.io.rosbag2_layout`): profile
-``ros2``, one ``ros2msg`` schema per type with the full definition text, ``cdr`` channels with
-``offered_qos_profiles``, chunked and compressed, with a summary (statistics, chunk and
-message indexes) so that readers can seek.
-
-:func:`write_streams` and :func:`write_recording` lay signal streams out the way a live
-recording of the rig looks: the latched ``stream_info`` first, then the blocks of all streams
-interleaved in time order, each block's ``log_time`` and ``publish_time`` equal to its stamp.
+Layout, atomic writing and how streams are laid out as blocks: ``doc/recording.md``.
 """
 
 from __future__ import annotations
@@ -39,24 +32,14 @@ _UINT64 = 2 ** 64
 
 class BagWriter:
     """
-    Write one rosbag2-layout MCAP file.
-
-    Use it as a context manager::
-
-        with BagWriter('run.mcap', atomic=True) as bag:
-            bag.add_topic('/rig/acceleration', IMAGE)
-            bag.write('/rig/acceleration', cdr_bytes, log_time_ns=stamp)
+    Write one rosbag2-layout MCAP file; use it as a context manager.
 
     Args:
-        path: The ``.mcap`` file to create (replaced if it exists). Its directory must exist.
+        path: The ``.mcap`` file to create (replaced if it exists); its directory must exist.
         compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
         chunk_size: Uncompressed bytes after which a chunk is closed and written.
-        atomic: Write a temporary file with a unique name beside ``path``
-            (``.NAME.XXXXXXXX.partial``, see :func:`~sensor_comp.files.open_temporary`) and
-            rename it to ``path`` only when :meth:`close` succeeds, so that ``path`` never
-            holds a half-written bag and concurrent writers of one ``path`` do not collide.
-            On any exception inside the ``with`` block or in :meth:`close` (Ctrl-C and a
-            SIGTERM turned into an exception included) the temporary file is removed.
+        atomic: Write a temporary file beside ``path``, renamed to it only when :meth:`close`
+            succeeds and removed on any exception.
 
     Raises:
         BagError: On an unknown compression, a bad chunk size or a folder that does not
@@ -123,8 +106,7 @@ class BagWriter:
 
         Args:
             topic: Absolute topic name, e.g. ``'/rig/acceleration'``.
-            msgtype: ``pkg/msg/Type``; its definition must be installed (see
-                :func:`~sensor_comp.io.msgdefs.message_definition`).
+            msgtype: ``pkg/msg/Type``; its definition must be installed.
             latched: Offer the topic transient-local on replay (e.g. ``stream_info``).
 
         Raises:
@@ -145,16 +127,9 @@ class BagWriter:
         """
         Declare a topic with the schema and channel metadata of another bag, unchanged.
 
-        Args:
-            topic: Absolute topic name.
-            msgtype: Schema name, ``pkg/msg/Type``.
-            schema_encoding: ``'ros2msg'`` or ``'ros2idl'``.
-            schema_data: The definition text as stored in the other bag.
-            metadata: Channel metadata (``offered_qos_profiles``, ``topic_type_hash``, ...).
-
         Raises:
-            BagError: If the writer is closed, the name is not absolute or already added, or
-                the schema encoding is not a ROS 2 one.
+            BagError: If the writer is closed, the name is not absolute or already added, or the
+                schema encoding is not ``'ros2msg'`` or ``'ros2idl'``.
 
         """
         self._check_new_topic(topic)
@@ -183,25 +158,13 @@ class BagWriter:
         self._sequence[channel] = 0
 
     def add_metadata(self, name: str, metadata: Mapping[str, str]) -> None:
-        """
-        Add an MCAP metadata record (e.g. copied from another bag).
-
-        Raises:
-            BagError: If the writer is closed.
-
-        """
+        """Add an MCAP metadata record (e.g. copied from another bag); BagError if closed."""
         self._check_open()
         self._writer.add_metadata(name, dict(metadata))
 
     def add_attachment(self, name: str, data: bytes, *, media_type: str, log_time_ns: int,
                        create_time_ns: int = 0) -> None:
-        """
-        Add an MCAP attachment (a file stored in the bag, e.g. copied from another bag).
-
-        Raises:
-            BagError: If the writer is closed.
-
-        """
+        """Add an MCAP attachment (e.g. copied from another bag); BagError if closed."""
         self._check_open()
         self._writer.add_attachment(create_time=create_time_ns, log_time=log_time_ns,
                                     name=name, media_type=media_type, data=bytes(data))
@@ -209,15 +172,14 @@ class BagWriter:
     def write(self, topic: str, data: bytes, *, log_time_ns: int,
               publish_time_ns: int | None = None, sequence: int | None = None) -> None:
         """
-        Append one serialized message.
+        Append one serialized (CDR) message.
 
         Args:
             topic: A topic declared with :meth:`add_topic`.
             data: CDR bytes of the message.
             log_time_ns: Receive time in integer nanoseconds (rosbag2's ``recv_timestamp``).
             publish_time_ns: Send time; defaults to ``log_time_ns``.
-            sequence: The message's sequence number (e.g. copied from another bag);
-                defaults to counting the topic's messages from 0.
+            sequence: Sequence number; defaults to counting the topic's messages from 0.
 
         Raises:
             BagError: If the writer is closed, the topic unknown or a time negative.
@@ -241,23 +203,12 @@ class BagWriter:
                                  publish_time=int(publish_time_ns), sequence=sequence)
 
     def flush(self) -> None:
-        """
-        Close the current chunk and push it to the file (a crash then loses nothing).
-
-        Raises:
-            BagError: If the writer is closed.
-
-        """
+        """Close the current chunk and push it to the file (a crash then loses nothing)."""
         self._check_open()
         self._writer.flush()
 
     def close(self) -> None:
-        """
-        Finish the file (summary and footer) and, for an atomic bag, rename it to ``path``.
-
-        Calling it again does nothing. If finishing an atomic bag fails or is interrupted,
-        its temporary file is removed.
-        """
+        """Finish the file and, for an atomic bag, rename it to ``path`` (again: no-op)."""
         if self._closed:
             return
         try:
@@ -299,20 +250,14 @@ def write_streams(path, streams: Sequence[Stream], *, namespace: str = '/rig',
                   block_width: int = 1000, atomic: bool = True,
                   compression: str = 'zstd') -> None:
     """
-    Write streams as a bag that looks like a live recording of the rig.
-
-    ``<namespace>/stream_info`` (latched) comes first with one status per stream, then the
-    ``64FC1`` Image blocks of every stream on ``<namespace>/<stream topic>``, interleaved in
-    stamp order. Streams with the same ``t0_ns`` and rate get identical block stamps. Gaps of
-    a stream are left out (no block covers them), so reading restores them.
+    Write streams as a bag that looks like a live recording of the rig (``doc/recording.md``).
 
     Args:
         path: The ``.mcap`` file to write.
         streams: Streams with distinct relative topics (``info.topic``).
         namespace: Rig namespace of the topics.
         block_width: Samples per block.
-        atomic: Write a temporary file beside ``path`` and rename it on success (see
-            :class:`BagWriter`).
+        atomic: As in :class:`BagWriter`.
         compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
 
     Raises:
@@ -352,10 +297,6 @@ def write_streams(path, streams: Sequence[Stream], *, namespace: str = '/rig',
 def write_recording(path, recording: Recording, *, namespace: str = '/rig',
                     block_width: int = 1000, atomic: bool = True,
                     compression: str = 'zstd') -> None:
-    """
-    Write a recording's ``acceleration`` and ``pressure/raw`` streams as a bag.
-
-    See :func:`write_streams` for the layout and arguments.
-    """
+    """Write the ``acceleration`` and ``pressure/raw`` streams as by :func:`write_streams`."""
     write_streams(path, recording.streams(), namespace=namespace, block_width=block_width,
                   atomic=atomic, compression=compression)

@@ -1,12 +1,10 @@
 """
 Little-endian CDR (XCDR1) as ROS 2 puts it on the wire and into bags.
 
-A serialized ROS 2 message is a 4-byte encapsulation header (``00 01 00 00`` = plain CDR,
-little-endian) followed by the fields in declaration order. Every primitive is aligned to its
-own size (at most 8) counted from the first byte *after* the header; strings are a ``uint32``
-byte count including a terminating NUL, then the bytes; sequences are a ``uint32`` element
-count, then the elements. Writers may leave padding bytes with any value (rclpy does), so
-readers skip them without checking.
+A 4-byte encapsulation header (``00 01 00 00``), then the fields in declaration order, each
+primitive aligned to its own size (at most 8) counted after the header; strings are a
+``uint32`` byte count including a terminating NUL, then the bytes; sequences a ``uint32``
+element count, then the elements. Padding bytes may hold any value (rclpy's do).
 """
 
 from __future__ import annotations
@@ -40,12 +38,7 @@ class CdrWriter:
     """
     Serialize fields one after the other into a little-endian CDR buffer.
 
-    Example::
-
-        w = CdrWriter()
-        w.int32(sec); w.uint32(nanosec); w.string(frame_id)
-        payload = w.getvalue()
-
+    Example: ``w = CdrWriter(); w.int32(sec); w.string(frame_id); payload = w.getvalue()``.
     """
 
     def __init__(self):
@@ -68,27 +61,21 @@ class CdrWriter:
         self._pack(_U8, 'uint8', value)
 
     def uint16(self, value: int) -> None:
-        """Append a ``uint16``."""
         self._pack(_U16, 'uint16', value)
 
     def int32(self, value: int) -> None:
-        """Append an ``int32``."""
         self._pack(_I32, 'int32', value)
 
     def uint32(self, value: int) -> None:
-        """Append a ``uint32``."""
         self._pack(_U32, 'uint32', value)
 
     def int64(self, value: int) -> None:
-        """Append an ``int64``."""
         self._pack(_I64, 'int64', value)
 
     def uint64(self, value: int) -> None:
-        """Append a ``uint64``."""
         self._pack(_U64, 'uint64', value)
 
     def float64(self, value: float) -> None:
-        """Append a ``float64``."""
         self._pack(_F64, 'float64', value)
 
     def string(self, text: str) -> None:
@@ -114,12 +101,7 @@ class CdrWriter:
 
     def primitive_sequence(self, data, *, itemsize: int, count: int) -> None:
         """
-        Append a sequence of fixed-size primitives given as raw little-endian bytes.
-
-        Args:
-            data: Bytes-like object holding ``count * itemsize`` bytes.
-            itemsize: Size of one element in bytes (1 for ``uint8[]``, 8 for ``float64[]``).
-            count: Number of elements.
+        Append ``count`` fixed-size primitives of ``itemsize`` bytes given as raw LE bytes.
 
         Raises:
             CdrError: If ``data`` does not hold ``count * itemsize`` bytes.
@@ -143,10 +125,7 @@ class CdrWriter:
 
 class CdrReader:
     """
-    Read fields one after the other from a little-endian CDR buffer.
-
-    Args:
-        data: A serialized message, encapsulation header included.
+    Read fields one after the other from a CDR message (header included).
 
     Raises:
         CdrError: If the buffer is shorter than the header or is not little-endian plain CDR.
@@ -188,37 +167,25 @@ class CdrReader:
         return self._unpack(_U8, 'a uint8')
 
     def uint16(self) -> int:
-        """Read a ``uint16``."""
         return self._unpack(_U16, 'a uint16')
 
     def int32(self) -> int:
-        """Read an ``int32``."""
         return self._unpack(_I32, 'an int32')
 
     def uint32(self) -> int:
-        """Read a ``uint32``."""
         return self._unpack(_U32, 'a uint32')
 
     def int64(self) -> int:
-        """Read an ``int64``."""
         return self._unpack(_I64, 'an int64')
 
     def uint64(self) -> int:
-        """Read a ``uint64``."""
         return self._unpack(_U64, 'a uint64')
 
     def float64(self) -> float:
-        """Read a ``float64``."""
         return self._unpack(_F64, 'a float64')
 
     def string(self) -> str:
-        """
-        Read a ``string``.
-
-        Raises:
-            CdrError: If the bytes run past the end, lack the NUL or are not UTF-8.
-
-        """
+        """Read a ``string`` (CdrError: past the end, no NUL, or not UTF-8)."""
         size = self.uint32()
         if size == 0:  # some writers encode '' without the NUL
             return ''
@@ -233,15 +200,10 @@ class CdrReader:
 
     def sequence_length(self, *, min_item_size: int = 1) -> int:
         """
-        Read the element count of a sequence.
+        Read a sequence's element count.
 
-        Args:
-            min_item_size: Smallest serialized size of one element, to reject counts that
-                cannot fit in the remaining bytes before anything is allocated.
-
-        Raises:
-            CdrError: If the count cannot fit in the rest of the message.
-
+        Counts that cannot fit in the remaining bytes at ``min_item_size`` bytes per element raise
+        CdrError before anything is allocated.
         """
         count = self.uint32()
         if count * min_item_size > self.remaining:
@@ -251,13 +213,7 @@ class CdrReader:
 
     def primitive_sequence(self, dtype: str) -> np.ndarray:
         """
-        Read a sequence of fixed-size primitives as a read-only NumPy view (no copy).
-
-        Args:
-            dtype: Little-endian NumPy dtype of the elements, e.g. ``'u1'`` or ``'<f8'``.
-
-        Returns:
-            A 1-D read-only array that shares memory with the message buffer.
+        Read a sequence of primitives of LE ``dtype`` (``'<f8'``) as a read-only view (no copy).
 
         Raises:
             CdrError: If the elements run past the end of the message.

@@ -1,47 +1,10 @@
 """
 Import oscilloscope and transient-recorder CSV exports as a :class:`Recording`.
 
-File format (one recording per file; UTF-8, Latin-1, or UTF-16 with byte-order mark):
-
-- ``#`` comment lines may appear anywhere; blank lines are skipped. Comment lines of the
-  form ``# key: value`` before the header become :attr:`Recording.metadata`, e.g.
-  ``# charge_sensitivity_pC_per_MPa: 100`` (checked to be a positive number); only
-  ``# frame_id: hammer`` is taken out of it and sets the default sensor frame.
-- The first other line is the header: ``time_<unit>``, ``pressure_<unit>``,
-  ``accel_z_<unit>`` and optionally ``accel_x_<unit>``, ``accel_y_<unit>``, in any order,
-  matched case-insensitively; surrounding whitespace and quotes are tolerated. Units:
-  :data:`TIME_UNITS`, :data:`PRESSURE_UNITS`, :data:`ACCEL_UNITS`. Other columns are skipped
-  (listed in metadata ``ignored_columns`` if named; a separator ending every line makes an
-  unnamed one), but a column named ``time``, ``pressure`` or ``accel_...`` must carry a
-  known unit. Missing lateral channels become zeros and metadata ``lateral_channels`` says
-  ``absent``, ``x_only`` or ``y_only`` (else ``present``): transverse analysis cannot run.
-- Separator: whichever of tab, semicolon and comma occurs most often in the header line.
-  With tab or semicolon separators a decimal comma is accepted as well as a point
-  (``1,5`` = 1.5, as German spreadsheets write); with commas only the point. Numbers are
-  plain: no quotes, no thousands separators, no units in cells, no trailing comments.
-
-Time base: the rate comes from the time column, which must increase uniformly. Exports print
-time stamps with few digits, so each stamp is only known to half its rounding quantum: the
-coarser of its last printed digit (inferred from the digits the whole column needs) and
-float32 resolution, as many recorders keep time in float32. A sample interval may deviate
-from the median interval by that rounding, a stamp from the straight line through the first
-and last stamp likewise, and neither ever by half a sample or more; anything beyond is
-jitter or a missing sample and raises :class:`CsvError` (``time_tolerance_s`` overrides the
-tolerance). The rate is that line's slope, rounded to the shortest decimal rate or interval
-within its uncertainty (1e6 Hz, not 999999.9999). Stamps are compared as float64, so
-absolute (e.g. UNIX) times are checked only to about a microsecond.
-
-Time origin: ``t0_ns`` is the first stamp in integer nanoseconds, converted exactly from its
-decimal text. Scope exports put time zero at the trigger, so pre-trigger stamps are negative;
-because bag log times are unsigned, a negative first stamp is shifted to ``t0_ns = 0``. File
-time ``t`` thus lies at stamp ``t + trigger_time_ns``, with metadata ``trigger_time_ns`` the
-stamp of the file's time zero (``'0'`` when the file starts at or after it). These importer
-facts (``source_file``, ``lateral_channels``, ``trigger_time_ns``, ``ignored_columns``)
-replace metadata lines of the same name.
-
-Speed: rows are parsed in chunks by numpy's C reader (a million rows of five columns take
-about 1.3 s of CPU here, two thirds of it in that reader); a chunk it refuses is re-read
-line by line to name the first bad line and cell.
+Header ``time_<unit>``, ``pressure_<unit>``, ``accel_z_<unit>`` (``accel_x``/``accel_y``
+optional), ``# key: value`` metadata lines, tab/semicolon/comma separators; the rate is
+checked against the printed precision of the time column. Format, time base and origin:
+``doc/csv-import.md``.
 """
 
 from __future__ import annotations
@@ -176,23 +139,19 @@ class _Table:
 def read_csv(path, *, frame_id: str | None = None,
              time_tolerance_s: float | None = None) -> Recording:
     """
-    Read an oscilloscope or transient-recorder CSV export (format: see module doc).
+    Read an oscilloscope or transient-recorder CSV export (``doc/csv-import.md``).
 
     Args:
         path: The CSV file.
-        frame_id: Sensor frame of the recording; default: the file's ``# frame_id:`` line,
-            else ``'sensor'``.
-        time_tolerance_s: Largest accepted deviation of a sample interval from the median
-            interval, and of a stamp from the uniform grid, in seconds. Default: derived
-            from the printed precision of the time column (see module doc); give a value
-            for time columns known to be imprecise.
+        frame_id: Sensor frame; default the file's ``# frame_id:`` line, else ``'sensor'``.
+        time_tolerance_s: Largest accepted deviation in s of an interval from the median one
+            and of a stamp from the uniform grid; default from the printed precision.
 
     Returns:
         The recording in SI units: pressure in Pa, acceleration in m/s² (rows x, y, z).
 
     Raises:
-        CsvError: If the file cannot be read or is malformed; the message names the line,
-            the column and what to do.
+        CsvError: If the file cannot be read or is malformed.
 
     """
     if time_tolerance_s is not None and not (math.isfinite(time_tolerance_s)
@@ -435,8 +394,8 @@ def _time_base(table: _Table, t: np.ndarray, tolerance_s: float | None) -> tuple
     Check that the time column ``t`` (file units) is uniform; return (fs, first stamp ns).
 
     Raises:
-        CsvError: Naming the first line where time does not increase, steps unevenly,
-            or drifts off the uniform grid.
+        CsvError: Naming the first line where time does not increase, steps unevenly, or
+            drifts off the uniform grid.
 
     """
     time = table.columns[0]
@@ -508,11 +467,8 @@ def _printed_quantum(t: np.ndarray) -> np.ndarray:
     """
     Return the rounding quantum of every time stamp as printed (file units).
 
-    The export's format is inferred from the stamps themselves: the fewest decimals ``d``
-    and the fewest significant digits ``s`` that write every stamp exactly. Printing ``d``
-    decimals rounds a stamp to ``10**-d``, printing ``s`` digits (trailing zeros stripped or
-    not) to ``10**(decade - s + 1)``; the column fits both, so the coarser one is taken. A
-    stamp that jitters off the grid needs more digits, which tightens the check of all.
+    The coarser of the fewest decimals and fewest significant digits that write every stamp
+    exactly (``doc/csv-import.md``, time base).
     """
     magnitude = np.abs(t)
     nonzero = magnitude > 0
@@ -529,12 +485,7 @@ def _printed_quantum(t: np.ndarray) -> np.ndarray:
 
 
 def _fewest(scaled, candidates: range) -> int:
-    """
-    Return the first candidate ``c`` for which ``scaled(c)`` holds whole numbers only.
-
-    Wholeness is monotonic in the candidates (more digits keep a whole number whole), so
-    this bisects. The tolerance covers the rounding of parsing and scaling.
-    """
+    """Return the first ``c`` for which ``scaled(c)`` holds whole numbers only (bisection)."""
     low, high = 0, len(candidates) - 1
     while low < high:
         middle = (low + high) // 2

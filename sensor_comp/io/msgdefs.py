@@ -1,16 +1,8 @@
 """
 Message definition texts for MCAP schemas, built exactly as rosbag2 builds them.
 
-rosbag2's MCAP storage (``rosbag2_storage_mcap``, ``message_definition_cache.cpp``) stores
-for each message type the full ``.msg`` text, then every dependency once, depth first in
-sorted order, each introduced by a line of 80 ``=`` and ``MSG: pkg/Type``. Dependencies are
-the non-primitive field types found by one regular expression over the raw text (comments
-included), qualified with the package of the referring file when they have no ``/``.
-
-The ``.msg`` files are looked up like ``ament_index_python`` does (a package ``pkg`` lives in
-the first prefix of ``AMENT_PREFIX_PATH`` holding ``share/ament_index/resource_index/
-packages/pkg``) without importing ROS; without ``AMENT_PREFIX_PATH``, under
-``sys.prefix/share/pkg/msg`` (where the ROS wheels put them).
+Found without importing ROS (``AMENT_PREFIX_PATH``, else ``sys.prefix/share``); the text
+format and the lookup: ``doc/recording.md``, message definitions.
 """
 
 from __future__ import annotations
@@ -58,11 +50,7 @@ def _share_dirs(package: str, ament_prefix_path: str) -> list[Path]:
 
 def msg_file(msgtype: str, *, suffix: str = '.msg') -> Path:
     """
-    Return the installed ``.msg`` file of ``msgtype`` (or another interface file).
-
-    Args:
-        msgtype: ``pkg/msg/Type`` or ``pkg/Type``.
-        suffix: File extension, ``'.msg'`` or ``'.json'`` (type description with hash).
+    Return the installed ``.msg`` (or ``suffix``: ``.json``) file of ``msgtype``.
 
     Raises:
         MessageDefinitionError: If the package or file is not installed.
@@ -124,14 +112,7 @@ def _definition(msgtype: str, ament_prefix_path: str) -> str:
 
 def message_definition(msgtype: str) -> str:
     """
-    Return the rosbag2 ``ros2msg`` schema text of ``msgtype``, dependencies included.
-
-    Args:
-        msgtype: ``pkg/msg/Type``, e.g. ``'sensor_msgs/msg/Image'``.
-
-    Returns:
-        The text rosbag2 stores as MCAP schema data for this type (cached per type and
-        ``AMENT_PREFIX_PATH``, so that changing the environment is honoured).
+    Return the ``ros2msg`` schema text rosbag2 stores for ``msgtype``, dependencies included.
 
     Raises:
         MessageDefinitionError: If the type or one of its dependencies is not installed.
@@ -141,14 +122,7 @@ def message_definition(msgtype: str) -> str:
 
 
 def type_hash(msgtype: str) -> str | None:
-    """
-    Return the ``RIHS01_...`` type hash of ``msgtype`` from its installed ``.json``.
-
-    Returns:
-        The hash string rosbag2 stores as channel metadata ``topic_type_hash``, or ``None``
-        when the package ships no type description (it is optional in bags).
-
-    """
+    """Return the ``RIHS01_...`` type hash of ``msgtype``, None without an installed ``.json``."""
     try:
         description = json.loads(msg_file(msgtype, suffix='.json').read_text())
     except (MessageDefinitionError, ValueError):

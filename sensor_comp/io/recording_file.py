@@ -18,10 +18,8 @@ def load_recording(path: str | os.PathLike) -> Recording:
     """
     Read a recording from an MCAP bag or an oscilloscope CSV export.
 
-    A bag is recognised by its ``.mcap`` suffix, as a rosbag2 directory, or by its first
-    bytes whatever its name. A bag cut short in its data section (a killed recorder) is
-    refused with the advice to run ``sensor-comp repair``, so that what was lost is
-    reported once and the analysis never runs on a silently shortened recording.
+    A bag is recognised by suffix, as a rosbag2 directory, or by its first bytes. A bag cut
+    short (killed recorder) is refused with the advice to run ``sensor-comp repair``.
 
     Raises:
         SensorCompError: If the file is missing or of an unknown kind, or does not read.

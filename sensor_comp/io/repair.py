@@ -1,16 +1,9 @@
 """
 Rewrite a cut-short, unfinished or damaged bag as a clean, finalised one.
 
-A recorder killed mid-run (SIGKILL, power loss) leaves a file without summary whose last
-chunk is cut; a writer that died while finalising leaves complete data without summary; a
-disk error can damage a chunk in the middle. :func:`repair_bag` reads every message that
-survived (:class:`~sensor_comp.io.bag_reader.BagReader` with ``skip_damaged``) and writes
-it, in file order, with its times, sequence number and bytes unchanged, into a new bag with
-the source's schemas (type names and definition texts), channels (topics and their metadata:
-offered QoS, type hash), metadata records and attachments, in the layout
-:class:`~sensor_comp.io.bag_writer.BagWriter` writes (profile ``ros2``, zstd chunks, a
-summary with statistics and indexes). The output appears under its name only when it is
-complete and has been read back, and the input is never replaced.
+Every surviving message is copied unchanged with the source's schemas, channels, metadata
+and attachments; the output appears only once complete and read back. Details:
+``doc/recording.md``, repair.
 """
 
 from __future__ import annotations
@@ -40,20 +33,17 @@ class RepairReport:
         source: The file read.
         output: The bag written.
         source_bytes: Size of the source in bytes.
-        state: ``'finalised'`` (complete with a summary), ``'no summary'`` (complete, but
-            no summary with message counts), ``'unfinalised'`` (data complete, summary cut
-            short), ``'cut'`` (cut short in the data section) or ``'damaged'`` (damaged
-            chunks or summary).
+        state: ``'finalised'``, ``'no summary'``, ``'unfinalised'``, ``'cut'`` or
+            ``'damaged'`` (``doc/recording.md``).
         warning: The reader's description of the cut or damage, ``''`` if none.
         lost_bytes: Bytes after the cut that hold no complete record (0 if not cut).
         partial_chunk: Log-time span ``(start, end)`` in ns of the chunk the cut fell in.
         damaged: Damaged chunks (or the damaged record) skipped, in file order.
-        recovered: Messages written, per topic (every topic of the source, 0 included).
-        expected: Messages per topic according to the source's summary, or ``None``
-            when it had no usable summary (then what a cut lost cannot be counted).
+        recovered: Messages written per topic (every topic of the source, 0 included).
+        expected: Messages per topic by the source's summary; None without a usable one.
         metadata_records: MCAP metadata records copied.
         attachments: MCAP attachments copied.
-        last_log_time_ns: Log time of the last message recovered, ``None`` if none.
+        last_log_time_ns: Log time of the last message recovered, None if none.
 
     """
 
@@ -158,13 +148,7 @@ class RepairReport:
 
 
 def default_output(source) -> Path:
-    """
-    Return where ``sensor-comp repair SOURCE`` writes by default.
-
-    ``run.mcap`` (or ``run.mcap.partial``, a writer's unfinished file) gives
-    ``run.repaired.mcap`` next to it; a rosbag2 directory ``run`` gives
-    ``run.repaired.mcap`` next to the directory.
-    """
+    """Return the default output of ``sensor-comp repair SOURCE``: ``run.repaired.mcap``."""
     source = Path(source)
     name = source.name.removesuffix('.partial').removesuffix('.mcap')
     return source.with_name(f'{name}.repaired.mcap')
@@ -193,17 +177,13 @@ def repair_bag(source, output=None, *, overwrite: bool = False) -> RepairReport:
 
     Args:
         source: The bag to repair (an ``.mcap`` file, or a rosbag2 directory holding one).
-        output: The bag to write; :func:`default_output` when ``None``.
+        output: The bag to write; :func:`default_output` when None.
         overwrite: Replace ``output`` if it exists (never the source).
-
-    Returns:
-        What was recovered and lost.
 
     Raises:
         RepairError: If the output is the source, a directory, or exists without
             ``overwrite``, or cannot be written.
-        BagError: If the source is not a ROS 2 MCAP bag or holds nothing readable (e.g. it
-            ends inside its header).
+        BagError: If the source is not a ROS 2 MCAP bag or holds nothing readable.
 
     """
     output = default_output(source) if output is None else Path(output)

@@ -1,15 +1,8 @@
 """
 What makes an MCAP file a rosbag2 bag: profile, encodings, QoS metadata, topics, directory.
 
-rosbag2's MCAP storage writes header profile ``ros2``, schemas named ``pkg/msg/Type`` with
-encoding ``ros2msg`` (full ``.msg`` text, see :mod:`sensor_comp.io.msgdefs`), channels with
-message encoding ``cdr`` and the channel metadata ``offered_qos_profiles``: a YAML list of the
-QoS profiles the recorded publishers offered. ``ros2 bag play`` re-offers the reliability and
-durability found there, so a latched (transient-local) topic such as ``stream_info`` must say
-``durability: transient_local`` or late subscribers never receive it.
-
-Reader and writer share the rest of the layout from here: :func:`topic_name` (a stream's
-topic in a namespace) and :func:`mcap_file` (the ``.mcap`` file of a rosbag2 bag directory).
+Shared by reader and writer; the layout and why latched topics need their QoS metadata:
+``doc/recording.md``.
 """
 
 from __future__ import annotations
@@ -70,42 +63,18 @@ class TruncatedBagWarning(UserWarning):
 
 
 def offered_qos_profiles(*, latched: bool) -> str:
-    """
-    Return the ``offered_qos_profiles`` channel metadata for one publisher.
-
-    Args:
-        latched: Transient-local durability (late subscribers get the last messages);
-            otherwise volatile. Reliability is always reliable.
-
-    Returns:
-        A YAML list with one QoS profile, as rosbag2 Jazzy and ``rosbags`` write it.
-
-    """
+    """Return ``offered_qos_profiles`` of a reliable publisher, transient-local if latched."""
     return _QOS_TEMPLATE.format(durability='transient_local' if latched else 'volatile')
 
 
 def is_latched(offered_qos: str) -> bool:
-    """
-    Tell whether a topic replays latched, given its ``offered_qos_profiles`` metadata.
-
-    Like ``ros2 bag play``, a topic is re-offered transient-local only when every recorded
-    publisher offered it; an empty or missing profile list means volatile.
-
-    Args:
-        offered_qos: The YAML text (version-9 names or version-8 numbers).
-
-    """
+    """Tell whether a topic replays latched: every publisher in ``offered_qos`` offered it so."""
     durabilities = _DURABILITY.findall(offered_qos or '')
     return bool(durabilities) and all(d.lower() in _TRANSIENT_LOCAL for d in durabilities)
 
 
 def topic_name(namespace: str, relative: str) -> str:
-    """
-    Return the absolute topic of ``relative`` (e.g. ``'pressure/raw'``) in ``namespace``.
-
-    ``'/rig'``, ``'rig'`` and ``'/rig/'`` all give ``'/rig/pressure/raw'``; ``''`` and ``'/'``
-    give ``'/pressure/raw'``.
-    """
+    """Return the absolute topic of ``relative`` in ``namespace`` (``'/rig'`` == ``'rig/'``)."""
     namespace = namespace.strip('/')
     return f'/{namespace}/{relative}' if namespace else f'/{relative}'
 
