@@ -321,8 +321,10 @@ def _noise(x: np.ndarray, base: slice) -> float:
 def _non_finite(recording: Recording, window: slice) -> list[str]:
     """Describe the NaN/Inf samples of every channel inside ``window``."""
     out = []
-    rows = np.vstack([recording.pressure[np.newaxis], recording.acceleration])
-    for name, row in zip(_CHANNELS, rows[:, window]):
+    # The window's rows only (views): stacking whole channels copied the whole recording
+    # once per shot.
+    rows = (recording.pressure[window], *recording.acceleration[:, window])
+    for name, row in zip(_CHANNELS, rows):
         bad = np.flatnonzero(~np.isfinite(row))
         if bad.size:
             first = window.start + int(bad[0])

@@ -30,10 +30,12 @@ from typing import Iterable, Iterator, NamedTuple
 import warnings
 import zlib
 
+import numpy as np
 import zstandard
 
-from ..blocks import assemble
-from ..streams import ACCELERATION, PRESSURE_RAW, Recording, STREAM_INFO, Stream, StreamError
+from ..blocks import assemble, BlockSequence
+from ..streams import (ACCELERATION, Gap, PRESSURE_RAW, Recording, STREAM_INFO, Stream,
+                       StreamError)
 from ..streams import StreamInfo
 from .mcap_records import (ATTACHMENT, AttachmentRecord, CHANNEL, ChannelRecord, CHUNK, CHUNK_HEAD,
                            COMPRESSIONS, DamagedChunk, DATA_END, decompress, FOOTER, FOOTER_BODY,
@@ -666,6 +668,78 @@ def require_described(path, infos: dict[str, StreamInfo], topics: dict[str, str]
                        f'stream_info of the node that publishes them')
 
 
+class _StreamFiller:
+    """
+    Assemble one stream's blocks as they are read, into one array sized up front.
+
+    The same stream as :func:`~sensor_comp.blocks.assemble` of all the blocks, without
+    holding them: each block is copied into place at once and its message freed, so reading
+    a bag needs the stream's samples once, not twice (blocks, then their concatenation).
+    The array is sized from the topic's message count times the first block's width; gaps
+    (NaN) beyond that grow it. Capacity never written is never touched, so it costs no
+    memory.
+
+    Args:
+        info: The stream's description (rate and channels).
+        name: The stream's name in error messages (the absolute topic).
+        messages: The number of messages on its topic (0: unknown).
+
+    """
+
+    def __init__(self, info: StreamInfo, *, name: str, messages: int):
+        self.sequence = BlockSequence(info, name=name)
+        self.channels = len(info.channels)
+        self.left = messages
+        self.data: np.ndarray | None = None
+        self.n = 0
+        self.t0: int | None = None
+        self.gaps: list[Gap] = []
+
+    def add(self, stamp: int, block: np.ndarray) -> None:
+        """Check the next block (:class:`BlockSequence`) and copy it into place."""
+        block = np.asarray(block, dtype=np.float64)
+        missing = self.sequence.add(stamp, block)
+        self.left -= 1
+        width = block.shape[-1]
+        if width == 0:
+            return
+        if self.t0 is None:
+            self.t0 = int(stamp)
+        end = self.n + missing + width
+        if self.data is None or end > self.data.shape[1]:
+            self._grow(end + width * max(self.left, 0), minimum=end)
+        if missing:
+            self.gaps.append(Gap(self.n, missing))
+            self.data[:, self.n:self.n + missing] = np.nan
+        self.data[:, end - width:end] = block
+        self.n = end
+
+    def _grow(self, size: int, *, minimum: int) -> None:
+        """Move the samples into a larger array (only when gaps outgrow the estimate)."""
+        if self.data is not None:
+            size = max(size, minimum + self.data.shape[1] // 2)
+        grown = np.empty((self.channels, size))
+        if self.data is not None:
+            grown[:, :self.n] = self.data[:, :self.n]
+        self.data = grown
+
+    def stream(self, info: StreamInfo) -> Stream:
+        """Return the stream (``info``: its final description)."""
+        if self.t0 is None:
+            return assemble(info, (), name=self.sequence.name)  # raises: no samples
+        return Stream(info, self.t0, self.data[:, :self.n], tuple(self.gaps))
+
+
+def _fill(fillers: dict, pending: dict, infos: dict, bag: BagReader, topics: dict) -> None:
+    """Start the fillers of the streams described by now and give them their held blocks."""
+    for name in list(pending):
+        if name in infos:
+            fillers[name] = _StreamFiller(infos[name], name=topics[name],
+                                          messages=bag.topics[topics[name]].message_count)
+            for stamp, data in pending.pop(name):
+                fillers[name].add(stamp, data)
+
+
 def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | None = None,
                  on_truncated: str = 'warn') -> dict[str, Stream]:
     """
@@ -710,30 +784,37 @@ def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | N
         prefix = topic_name(namespace, '')
         topics = block_topics(bag, namespace=namespace, names=names)
         infos: dict[str, StreamInfo] = {}
-        blocks: dict[str, list] = {name: [] for name in topics}
+        # Blocks are copied into place as they come (a stream before its description is
+        # held until it comes): the samples are in memory once, not twice.
+        fillers: dict[str, _StreamFiller] = {}
+        pending: dict[str, list] = {name: [] for name in topics}
         # One pass: stream_info and blocks share chunks, each chunk is decompressed once.
-        for msg in bag.messages([info_topic, *topics.values()]):
-            if msg.topic == info_topic:
-                _merge_stream_info(infos, msg, bag.path)
-                continue
-            try:
-                stamp, _, data = decode_block(msg.data)
-            except MessageError as exc:
-                raise BagError(f'{bag.path}: {msg.topic} message at log time '
-                               f'{msg.log_time_ns} ns: {exc}') from None
-            blocks[msg.topic[len(prefix):]].append((stamp, data))
-        if names is None:
-            for name in infos:
-                if prefix + name in bag.topics and bag.topics[prefix + name].msgtype != IMAGE:
-                    raise _not_blocks(bag, prefix + name)
-    require_described(path, infos, topics, info_topic)
-    streams = {}
-    for name, topic in topics.items():
         try:
-            streams[name] = assemble(infos[name], blocks[name], name=topic)
+            for msg in bag.messages([info_topic, *topics.values()]):
+                if msg.topic == info_topic:
+                    _merge_stream_info(infos, msg, bag.path)
+                    _fill(fillers, pending, infos, bag, topics)
+                    continue
+                try:
+                    stamp, _, data = decode_block(msg.data)
+                except MessageError as exc:
+                    raise BagError(f'{bag.path}: {msg.topic} message at log time '
+                                   f'{msg.log_time_ns} ns: {exc}') from None
+                name = msg.topic[len(prefix):]
+                if name in fillers:
+                    fillers[name].add(stamp, data)
+                else:
+                    pending[name].append((stamp, data))
+            if names is None:
+                for name in infos:
+                    if prefix + name in bag.topics and \
+                            bag.topics[prefix + name].msgtype != IMAGE:
+                        raise _not_blocks(bag, prefix + name)
+            require_described(path, infos, topics, info_topic)
+            _fill(fillers, pending, infos, bag, topics)
+            return {name: fillers[name].stream(infos[name]) for name in topics}
         except StreamError as exc:
             raise StreamError(f'{path}: {exc}') from None
-    return streams
 
 
 def read_recording(path, *, namespace: str | None = None,

@@ -9,7 +9,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 import numpy as np
 import pytest
 
-from sensor_comp.blocks import iter_blocks
+from sensor_comp.blocks import assemble, iter_blocks
 from sensor_comp.io.bag_reader import (AttachmentRecord, BagReader, MetadataRecord,
                                        RawMessage, read_recording, read_stream_infos,
                                        read_streams, TruncatedBagError)
@@ -515,3 +515,27 @@ def test_records_yield_metadata_and_attachments_with_the_messages(tmp_path):
 def test_cannot_open_says_what_to_check(tmp_path):
     with pytest.raises(BagError, match='nope.mcap: No such file or directory; check the path'):
         BagReader(tmp_path / 'nope.mcap')
+
+
+@pytest.mark.parametrize('info_first', [True, False])
+def test_read_streams_equals_assembling_every_block(tmp_path, info_first):
+    # Blocks are copied into place as they are read (an array sized from the message count
+    # and the first width, grown by gaps): the stream is the one assemble() makes of all
+    # the blocks, whatever the widths, gaps and empty blocks, and whether stream_info comes
+    # before or after the first blocks.
+    rng = np.random.default_rng(3)
+    stamp, blocks = 1_000_000, []
+    for width in (7, 7, 0, 12, 3, 30, 1, 7):
+        blocks.append((stamp, rng.normal(size=(1, width))))
+        stamp += (width + int(rng.integers(0, 2)) * int(rng.integers(1, 50))) * 1_000_000
+    path = tmp_path / 'blocks.mcap'
+    info = ('/rig/stream_info', 0, encode_stream_info([INFO], stamp_ns=0))
+    messages = [('/rig/pressure/raw', s, encode_block(b, stamp_ns=s, frame_id=''))
+                for s, b in blocks]
+    messages = [info] + messages if info_first else messages[:3] + [info] + messages[3:]
+    write_raw(path, {'/rig/stream_info': (DIAGNOSTIC_ARRAY, True),
+                     '/rig/pressure/raw': (IMAGE, False)}, messages)
+    got = read_streams(path)['pressure/raw']
+    want = assemble(INFO, blocks, name='/rig/pressure/raw')
+    assert got.t0_ns == want.t0_ns and got.gaps == want.gaps
+    np.testing.assert_array_equal(got.data, want.data)
