@@ -1,16 +1,9 @@
 """
 Streams ↔ blocks, the form in which samples travel on topics and sit in bags.
 
-A block is ``(stamp_ns, data)``: the integer-nanosecond acquisition time of its first sample
-and a ``(channels, w)`` float64 array. Sample ``k`` of a block was acquired at
-``stamp_ns + round(k * 1e9 / fs)``. Consecutive blocks of a gap-free stream follow each other
-exactly: the next block starts ``round(w * 1e9 / fs)`` ns after the previous one.
-
-:func:`assemble` checks every block against the end of the previous one (not against a grid
-anchored at the first block) with a tolerance of half a sample, so rounding of the integer
-stamps and a DAQ clock slightly off its nominal rate never break a long stream, while lost
-blocks become NaN samples plus a :class:`~sensor_comp.streams.Gap` and duplicated,
-overlapping or reordered blocks raise :class:`~sensor_comp.streams.StreamError`.
+A block is ``(stamp_ns, (channels, w) float64 array)``; consecutive blocks are checked
+against the end of the previous one within half a sample, lost blocks become NaN gaps and
+overlaps raise :class:`~sensor_comp.streams.StreamError`. See ``doc/streams.md``.
 """
 
 from __future__ import annotations
@@ -27,23 +20,10 @@ __all__ = ['BlockSequence', 'assemble', 'iter_blocks']
 
 def iter_blocks(stream: Stream, *, width: int) -> Iterator[tuple[int, np.ndarray]]:
     """
-    Cut a stream into blocks of ``width`` samples.
+    Cut a stream into ``(stamp_ns, data)`` blocks of ``width`` (>= 1) samples; never over a gap.
 
-    Blocks never span a gap of the stream: the block before a gap is cut short and the next
-    one starts at the first sample after it, so :func:`assemble` restores the same gaps.
-    The last block of each gap-free run may be shorter than ``width``.
-
-    Args:
-        stream: The stream to cut.
-        width: Samples per block (>= 1).
-
-    Returns:
-        An iterator of ``(stamp_ns, data)``, ``data`` a ``(channels, w)`` view into
-        ``stream.data``.
-
-    Raises:
-        StreamError: If ``width`` is not a positive integer.
-
+    ``data`` is a view into ``stream.data``; the last block of each gap-free run may be
+    shorter. Raises StreamError if ``width`` is not a positive integer.
     """
     if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or width < 1:
         raise StreamError(f'block width must be a positive number of samples, got {width!r}')
@@ -67,15 +47,11 @@ def _describe(stamp: int, width: int) -> str:
 
 class BlockSequence:
     """
-    Check that the blocks of one stream follow each other, one block at a time.
-
-    This is the check :func:`assemble` applies, for readers that process blocks as they
-    come (e.g. compensating a bag block by block) instead of joining them.
+    Check block by block that the blocks of one stream follow each other (as :func:`assemble`).
 
     Args:
         info: The stream's metadata; its rate defines where each block should start.
-        name: Name of the stream in error messages (default ``info.topic``), e.g. the
-            absolute topic.
+        name: Name of the stream in error messages (default ``info.topic``).
 
     """
 
@@ -94,14 +70,12 @@ class BlockSequence:
             block: ``(channels, w)`` samples; an empty block is accepted and ignored.
 
         Returns:
-            0 for the first block and for a block that starts where the previous one ends
-            (within half a sample), else the number of samples of the gap.
+            0 for the first block and for one that starts where the previous one ends (within
+            half a sample), else the number of samples of the gap.
 
         Raises:
-            StreamError: If the block has the wrong number of channels, starts before the
-                previous block starts (out of order) or more than half a sample before it
-                ends (overlap, duplicate); the message names the stream, the stamps and
-                the sizes.
+            StreamError: On a wrong number of channels, a block out of order, or one starting more
+                than half a sample before the previous one ends (overlap, duplicate).
 
         """
         info, stamp = self.info, int(stamp)
@@ -139,23 +113,18 @@ class BlockSequence:
 def assemble(info: StreamInfo, blocks: Iterable[tuple[int, np.ndarray]], *,
              name: str | None = None) -> Stream:
     """
-    Join blocks into one stream, turning missing blocks into NaN gaps.
+    Join ``(stamp_ns, (channels, w) array)`` blocks into one stream, missing ones as NaN gaps.
 
     Args:
         info: The stream's metadata; its rate defines where each block should start.
-        blocks: ``(stamp_ns, (channels, w) array)`` in acquisition order. Empty blocks are
-            ignored.
+        blocks: The blocks in acquisition order; empty blocks are ignored.
         name: Name of the stream in error messages (default ``info.topic``).
 
     Returns:
-        The stream, with ``t0_ns`` = stamp of the first block. Samples no block delivered
-        are NaN and listed in ``Stream.gaps``.
+        The stream, ``t0_ns`` the stamp of the first block, gaps in ``Stream.gaps``.
 
     Raises:
-        StreamError: If there is no sample at all, a block has the wrong number of channels,
-            or a block starts more than half a sample before the previous block ends
-            (overlap, duplicate) or before the previous block starts (out of order); the
-            message names the topic, the stamps and the sizes.
+        StreamError: If there is no sample at all, or as :meth:`BlockSequence.add`.
 
     """
     sequence = BlockSequence(info, name=name)

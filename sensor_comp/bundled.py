@@ -14,10 +14,7 @@ PACKAGE = 'sensor_comp'
 
 def bag_dir() -> Path:
     """
-    Return the folder of the bundled bags.
-
-    The ament index (``AMENT_PREFIX_PATH``) is searched first, as ROS tools do, then the
-    source tree this module was imported from.
+    Return the folder of the bundled bags: the ament index first, then the source tree.
 
     Raises:
         SensorCompError: If no folder holds them.

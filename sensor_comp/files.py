@@ -1,11 +1,8 @@
 """
 Safe outputs: check an output path before any work, then write it atomically.
 
-Every ``sensor-comp`` command that writes a file calls :func:`check_output` on each output
-before it reads a bag or fits a model, so that a wrong ``-o`` fails in a second with one
-line instead of replacing an input or failing with a traceback after the work. A file
-appears under its final name only when complete: writers fill a temporary file with a
-unique name in the target folder and rename it.
+So a wrong ``-o`` fails at once instead of replacing an input or failing after the work;
+a file appears under its name only complete. See ``doc/outputs-and-workers.md``.
 """
 
 from __future__ import annotations
@@ -51,26 +48,18 @@ class OutputError(SensorCompError):
 def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = (),
                  kind: str, force: bool = False, forceable: bool = True) -> Path:
     """
-    Check that ``path`` can take an output of ``kind``, before any work; return the path to write.
+    Check that ``path`` can take an output of ``kind`` before any work; return the path to write.
 
-    Refused: an output that is one of ``inputs`` (same inode, so through symlinks, hard
-    links and other spellings; a folder input counts with the files directly in it), an
-    existing file of another kind (unless ``force``), a folder where a file is due, and a
-    folder to write in that is missing or not writable (probed with a real file, so this
-    also holds for root and read-only mounts). Nothing is created or changed.
+    Refuses one of ``inputs`` (by inode), an existing file of another kind (unless ``force``),
+    a folder where a file is due and a folder that does not take files; changes nothing.
 
     Args:
         path: The output as the user gave it.
         inputs: The files and folders the command reads.
-        kind: One of :data:`KINDS`. A ``'png'`` plot may also end in another image suffix
-            (``.svg``, ``.pdf``, ...); without a suffix, ``.png`` is appended.
+        kind: One of :data:`KINDS`; a ``'png'`` plot may end in another image suffix and gets
+            ``.png`` appended without one.
         force: Replace an existing file of another kind.
-        forceable: Whether the caller offers ``--force`` (a node does not): the refusal
-            then names it as a way out.
-
-    Returns:
-        The path to write and to name in messages: ``path``, with ``.png`` appended to a plot
-        name without suffix.
+        forceable: Whether the caller offers ``--force`` (a node does not), for the message.
 
     Raises:
         OutputError: If the output is refused; the message names the path and the fix.
@@ -112,14 +101,7 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
 
 
 def sniff_kind(path: str | os.PathLike) -> str | None:
-    """
-    Return which of :data:`KINDS` the existing ``path`` is by its content.
-
-    Returns:
-        A key of :data:`KINDS`; ``'empty'`` for an empty file, ``'other'`` for content of
-        no known kind (a CSV file, say), ``None`` if ``path`` does not exist or cannot be read.
-
-    """
+    """Return the kind of ``path`` by content (:data:`KINDS`, ``'empty'``, ``'other'``; None)."""
     path = Path(path)
     if path.is_dir():
         return 'directory'
@@ -223,17 +205,8 @@ def atomic_file(path: str | os.PathLike, *, text: bool = False) -> Iterator[IO]:
     """
     Open a unique temporary file beside ``path``; rename it to ``path`` when the block ends.
 
-    The file appears under ``path`` only complete (flushed to disk), with the permissions a
-    plain ``open(path, 'w')`` gives. On any exception, ``KeyboardInterrupt`` and a SIGTERM
-    turned into one included, the temporary file is removed and ``path`` left as it was.
-
-    Args:
-        path: The file to write.
-        text: Open in text mode (UTF-8) instead of binary.
-
-    Raises:
-        OSError: If the file cannot be created or written.
-
+    On any exception (SIGTERM and ``KeyboardInterrupt`` included) the temporary file is removed
+    and ``path`` left as it was. ``text``: UTF-8 text mode instead of binary.
     """
     path = Path(path)
     file, tmp = open_temporary(path, text=text)
@@ -250,17 +223,10 @@ def atomic_file(path: str | os.PathLike, *, text: bool = False) -> Iterator[IO]:
 
 def open_temporary(path: str | os.PathLike, *, text: bool = False) -> tuple[IO, Path]:
     """
-    Create and open a temporary file for ``path`` in its folder: ``.NAME.XXXXXXXX.partial``.
+    Create and open (``'w'`` UTF-8 or ``'wb'``) a unique ``.NAME.XXXXXXXX.partial`` for ``path``.
 
-    The name is unique per call, so that concurrent writers of one output never share it;
-    the caller removes the file on failure or renames it with :func:`publish`.
-
-    Returns:
-        The open file (``'w'`` UTF-8 or ``'wb'``) and its path.
-
-    Raises:
-        OSError: If the folder does not take the file.
-
+    Return ``(file, its path)``; the caller removes it on failure or renames it with
+    :func:`publish`. OSError if the folder does not take the file.
     """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial',
@@ -275,9 +241,7 @@ def open_temporary(path: str | os.PathLike, *, text: bool = False) -> tuple[IO, 
 
 def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     """
-    Rename a finished temporary file to ``path`` with a new file's permissions.
-
-    The permissions become ``0o666`` less the umask, not the ``0o600`` of a temporary file.
+    Rename a finished temporary file to ``path`` with a new file's permissions (umask).
 
     Raises:
         OSError: If the rename fails (``tmp`` is then left for the caller to remove).
@@ -293,11 +257,8 @@ def save_figure(figure, path: str | os.PathLike, *, dpi: int = 100) -> None:
     """
     Save a matplotlib figure to ``path`` atomically, in the format its suffix names.
 
-    Check ``path`` first with :func:`check_output` (kind ``'png'``), which gives it a suffix.
-
     Raises:
-        OutputError: If the file cannot be written (a full disk, say); ``path`` is then left
-            as it was.
+        OutputError: If the file cannot be written; ``path`` is then left as it was.
 
     """
     try:
@@ -308,12 +269,6 @@ def save_figure(figure, path: str | os.PathLike, *, dpi: int = 100) -> None:
 
 
 def write_text_atomically(path: str | os.PathLike, text: str) -> None:
-    """
-    Write ``text`` to ``path`` via a temporary file in the same folder, then rename.
-
-    Raises:
-        OSError: If the file cannot be written; ``path`` is then left as it was.
-
-    """
+    """Write ``text`` to ``path`` atomically; OSError leaves ``path`` as it was."""
     with atomic_file(path, text=True) as f:
         f.write(text)

@@ -1,10 +1,4 @@
-"""
-Package entry points that load on first use (PEP 562), so ``import sensor_comp.core`` stays cheap.
-
-A package lists ``{name: submodule}`` and gets the module-level ``__getattr__`` and
-``__dir__`` from :func:`lazy_exports`; the first access imports the submodule and keeps the
-value in the package's namespace.
-"""
+"""Package entry points loaded on first use (PEP 562), so importing a package stays cheap."""
 
 from __future__ import annotations
 
@@ -17,14 +11,7 @@ __all__ = ['lazy_exports']
 
 def lazy_exports(package: str, exports: Mapping[str, str]
                  ) -> tuple[Callable[[str], object], Callable[[], list[str]]]:
-    """
-    Return ``__getattr__`` and ``__dir__`` for ``package`` exporting ``exports`` lazily.
-
-    Args:
-        package: The package's ``__name__``.
-        exports: ``{name: submodule}``, the submodule relative to the package (``'.model'``).
-
-    """
+    """Return ``__getattr__`` and ``__dir__`` exporting ``{name: '.submodule'}`` lazily."""
     def __getattr__(name: str):
         if name not in exports:
             raise AttributeError(f'module {package!r} has no attribute {name!r}')

@@ -1,15 +1,8 @@
 """
 The signal stream contract: uniformly sampled multi-channel streams and their metadata.
 
-Time-series convention (as in ``scipy.signal``): samples lie on the **last** axis, channels
-on the first; a stream's data is a ``(channels, samples)`` float64 array. Time is carried as
-the integer nanosecond stamp of the first sample (``t0_ns``) plus the sample rate ``fs`` in
-Hz; sample ``k`` was acquired at ``t0_ns + k * 1e9 / fs``. Values are SI (REP 103): pascal
-for pressure, m/s² for acceleration.
-
-On the wire (see :mod:`sensor_comp.blocks`) a stream travels as blocks, and its rate, channel
-names, unit and sensor metadata travel on the latched ``stream_info`` topic described by
-:class:`StreamInfo`; a block stream is never decoded by guessing its rate.
+Samples on the last axis, ``t0_ns`` integer stamp plus ``fs``, SI units; the rate travels
+on the latched ``stream_info`` topic (:class:`StreamInfo`). See ``doc/streams.md``.
 """
 
 from __future__ import annotations
@@ -61,8 +54,7 @@ class StreamInfo:
         channels: One name per row, e.g. ``('x', 'y', 'z')``.
         unit: SI unit of every channel, e.g. ``'Pa'`` or ``'m/s^2'``.
         frame_id: Sensor frame of the samples.
-        metadata: Further sensor facts as strings, e.g.
-            ``{'charge_sensitivity_pC_per_MPa': '100.0'}``.
+        metadata: Further sensor facts as strings.
 
     Raises:
         StreamError: On a non-positive or non-finite rate or an empty channel list.
@@ -97,12 +89,12 @@ class Gap:
 @dataclass(frozen=True)
 class Stream:
     """
-    A uniformly sampled stream assembled from blocks.
+    A uniformly sampled ``(channels, samples)`` stream assembled from blocks.
 
     Args:
         info: The stream's metadata.
         t0_ns: Acquisition time of sample 0 in integer nanoseconds.
-        data: ``(channels, samples)`` float64 array; samples on the last axis.
+        data: ``(channels, samples)`` float64 array.
         gaps: Runs of samples that no block delivered; they hold NaN in ``data``.
 
     Raises:
@@ -126,12 +118,10 @@ class Stream:
 
     @property
     def fs(self) -> float:
-        """Return the sample rate in Hz."""
         return self.info.fs
 
     @property
     def n_samples(self) -> int:
-        """Return the number of samples per channel."""
         return self.data.shape[-1]
 
     def times(self) -> np.ndarray:
@@ -143,13 +133,7 @@ class Stream:
         return self.t0_ns + round(index * 1e9 / self.fs)
 
     def channel(self, name: str) -> np.ndarray:
-        """
-        Return the row of channel ``name``.
-
-        Raises:
-            StreamError: If the stream has no such channel.
-
-        """
+        """Return the row of channel ``name``; StreamError if there is none."""
         try:
             return self.data[self.info.channels.index(name)]
         except ValueError:
@@ -160,16 +144,13 @@ class Stream:
 @dataclass(frozen=True)
 class Recording:
     """
-    Pressure and triaxial acceleration of one rig, on one time base.
-
-    This is what the numerical core consumes: ``pressure`` (Pa) and ``acceleration``
-    (rows x, y, z of the sensor frame in m/s², z = sensor axis) share ``fs`` and ``t0_ns``.
+    Pressure (Pa) and triaxial acceleration (m/s², rows x, y, z; z the sensor axis) of one rig.
 
     Args:
         fs: Sample rate in Hz.
         t0_ns: Acquisition time of sample 0 in integer nanoseconds.
-        pressure: ``(samples,)`` raw pressure in Pa.
-        acceleration: ``(3, samples)`` acceleration in m/s².
+        pressure: ``(samples,)`` raw pressure.
+        acceleration: ``(3, samples)`` acceleration.
         frame_id: Sensor frame.
         metadata: Sensor facts, e.g. ``{'charge_sensitivity_pC_per_MPa': '100.0'}``.
 
@@ -201,7 +182,6 @@ class Recording:
 
     @property
     def n_samples(self) -> int:
-        """Return the number of samples."""
         return self.pressure.size
 
     @property
@@ -241,8 +221,8 @@ class Recording:
         Join an acceleration and a pressure stream on their common time span.
 
         Raises:
-            StreamError: If rates differ, the streams do not overlap, or their sample
-                grids are offset by a fraction of a sample.
+            StreamError: If rates differ, the streams do not overlap, or their sample grids are
+                offset by a fraction of a sample.
 
         """
         accel_name, press_name = acceleration.info.topic, pressure.info.topic

@@ -1,14 +1,9 @@
 """
 A worker process: a fresh Python interpreter that runs calls sent to it over two pipes.
 
-Used where work must leave the calling process: the identification node's fits (they
-held the GIL and starved block reception) and EMD windows shared across cores. The
-worker is started by ``subprocess``, not ``multiprocessing``: forking a process that runs
-rclpy and DDS threads copies locks held by other threads, and ``spawn`` re-imports the
-user's ``__main__`` script (a rig script without an ``if __name__ == '__main__':`` guard
-started a second acquisition in its worker). It takes the parent's ``sys.path``, so it
-runs the same ``sensor_comp``; it ignores SIGINT (the parent decides when it stops) and
-exits when its request pipe closes. No ROS import.
+For work that must leave the calling process (node fits, EMD windows). Started by
+``subprocess``, not ``multiprocessing`` (fork copies held DDS locks, spawn re-runs the
+user's ``__main__``); why and how: ``doc/outputs-and-workers.md``. No ROS import.
 """
 
 from __future__ import annotations
@@ -43,14 +38,9 @@ class Worker:
     """
     One worker process that runs calls one at a time; use it from one thread.
 
-    :meth:`terminate` may come from any thread.
-
     Args:
         name: What the worker is, for messages (``'fit worker'``).
         env: Environment variables to set in the worker.
-
-    Attributes:
-        pid: The worker's process id.
 
     """
 
@@ -96,12 +86,12 @@ class Worker:
 
     def call(self, function, *args, **kwargs):
         """
-        Return ``function(*args, **kwargs)`` run in the worker (a module-level function).
+        Return ``function(*args, **kwargs)`` (a module-level function) run in the worker.
 
         Raises:
             WorkerDied: If the process ended before it answered.
-            Exception: What the call raised in the worker (its traceback in a note), or
-                what pickling the arguments raised here.
+            Exception: What the call raised in the worker (its traceback in a note), or what
+                pickling the arguments raised here.
 
         """
         request = pickle.dumps((function, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
@@ -163,14 +153,7 @@ def _reply(ok: bool, value) -> bytes:
 
 
 def serve(read_fd: int, write_fd: int) -> None:
-    """
-    Answer calls until the request pipe closes (the worker's main loop).
-
-    Args:
-        read_fd: The pipe the pickled ``(function, args, kwargs)`` requests come on.
-        write_fd: The pipe the pickled ``(ok, result or exception)`` replies go on.
-
-    """
+    """Answer pickled calls from ``read_fd`` on ``write_fd`` until the request pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     with os.fdopen(read_fd, 'rb') as requests:
         try:
