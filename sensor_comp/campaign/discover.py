@@ -1,25 +1,8 @@
 """
 A campaign's recordings, and which sensor each one holds.
 
-Inputs are files, folders (searched recursively for ``*.mcap`` and ``*.csv``; hidden
-folders are skipped) and glob patterns (``**`` spans folders; the files they match count
-when they have one of those suffixes). Every ``.mcap`` file is one
-recording: a split series ``run_0000.mcap``, ``run_0001.mcap``, ... from the recorder reads
-file by file, each file starting with the latched ``stream_info``. A file named explicitly
-is taken whatever its suffix (a recording that is not MCAP then fails with its reason).
-
-The sensor of a recording comes from the sensor map when one is given, else from the
-recording itself: its frame id (``stream_info``'s ``hardware_id``; the CSV ``# frame_id:``
-line) or the metadata key named by ``sensor_key`` (e.g. a serial number written into
-``stream_info``). A sensor map is a small YAML file, one entry per sensor with the glob
-patterns of its recordings, relative to the map's folder::
-
-    PCB-113B24-4711: [rig_a/**/*.mcap, spare/run_00*.mcap]
-    PCB-113B24-4712:
-      - rig_b/*.mcap
-
-A pattern without ``/`` matches the file name anywhere. A recording matched by two sensors
-is an error; one matched by none falls back to its metadata.
+Inputs are files, folders and globs; the sensor comes from a YAML sensor map, else from
+the recording's frame id or a metadata key. See ``doc/campaign.md``.
 """
 
 from __future__ import annotations
@@ -51,11 +34,10 @@ class CampaignError(SensorCompError):
 @dataclass(frozen=True)
 class SensorMap:
     """
-    Which recordings hold which sensor, by glob patterns (see the module docs).
+    Which recordings hold which sensor, by glob patterns (``doc/campaign.md``).
 
     Args:
-        patterns: ``(sensor, pattern)`` pairs; absolute patterns, or file-name patterns
-            without ``/``.
+        patterns: ``(sensor, pattern)`` pairs; absolute, or file-name patterns without ``/``.
         source: The file the map was read from, for messages.
 
     """
@@ -65,13 +47,7 @@ class SensorMap:
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> SensorMap:
-        """
-        Read a sensor map from YAML ``{sensor: [glob, ...]}``.
-
-        Raises:
-            CampaignError: If the file is missing, not YAML or not such a mapping.
-
-        """
+        """Read a sensor map ``{sensor: [glob, ...]}``; CampaignError if it is not such YAML."""
         import yaml
         try:
             doc = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
@@ -97,13 +73,7 @@ class SensorMap:
         return cls(tuple(patterns), str(path))
 
     def sensor(self, path: str | os.PathLike) -> str | None:
-        """
-        Return the sensor whose patterns match ``path``, or None.
-
-        Raises:
-            CampaignError: If patterns of two sensors match it.
-
-        """
+        """Return the sensor whose patterns match ``path``, or None; CampaignError if two match."""
         full = os.path.abspath(path)
         found = sorted({sensor for sensor, pattern in self.patterns
                         if fnmatch.fnmatchcase(full if '/' in pattern else os.path.basename(full),
@@ -115,18 +85,7 @@ class SensorMap:
 
 
 def sensor_of(recording: Recording, *, key: str = FRAME_ID) -> tuple[str, str | None]:
-    """
-    Return the sensor a recording names, and a note when it had to fall back.
-
-    Args:
-        recording: The recording read.
-        key: :data:`FRAME_ID`, or a metadata key of its ``stream_info``.
-
-    Returns:
-        ``(sensor, note)``: the frame id when ``key`` is missing from the metadata, with a
-        note saying so; the note is None otherwise.
-
-    """
+    """Return the sensor a recording names by ``key``, and a note if the frame id stood in."""
     if key == FRAME_ID:
         return recording.frame_id, None
     value = recording.metadata.get(key, '')
@@ -139,15 +98,10 @@ def sensor_of(recording: Recording, *, key: str = FRAME_ID) -> tuple[str, str | 
 def discover(inputs: Sequence[str | os.PathLike], *,
              exclude: Iterable[str | os.PathLike] = ()) -> list[str]:
     """
-    Return the recordings the inputs name, sorted, each once.
+    Return the recordings the inputs (files, folders, globs) name, sorted, each once.
 
-    Args:
-        inputs: Files, folders and glob patterns.
-        exclude: Folders whose contents are never inputs (the campaign's own output).
-
-    Raises:
-        CampaignError: If an input matches nothing, or no recording is found at all.
-
+    Folders in ``exclude`` (the campaign's own output) are never searched. CampaignError if an
+    input matches nothing, or no recording is found at all.
     """
     excluded = [os.path.realpath(p) for p in exclude]
     found: dict[str, str] = {}

@@ -1,23 +1,8 @@
 """
 Drift of a sensor's acceleration sensitivity over a campaign: trend and change points.
 
-- **Trend**: the Theil–Sen slope of sensitivity against time (the median of the slopes
-  between all pairs of shots), with its 95 % confidence interval (Sen's, from Kendall's
-  τ: distribution-free, robust to outlying shots up to 29 % of them), from at least
-  :data:`MIN_TREND_POINTS` shots. The slope is given per day, and relative to the sensor's
-  median sensitivity over the time the shots span and per 30 days; the drift is called
-  significant when the interval excludes zero. The cost grows with the square of the
-  shots, so at most :data:`TREND_POINTS` shots, evenly spread in time order, enter it.
-- **Change points**: binary segmentation with the CUSUM statistic on the shots in time
-  order. For a segment of ``n`` shots, ``T = max_k |Σ_{i≤k} (x_i − x̄)| / (σ √n)``; with
-  no change and independent noise, ``T`` follows the supremum of a Brownian bridge
-  (Kolmogorov's distribution), so a change is flagged when its p-value is below
-  :data:`CHANGE_ALPHA` (0.01: ``T > 1.63``), the segment is split at the argmax and both
-  halves are tested again (each side holds at least :data:`MIN_SEGMENT` shots). ``σ`` is
-  the noise of the series from the median absolute deviation of successive differences
-  (divided by √2), which a level shift does not inflate. A steady trend also shows as a
-  change point; shots that are not independent (a campaign's shot mix changing with time)
-  make the test liberal: read flagged points with the plot.
+Theil–Sen trend with Sen's 95 % interval; change points by CUSUM binary segmentation
+(``doc/campaign.md``, sensitivity and drift).
 """
 
 from __future__ import annotations
@@ -50,7 +35,7 @@ DAY_NS = 86_400e9
 @dataclass(frozen=True)
 class Trend:
     """
-    Theil–Sen trend of a sensitivity series.
+    Theil–Sen trend of a sensitivity series (slopes per day, 95 % interval).
 
     Args:
         slope_per_day: Slope in units of the series per day.
@@ -134,7 +119,6 @@ class ChangePoint:
         return 100.0 * (self.after - self.before) / abs(self.before) if self.before else math.nan
 
     def to_json(self) -> dict:
-        """Return the numbers as JSON-ready values."""
         return {'stamp_ns': self.stamp_ns, 'index': self.index, 'before': self.before,
                 'after': self.after, 'shift_percent': self.shift_percent,
                 'statistic': self.statistic, 'p_value': self.p_value}
@@ -150,13 +134,7 @@ def _ordered(stamps_ns, values) -> tuple[np.ndarray, np.ndarray]:
 
 
 def trend(stamps_ns, values) -> Trend | None:
-    """
-    Return the Theil–Sen trend of ``values`` over time (non-finite values left out).
-
-    Returns:
-        None with fewer than :data:`MIN_TREND_POINTS` values or all at one time.
-
-    """
+    """Return the Theil–Sen trend of the finite ``values``; None if too few or all at one time."""
     stamps, y = _ordered(stamps_ns, values)
     if y.size < MIN_TREND_POINTS or stamps[-1] == stamps[0]:
         return None
@@ -175,12 +153,7 @@ def change_points(stamps_ns, values, *, alpha: float = CHANGE_ALPHA,
     """
     Return the change points of ``values`` in time order (binary segmentation, CUSUM).
 
-    Args:
-        stamps_ns: Time of each value.
-        values: The series (non-finite values left out).
-        alpha: Significance level of each test.
-        min_segment: Fewest values on either side of a change.
-
+    ``alpha`` is the level of each test, ``min_segment`` the fewest values either side.
     """
     stamps, y = _ordered(stamps_ns, values)
     if y.size < 2 * min_segment:

@@ -1,19 +1,8 @@
 """
 A campaign run: the task graph per recording, its cache, and the tables streamed to disk.
 
-1. Every recording is hashed (SHA-256, a task per file unless its size and time are
-   unchanged since the last run) and looked up in the cache (:mod:`.store`); a miss becomes
-   a task :func:`~sensor_comp.campaign.shots.analyse_bag` that returns the recording's rows.
-   Tasks are submitted at once and their results taken as they finish: each is written to
-   its cache part file straight away, so an interrupted campaign resumes where it stopped
-   and the client holds one recording's rows at a time.
-2. With ``identify``, each sensor without a model gets one (a task
-   :func:`~sensor_comp.campaign.models.identify_sensor` on a sample of its shots, stored in
-   the output folder and reused by later runs) and its recordings are compared with it (a
-   task per recording again).
-3. The parts are concatenated, recording by recording, into the per-shot table (Parquet and
-   CSV), then the per-recording and per-sensor tables, the summary and the report are
-   written.
+Hash and look up each recording, analyse the misses as tasks (identify models first if
+asked), then write the tables, summary and report. See ``doc/campaign.md``, the run.
 """
 
 from __future__ import annotations
@@ -290,21 +279,17 @@ def run_campaign(inputs: Sequence[str | os.PathLike], output: str | os.PathLike,
             :func:`~.models.read_models`.
         identify: Identify a model for every sensor without one, with these options.
         options: Shot detection and sensor naming.
-        scheduler: ``'tcp://host:8786'`` for a running Dask cluster, ``'synchronous'`` for
-            this process; None for a local cluster (or ``DASK_SCHEDULER_ADDRESS``).
+        scheduler: ``'tcp://host:8786'``, ``'synchronous'``, or None for a local cluster
+            (or ``DASK_SCHEDULER_ADDRESS``).
         workers: Local workers (default: one per core, bounded by memory); with a
             scheduler, the workers to wait for.
         force: Write into an existing folder that is not a campaign's.
         report: Write ``report.html``.
         progress: Progress bar factory ``progress(label, total)``.
 
-    Returns:
-        The counts, the per-sensor summary and how the run went.
-
     Raises:
-        SensorCompError: On a bad output folder (checked before any work), inputs that
-            match nothing, an ambiguous sensor map, or a cluster that cannot be reached.
-            A recording that fails is a row of the table, not an error.
+        SensorCompError: On a bad output folder (checked before any work), inputs that match
+            nothing, an ambiguous sensor map, or a cluster that cannot be reached.
 
     """
     began = time.perf_counter()

@@ -1,13 +1,8 @@
 """
 A model per sensor: given as files, or identified from a sample of the sensor's own shots.
 
-``--model SENSOR=model.json`` gives one sensor its model, ``--model model.json`` gives every
-sensor without its own the same one. With ``identify``, a sensor that has no model gets one
-fitted by the core's :func:`~sensor_comp.core.identify.identify` on up to
-:attr:`IdentifyOptions.max_shots` of its usable shots, spread evenly over the campaign's
-time span and split alternately (in time order) into calibration and validation shots, so
-that the model is validated on shots it was not fitted to and no period dominates. Only the
-windows of those shots are kept in memory, whatever the size of their recordings.
+Shots are spread evenly over time and alternate calibration/validation; see
+``doc/campaign.md``.
 """
 
 from __future__ import annotations
@@ -35,15 +30,7 @@ ALL_SENSORS = '*'
 
 @dataclass(frozen=True)
 class ModelFile:
-    """
-    A model and the file it was read from.
-
-    Args:
-        path: The model file.
-        sha256: SHA-256 of its bytes (part of the cache key of every recording it is used on).
-        model: The model.
-
-    """
+    """A model, the file it was read from and its SHA-256 (part of the cache keys)."""
 
     path: str
     sha256: str
@@ -51,13 +38,7 @@ class ModelFile:
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> ModelFile:
-        """
-        Read and check a model file.
-
-        Raises:
-            ModelError: If it is missing, malformed or unstable (the message names the file).
-
-        """
+        """Read and check a model file; ModelError if missing, malformed or unstable."""
         path = os.fspath(path)
         if not os.path.isfile(path):
             raise ModelError(f'{path}: no such model file')
@@ -114,7 +95,7 @@ class IdentifyOptions:
         structure: Model structure (:data:`~sensor_comp.core.identify.STRUCTURES`).
         orders: ``(na, nb)``, or None for the structure's default.
         delay: Input delay in samples, or None to estimate it.
-        emd: EMD-denoise the calibration windows (slow; does not change an output-error fit).
+        emd: EMD-denoise the calibration windows (slow; no change for an output-error fit).
         effects: Catalogued physical effects to add to the model.
         max_shots: Most shots used (half to fit, half to validate).
 
@@ -136,16 +117,7 @@ class IdentifyOptions:
 
 @dataclass(frozen=True)
 class Pick:
-    """
-    A shot chosen to identify a sensor's model.
-
-    Args:
-        path: The recording (as the workers can open it).
-        sha256: SHA-256 of the recording (for the model's provenance).
-        index: The shot's index in the recording.
-        role: ``'calibration'`` or ``'validation'``.
-
-    """
+    """A shot chosen to identify a sensor's model, ``role`` calibration or validation."""
 
     path: str
     sha256: str
@@ -155,15 +127,10 @@ class Pick:
 
 def pick_shots(shots: Sequence[tuple[int, str, str, int]], *, most: int) -> list[Pick]:
     """
-    Choose up to ``most`` shots evenly over time, alternately calibration and validation.
+    Choose up to ``most`` (>= 2) shots evenly over time, alternately calibration and validation.
 
-    Args:
-        shots: ``(stamp_ns, path, sha256, index)`` of the sensor's usable shots.
-        most: The most shots to choose (at least 2).
-
-    Raises:
-        CampaignError: With fewer than 2 shots.
-
+    ``shots`` are ``(stamp_ns, path, sha256, index)`` of the sensor's usable shots; fewer than
+    2 raise CampaignError.
     """
     if len(shots) < 2:
         raise CampaignError(f'{len(shots)} usable shot(s); identification needs at least 2 '
@@ -179,14 +146,7 @@ def pick_shots(shots: Sequence[tuple[int, str, str, int]], *, most: int) -> list
 def identify_sensor(sensor: str, picks: Sequence[Pick], *, threshold_g: float | None,
                     options: IdentifyOptions) -> Model:
     """
-    Identify a sensor's model on the picked shots (a worker task).
-
-    Each recording is read once; the shots are detected as in the per-shot table, and only
-    the picked windows are kept.
-
-    Returns:
-        The model, its provenance naming the recordings (path, SHA-256) and the shots with
-        their sample windows in those recordings.
+    Identify a sensor's model on the picked shots (a worker task), each recording read once.
 
     Raises:
         SensorCompError: If a recording does not read, or identification fails.

@@ -1,29 +1,9 @@
 """
 Where a campaign's tasks run: a Dask cluster (local or remote), or this process.
 
-- **local** (default): a :class:`distributed.LocalCluster` of worker *processes* with one
-  thread each (the analysis is numpy/scipy code that holds the GIL between calls, so
-  processes, not threads, use the cores), started with :data:`WORKER_ENV`: BLAS limited to
-  one thread per worker (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``,
-  ``MKL_NUM_THREADS`` = 1: small solves slow down 30× when BLAS threads fight for the
-  cores), and glibc's malloc thresholds set so that the arrays of a recording (a few MB
-  each, allocated anew for every recording) come from the heap instead of fresh
-  ``mmap`` pages: Dask's default ``MALLOC_TRIM_THRESHOLD_=65536`` returns every freed array
-  to the system, and the page faults of the next one tripled the CPU time per shot here
-  (0.16 s instead of 0.06 s per recording of ten 1 MS/s shots). Its size: one worker per
-  core available to this process, fewer when memory is short (:data:`MEMORY_PER_WORKER`).
-- **distributed**: ``scheduler='tcp://host:8786'`` (or ``DASK_SCHEDULER_ADDRESS``) runs the
-  same tasks on a running Dask cluster, e.g. one started by ``dask-jobqueue`` on SLURM or
-  PBS. The workers must have sensor_comp installed and see the recordings under the same
-  paths (a shared file system); results come back to this process, which writes every
-  output file. Start those workers with :data:`WORKER_ENV` in their environment.
-- **synchronous**: every task runs in this process when submitted, without Dask: for
-  tests, debugging and profiling.
-
-All three offer ``submit`` and ``completed`` (futures in the order they finish, including
-futures submitted while iterating), so the campaign streams results as they come. A
-cluster is started (or connected to) at the first task only: a re-run whose recordings all
-come from the cache starts none.
+``local`` (worker processes with :data:`WORKER_ENV`: one BLAS thread, malloc tuned),
+``distributed`` (``tcp://host:8786``), ``synchronous``; all offer ``submit`` and
+``completed``, and start at the first task. Why and the measurements: ``doc/campaign.md``.
 """
 
 from __future__ import annotations
@@ -84,11 +64,9 @@ class InlinePool:
 
     @property
     def workers(self) -> int:
-        """Return 1: this process."""
         return 1
 
     def share(self, value):
-        """Return ``value`` (nothing to send anywhere)."""
         return value
 
     def submit(self, fn: Callable, *args, **kwargs) -> concurrent.futures.Future:
@@ -107,7 +85,6 @@ class InlinePool:
             yield self._done.popleft()
 
     def peak_memory_mb(self) -> float:
-        """Return this process's peak memory in MB."""
         return _peak_rss_mb()
 
 
@@ -116,10 +93,9 @@ class DaskPool:
     Run tasks on a Dask cluster: a new local one, or the one at ``scheduler``.
 
     Args:
-        scheduler: Address of a running scheduler (``tcp://host:8786``); None for a local
-            cluster.
+        scheduler: Address of a running scheduler (``tcp://host:8786``); None for local.
         workers: Local workers to start (default :func:`default_workers`); with a
-            scheduler, the workers to wait for before starting (default 1).
+            scheduler, the workers to wait for (default 1).
 
     Raises:
         CampaignError: If the scheduler cannot be reached or no worker joins in time.
@@ -171,7 +147,6 @@ class DaskPool:
 
     @property
     def workers(self) -> int:
-        """Return the number of workers now."""
         return len(self._client.scheduler_info().get('workers', {}))
 
     def share(self, value):
@@ -179,7 +154,6 @@ class DaskPool:
         return self._client.scatter([value], broadcast=True)[0]
 
     def submit(self, fn: Callable, *args, **kwargs):
-        """Submit ``fn(*args, **kwargs)``; return its future."""
         future = self._client.submit(fn, *args, pure=False, **kwargs)
         self._pending.add(future)
         return future
@@ -197,14 +171,7 @@ class DaskPool:
 
 
 class LazyPool:
-    """
-    A pool started at its first task (a cluster costs seconds to start, or to reach).
-
-    Args:
-        engine: What the pool will be: ``'local'``, ``'distributed'`` or ``'synchronous'``.
-        start: Returns the pool.
-
-    """
+    """A pool started at its first task (a cluster costs seconds to start, or to reach)."""
 
     def __init__(self, engine: str, start: Callable):
         self.engine, self._start, self._pool = engine, start, None
@@ -231,7 +198,6 @@ class LazyPool:
         return self._started().share(value)
 
     def submit(self, fn: Callable, *args, **kwargs):
-        """Start the pool; submit ``fn(*args, **kwargs)``."""
         return self._started().submit(fn, *args, **kwargs)
 
     def completed(self) -> Iterator:
@@ -245,14 +211,10 @@ class LazyPool:
 
 def open_pool(*, scheduler: str | None = None, workers: int | None = None) -> LazyPool:
     """
-    Return the pool for ``scheduler``: :data:`SYNCHRONOUS`, an address, or None (local).
+    Return the pool for ``scheduler`` (:data:`SYNCHRONOUS`, an address, None: local).
 
-    ``DASK_SCHEDULER_ADDRESS`` stands for the address when ``scheduler`` is None. The pool
-    starts at its first task.
-
-    Raises:
-        CampaignError: If ``workers`` is below 1.
-
+    ``DASK_SCHEDULER_ADDRESS`` stands for the address when ``scheduler`` is None. CampaignError
+    if ``workers`` is below 1.
     """
     if workers is not None and workers < 1:
         raise CampaignError(f'workers must be at least 1, got {workers}')

@@ -1,11 +1,7 @@
 """
 The campaign's HTML report: one self-contained file (figures embedded as base64 PNG).
 
-Sections: the run in numbers; the sensors (sensitivity, drift with its 95 % interval,
-change points, fit); sensitivity against time per sensor with its trend line and change
-points; the distribution of the peak residual after compensation per sensor; the worst
-shots, each linked to its recording with its time, sample window and the command that
-shows it; the recordings that failed, with the reason.
+Sections are listed in ``doc/campaign.md``.
 """
 
 from __future__ import annotations

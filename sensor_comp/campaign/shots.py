@@ -1,22 +1,8 @@
 """
 One recording of a campaign → its rows of the per-shot table (the task each worker runs).
 
-The numbers are the single-recording commands' own: shots detected by
-:meth:`~sensor_comp.core.identify.ShotSource.detect` (peak g, pulse width, peak pressure,
-MPa/g, mode and defects as in the shot table of ``identify``) and, with a model, the usable
-shots compared by :func:`~sensor_comp.core.compare.compare` as ``sensor-comp compare`` does
-(fit %, peak residual %). Two columns are added per compared shot:
-
-- the compensated peak: the largest-magnitude value of measured − modelled pressure in the
-  window, in MPa;
-- the model-based sensitivity: the model's static sensitivity (MPa/g) times the
-  least-squares gain ``⟨y, ŷ⟩ / ⟨ŷ, ŷ⟩`` that scales the simulated shot onto the measured
-  one. Unlike the peak ratio MPa/g, which depends on the pulse width (a short pulse rings
-  the sensor's resonance), it measures the same quantity on every shot, so its drift over
-  a campaign is the sensor's.
-
-A recording that does not read, or holds no shot, gives one ``failed`` row with the reason;
-the task never raises, so one bad file never stops a campaign.
+Numbers as the single-recording commands compute them, plus the compensated peak and the
+model-based sensitivity; failures become a ``failed`` row (``doc/campaign.md``).
 """
 
 from __future__ import annotations
@@ -46,7 +32,7 @@ __all__ = ['BagResult', 'ShotOptions', 'analyse_bag']
 @dataclass(frozen=True, kw_only=True)
 class ShotOptions:
     """
-    How shots are found and named (everything a recording's rows depend on besides the model).
+    How shots are found and named (all a recording's rows depend on besides the model).
 
     Args:
         threshold_g: Shot trigger level in g; None for the automatic one.
@@ -73,14 +59,14 @@ class BagResult:
         rows: Its rows of the per-shot table.
         sensor: The sensor the rows name.
         bag_sensor: The sensor the recording names itself ('' when it did not read).
-        model: SHA-256 of the model file compared with, or '' without one.
+        model: SHA-256 of the model file compared with, or ''.
         failed: Whether the recording could not be analysed (one ``failed`` row).
         reason: Why it failed.
-        cacheable: Whether the result follows from the file's bytes alone (a file that does
-            not read fails again; a worker that ran out of memory may not).
+        cacheable: Whether the result follows from the file's bytes alone (not so for a worker
+            out of memory).
         notes: Recording-level notes (units warning, comparison not possible).
         seconds: Wall time the task took.
-        cpu_seconds: CPU time it took (the worker runs one task at a time).
+        cpu_seconds: CPU time it took.
 
     """
 
@@ -100,7 +86,7 @@ class BagResult:
 def analyse_bag(path: str, *, sha256: str, sensor: str | None,
                 models: Mapping[str, ModelFile], options: ShotOptions) -> BagResult:
     """
-    Return the rows of one recording (a worker task; never raises).
+    Return the rows of one recording (a worker task; never raises: failures are a result).
 
     Args:
         path: The recording, as the workers can open it.
@@ -108,10 +94,6 @@ def analyse_bag(path: str, *, sha256: str, sensor: str | None,
         sensor: Its sensor from the sensor map, or None to take the recording's own.
         models: ``{sensor: model}`` (see :func:`~sensor_comp.campaign.models.model_for`).
         options: Shot detection and sensor naming.
-
-    Returns:
-        The rows and what they depend on; a ``failed`` result with the reason when the
-        recording does not read, holds no shot, or the analysis broke.
 
     """
     began, cpu = time.perf_counter(), time.process_time()

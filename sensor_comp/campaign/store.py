@@ -1,25 +1,8 @@
 """
 The campaign's output folder: its files, its checks, and the cache that makes runs resumable.
 
-Layout of ``OUTDIR``::
-
-    shots.parquet, shots.csv   the per-shot table (:mod:`.table`)
-    bags.csv                   one row per recording: status, reason, counts, cached or not
-    sensors.csv                one row per sensor: sensitivity, drift, change points
-    summary.json               the run and the per-sensor summary in full
-    report.html                the self-contained HTML report
-    models/SENSOR.json         models identified by the campaign (``identify``)
-    .sensor-comp-campaign      marks the folder as a campaign's (written first)
-    .cache/                    per-recording results, hashes and identified models
-
-Each recording's result is cached in ``.cache/parts/<sha256>-<options>-<model>.parquet``:
-the SHA-256 of the recording's bytes, a hash of the shot options (with the table layout and
-the sensor_comp version) and the SHA-256 of the model file compared with (``none``
-without), so that a re-run after an interruption, or with one new recording or one new
-model, computes only what changed. A recording that cannot be read is cached as failed
-(its bytes will not read better next time); a failure that does not follow from the file
-(a worker out of memory) is not cached. SHA-256 sums are remembered by path, size and
-modification time in ``.cache/hashes.json``, so that unchanged files are not hashed again.
+Results are cached per recording by SHA-256, shot options and model; layout and cache rules
+in ``doc/campaign.md``.
 """
 
 from __future__ import annotations
@@ -50,14 +33,7 @@ _SAFE = re.compile(r'[^A-Za-z0-9._-]+')
 
 
 class CachedBag:
-    """
-    A recording's result as stored in the cache: its summary, its rows in a Parquet part.
-
-    Args:
-        part: The part file.
-        meta: What :meth:`CampaignFolder.store` recorded besides the rows.
-
-    """
+    """A recording's cached result: its ``meta`` summary and its rows in the Parquet ``part``."""
 
     def __init__(self, part: Path, meta: dict):
         self.part = part
@@ -74,14 +50,7 @@ class CachedBag:
 
 
 class CampaignFolder:
-    """
-    The output folder of one campaign (see the module docs).
-
-    Args:
-        path: The folder (created by :meth:`create`).
-        options_key: Hash of the shot options, part of every cache key.
-
-    """
+    """The output folder of one campaign; ``options_key`` hashes the shot options (cache key)."""
 
     def __init__(self, path: str | os.PathLike, *, options_key: str):
         self.path = Path(path)
@@ -103,14 +72,9 @@ class CampaignFolder:
         """
         Check that ``path`` can take a campaign's output, before any work; change nothing.
 
-        Refused: a folder that is, or contains, one of ``inputs``; a file; a folder that
-        cannot be written or lies in a missing folder; an existing non-empty folder that is
-        not a campaign's (no :data:`MARKER`) unless ``force``. A folder inside an input
-        folder is fine: the search for recordings leaves it out.
-
         Raises:
             OutputError: From :func:`~sensor_comp.files.check_output`.
-            CampaignError: If the folder contains an input or is another program's.
+            CampaignError: If the folder contains an input or is not a campaign's (no ``force``).
 
         """
         inputs = [os.fspath(i) for i in inputs]
@@ -164,7 +128,6 @@ class CampaignFolder:
         self._hashes[os.path.realpath(path)] = [st.st_size, st.st_mtime_ns, sha256]
 
     def save_hashes(self) -> None:
-        """Write the remembered SHA-256 sums."""
         write_text_atomically(self._hashes_file, json.dumps(self._hashes) + '\n')
 
     def _part(self, sha256: str, model: str) -> Path:
@@ -173,14 +136,9 @@ class CampaignFolder:
     def lookup(self, sha256: str, *, sensor: str | None,
                model_of: Callable[[str], str]) -> CachedBag | None:
         """
-        Return the cached result of a recording, if it is valid for the current models.
+        Return the cached result of a recording, if valid for the model that applies now.
 
-        Args:
-            sha256: The recording's SHA-256.
-            sensor: Its sensor from the sensor map, or None for the one it names.
-            model_of: ``model_of(sensor)`` → the SHA-256 of the model file that applies to
-                that sensor now, or ''.
-
+        ``model_of(sensor)`` gives the SHA-256 of that model file, or ''.
         """
         if self._index is None:  # one listing of the folder, not one per recording
             self._index = {}

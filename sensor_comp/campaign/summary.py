@@ -1,11 +1,8 @@
 """
 The campaign in numbers: counts, and per sensor its sensitivity, drift and change points.
 
-A sensor's sensitivity series is, per usable shot, the model-based sensitivity when the
-sensor's shots were compared with a model (the model's static MPa/g scaled by the shot's
-least-squares gain: independent of the pulse width), else the peak ratio MPa/g of the shot
-table (which also follows the campaign's mix of pulse widths; the summary says which).
-Its trend and change points come from :mod:`.drift`.
+The series is the model-based sensitivity when compared with a model, else the peak ratio
+MPa/g (``doc/campaign.md``).
 """
 
 from __future__ import annotations
@@ -116,7 +113,7 @@ class CampaignSummary:
         failed: Recordings that could not be analysed.
         shots: Shots detected.
         usable_shots: Of which usable.
-        processed: Recordings analysed by this run (the others came from the cache).
+        processed: Recordings analysed by this run.
         cached: Recordings taken from the cache.
         sensors: One summary per sensor.
         workers: Workers of the engine.

@@ -1,12 +1,8 @@
 """
 The campaign's per-shot table: its columns, and writers that stream it to Parquet and CSV.
 
-One row per detected shot of every recording, in recording order, plus one row for each
-recording that could not be analysed (``mode = 'failed'``, the reason in ``reason``). The
-columns that need a model (fit, peak residual, compensated peak, model-based sensitivity)
-are null without one. Tables are written a recording at a time, so a campaign of millions
-of shots never sits in one process's memory; files appear under their final names only
-when complete.
+One row per shot (or per failed recording), written a recording at a time and published
+atomically (``doc/campaign.md``).
 """
 
 from __future__ import annotations
@@ -67,7 +63,7 @@ def failure_row(*, bag: str, sensor: str, reason: str, sha256: str = '') -> dict
 
 
 def rows_table(rows: Iterable[Mapping]) -> pa.Table:
-    """Return rows (dicts keyed by column name, missing keys null) as a table of :data:`SCHEMA`."""
+    """Return rows (dicts by column name, missing keys null) as a table of :data:`SCHEMA`."""
     return pa.Table.from_pylist([dict(row) for row in rows], schema=SCHEMA)
 
 
@@ -88,13 +84,7 @@ class TableWriter:
     """
     Write tables of :data:`SCHEMA` to a Parquet and a CSV file, piece by piece.
 
-    Both files are filled under temporary names in their folder and renamed on a clean
-    exit of the ``with`` block; on an error both are removed and existing files are left.
-
-    Args:
-        parquet: The Parquet file to write.
-        csv: The CSV file to write (same rows; timestamps in ISO 8601).
-
+    Both appear on a clean exit of the ``with`` block; on an error both are removed.
     """
 
     def __init__(self, parquet: str | os.PathLike, csv: str | os.PathLike):
@@ -141,12 +131,7 @@ def _temporary(path: Path) -> Path:
 
 
 def read_columns(path: str | os.PathLike, names: Sequence[str]) -> dict[str, np.ndarray]:
-    """
-    Read columns of a per-shot Parquet table as numpy arrays.
-
-    Integers (``stamp``, ``shot``) fill nulls with 0, floats with NaN, text with ``''``
-    (object arrays), so masks and statistics need no null handling.
-    """
+    """Read columns of a per-shot Parquet table as numpy arrays, nulls as 0, NaN or ``''``."""
     table = pq.read_table(path, columns=list(names))
     data = {}
     for name in names:
