@@ -76,6 +76,8 @@ import numpy as np
 from scipy import signal, stats
 
 from .compare import compare, Comparison
+from .effects import ProbeData, PROBES as EFFECT_PROBES, ProbeSpec
+from .effects.probe import PROBE_TIME_CONSTANTS_MS
 from .ident.simulate import simulate
 from .model import Model, ModelError
 from .noise_floor import (gram, json_number, noise_model, NoiseModel, PRACTICAL_SHARE,
@@ -87,6 +89,7 @@ from ..streams import G0, Recording
 __all__ = [
     'ALPHA',
     'DEFAULT_MAX_LAG_S',
+    'GENERIC_PROBES',
     'MAX_LAG_LIMIT_S',
     'MIN_LAGS',
     'OVERDAMPED_RINGING_S',
@@ -124,13 +127,7 @@ RINGING_TIME_CONSTANTS = 5.0
 #: Segment names, in window order.
 SEGMENTS = ('pre_trigger', 'pulse', 'ringing', 'tail')
 #: Time constants (ms) tried by the zero-shift and integral probes.
-TIME_CONSTANTS_MS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
-#: Mains harmonics in each hum probe (odd ones: saturated transformer cores).
-HUM_HARMONICS = (1, 3, 5)
-#: The jerk probe is low-passed at this multiple of the model's highest resonance ...
-JERK_CUTOFF_FACTOR = 2.0
-#: ... or at this frequency (Hz) for a model without resonance.
-JERK_CUTOFF_HZ = 10e3
+TIME_CONSTANTS_MS = PROBE_TIME_CONSTANTS_MS
 #: Welch segment length of the residual spectrum in s (100 Hz resolution).
 SPECTRUM_SEGMENT_S = 10e-3
 #: Most spectral peaks reported.
@@ -146,25 +143,26 @@ _AR_MAX_ORDER = 20
 # Asymptotic variance of log(σ²) from the MAD of n Gaussian samples is 4 · 1.3605 / n.
 _MAD_LOG_VAR = 4 * 1.3605
 
+
+def _squares(data: ProbeData, _) -> list[np.ndarray]:
+    return [g[np.newaxis] for g in data.through([a * a for a in data.axial])]
+
+
+#: The probes tied to no effect: the sensitivity error (fitted alone, first) and the others.
+GENERIC_PROBES = (
+    ProbeSpec('gain', tests='G·a_z, the model output itself: a sensitivity error',
+              words='a scaled model output (sensitivity error)', with_output=False,
+              regressors=lambda data, _: [y[np.newaxis] for y in data.simulated],
+              reading=lambda c, _: {'gain_error_percent': 100.0 * c[0]}),
+    ProbeSpec('square', tests='G·a_z²: a quadratic (rectifying) nonlinearity',
+              words='G·a² (quadratic nonlinearity)', regressors=_squares,
+              reading=lambda c, _: {'beta_per_g': G0 * c[0]}),
+)
+#: Every probe run, by name: ``gain``, the effects' in signal-path order, the other generic.
+_ALL_PROBES: dict[str, ProbeSpec] = {
+    p.name: p for p in (GENERIC_PROBES[0], *EFFECT_PROBES.values(), *GENERIC_PROBES[1:])}
 #: Probe name → what it tests (regressor; G = the model's a_z dynamics).
-PROBES = {
-    'gain': 'G·a_z, the model output itself: a sensitivity error',
-    'delay': 'd(G·a_z)/dt = G·(da_z/dt), the simulated output\'s rate: a channel delay '
-             '(ε ≈ −d·dŷ/dt)',
-    'abs_square': 'G·(a_z|a_z|): sensitivity changing with the load',
-    'square': 'G·a_z²: a quadratic (rectifying) nonlinearity',
-    'jerk': 'da_z/dt not through G (low-passed at twice the model resonance, zero phase): '
-            'base strain acting at the element',
-    'lateral': 'G·a_x and G·a_y beyond the axial path: transverse sensitivity',
-    'integral': 'G·∫a_z dt, the running integral of the model output from the window '
-                'start, leaking with the best time constant (or none): an amplifier '
-                'high-pass τs/(τs + 1) leaves ε = −ŷ/(τs + 1)',
-    'hum_50': 'sin/cos at 50, 150, 250 Hz in recording time: mains hum',
-    'hum_60': 'sin/cos at 60, 180, 300 Hz in recording time: mains hum',
-    'zero_shift': 'an offset ∝ the peak g building up over the pulse and decaying after it '
-                  f'(best decay time of {", ".join(f"{t:g}" for t in TIME_CONSTANTS_MS)} '
-                  f'ms)',
-}
+PROBES = {name: p.tests for name, p in _ALL_PROBES.items()}
 
 
 class ResidualError(SensorCompError, ValueError):
@@ -816,93 +814,28 @@ def _probe(result: tuple, parameters: Mapping[str, float], *, searched: int = 1)
                  {k: float(v) for k, v in parameters.items()})
 
 
-def _hum_columns(start: int, n: int, noise_stop: int, fs: float, mains: float) -> np.ndarray:
-    """Return sin/cos of the mains harmonics, minus their baseline as the window lost it."""
-    t = (start + np.arange(n)) / fs
-    rows = []
-    for k in HUM_HARMONICS:
-        if k * mains < fs / 2:
-            rows += [np.sin(2 * math.pi * k * mains * t), np.cos(2 * math.pi * k * mains * t)]
-    rows = np.array(rows)
-    return rows - rows[:, :max(noise_stop, 1)].mean(axis=1, keepdims=True)
-
-
-def _zero_shift_column(n: int, onset: int, end: int, peak_g: float, tau_s: float,
-                       fs: float) -> np.ndarray:
-    out = np.zeros(n)
-    width = max(end - onset, 1)
-    ramp = np.arange(min(end, n) - onset) / width
-    out[onset:min(end, n)] = 0.5 * (1.0 - np.cos(math.pi * ramp))
-    out[end:] = np.exp(-np.arange(n - min(end, n)) / (tau_s * fs))
-    return peak_g * out
-
-
-def _jerk(a: np.ndarray, fs: float, dyn: _Dynamics) -> np.ndarray:
-    """
-    Return da/dt, low-passed without phase shift at twice the model's highest resonance.
-
-    Differentiating the accelerometer's white noise gives a spectrum rising as f² up to
-    fs/2; the pulse's jerk lies far below the sensor's resonance. The cut keeps it and
-    removes most of the noise (whose energy falls as the cube of the cut-off).
-    """
-    if a.size < 2:
-        return np.zeros_like(a)
-    cutoff = min(JERK_CUTOFF_FACTOR * max((fn for fn, _ in dyn.resonances),
-                                          default=JERK_CUTOFF_HZ / JERK_CUTOFF_FACTOR),
-                 0.4 * fs)
-    rate = np.gradient(a) * fs
-    sos = signal.butter(4, cutoff, fs=fs, output='sos')
-    return signal.sosfiltfilt(sos, rate) if a.size > 3 * (2 * sos.shape[0] + 1) else rate
-
-
-def _search(run, build, taus: Sequence[float]) -> tuple[tuple, float]:
-    """Return the probe result explaining most over a grid of time constants, and its τ."""
-    return max(((run(build(tau)), tau) for tau in taus), key=lambda r: r[0][0])
-
-
 def _probes(e: list[np.ndarray], simulated: list[np.ndarray], accel: list[np.ndarray],
             shots: Sequence[Shot], bounds: list[tuple[int, int, int, int, int]],
             dyn: _Dynamics, noise: NoiseModel, fs: float) -> dict[str, Probe]:
-    az = [a[2] for a in accel]
+    """Return every probe's result (:data:`PROBES`), significant at :data:`ALPHA` over all."""
+    data = ProbeData(fs=fs, simulated=simulated, acceleration=accel,
+                     starts=[s.start for s in shots], bounds=bounds,
+                     peak_g=[s.peak_g for s in shots],
+                     resonances_hz=tuple(fn for fn, _ in dyn.resonances),
+                     through=functools.partial(_through, dyn.path))
     output = [y[np.newaxis] for y in simulated]
-    run = functools.partial(_probe_stats, e, noise=noise, nuisance=output)
-    rate = [np.gradient(y) * fs if y.size > 1 else np.zeros_like(y) for y in simulated]
-    gain = _probe_stats(e, output, noise)
-    delay = run([r[np.newaxis] for r in rate])
-    absq = run([g[np.newaxis] for g in _through(dyn.path, [a * np.abs(a) for a in az])])
-    sq = run([g[np.newaxis] for g in _through(dyn.path, [a * a for a in az])])
-    jerk = run([_jerk(a, fs, dyn)[np.newaxis] for a in az])
-    lateral = run([np.array([gx, gy]) for gx, gy in zip(
-        _through(dyn.path, [a[0] for a in accel]), _through(dyn.path, [a[1] for a in accel]))])
-    probes = {
-        'gain': _probe(gain, {'gain_error_percent': 100.0 * gain[4][0]}),
-        'delay': _probe(delay, {'delay_us': -1e6 * delay[4][0]}),
-        'abs_square': _probe(absq, {'beta_per_g': G0 * absq[4][0]}),
-        'square': _probe(sq, {'beta_per_g': G0 * sq[4][0]}),
-        'jerk': _probe(jerk, {'pa_per_g_per_ms': G0 * 1e3 * jerk[4][0]}),
-        'lateral': _probe(lateral, {
-            'ratio': math.hypot(*lateral[4]),
-            'angle_deg': math.degrees(math.atan2(lateral[4][1], lateral[4][0]))}),
-    }
-    # Leaky integral ∫ŷ e^(−(t−s)/τ) ds: its coefficient is −1/τ for a high-pass of the
-    # same τ; τ = ∞ is the plain running integral.
-    taus = TIME_CONSTANTS_MS + (math.inf,)
-    result, tau_ms = _search(run, lambda tau: [
-        signal.lfilter([1.0 / fs], [1.0, -math.exp(-1e3 / (tau * fs))], y)[np.newaxis]
-        for y in simulated], taus)
-    coef = result[4][0]
-    probes['integral'] = _probe(result, {'tau_ms': -1e3 / coef if coef < 0 else math.nan,
-                                         'shape_tau_ms': tau_ms}, searched=len(taus))
-    for mains in (50.0, 60.0):
-        hum = run([_hum_columns(s.start, w.size, b[0], fs, mains)
-                   for s, w, b in zip(shots, e, bounds)])
-        probes[f'hum_{mains:.0f}'] = _probe(hum, {
-            'freq_hz': mains, 'amplitude_pa': math.hypot(hum[4][0], hum[4][1])})
-    result, tau_ms = _search(run, lambda tau: [
-        _zero_shift_column(w.size, b[1], b[2], s.peak_g, tau * 1e-3, fs)[np.newaxis]
-        for s, w, b in zip(shots, e, bounds)], TIME_CONSTANTS_MS)
-    probes['zero_shift'] = _probe(result, {'pa_per_g': result[4][0], 'tau_ms': tau_ms},
-                                  searched=len(TIME_CONSTANTS_MS))
+    probes = {}
+    for name, spec in _ALL_PROBES.items():
+        run = functools.partial(_probe_stats, e, noise=noise,
+                                nuisance=output if spec.with_output else None)
+        if spec.grid:
+            # The value explaining most over the grid; the p-value pays for the search.
+            result, value = max(((run(spec.regressors(data, v)), v) for v in spec.grid),
+                                key=lambda r: r[0][0])
+        else:
+            result, value = run(spec.regressors(data, None)), None
+        probes[name] = _probe(result, spec.reading(result[4], value),
+                              searched=max(len(spec.grid), 1))
     level = ALPHA / len(probes)
     return {name: p._replace(significant=p.p_value < level) for name, p in probes.items()}
 
@@ -1183,18 +1116,7 @@ def _localise(shots: Sequence[Shot], e: Sequence[np.ndarray], bounds: Sequence[t
 
 _SEGMENT_WORDS = {'pre_trigger': 'before the trigger', 'pulse': 'during the pulse',
                   'ringing': 'in the ringing after the pulse', 'tail': 'in the tail'}
-_PROBE_WORDS = {
-    'gain': 'a scaled model output (sensitivity error)',
-    'delay': 'the rate of the model output (a delay between the channels)',
-    'abs_square': 'G·(a|a|) (sensitivity changing with load)',
-    'square': 'G·a² (quadratic nonlinearity)',
-    'jerk': 'da/dt (base strain)',
-    'lateral': 'the lateral acceleration through the model (transverse sensitivity)',
-    'integral': 'the running integral of a through the model (amplifier high-pass)',
-    'hum_50': 'a 50 Hz mains line and its odd harmonics',
-    'hum_60': 'a 60 Hz mains line and its odd harmonics',
-    'zero_shift': 'a decaying offset after each pulse (zero shift)',
-}
+_PROBE_WORDS = {name: p.words for name, p in _ALL_PROBES.items()}
 
 
 #: Significant probes (and spectral peaks) named in the summary.

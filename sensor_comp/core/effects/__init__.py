@@ -1,9 +1,11 @@
 """
 The catalogue of physical effects the base model can be extended with, one module each.
 
-Every module of this package (except :mod:`.base`) defines one subclass of
-:class:`~sensor_comp.core.effects.base.Effect`; they are found on import, so adding an
-effect means adding one module. :data:`EFFECTS` maps each id to its (stateless) instance;
+Every module of this package is imported here, and subclassing
+:class:`~sensor_comp.core.effects.base.Effect` with an ``id`` registers the effect (as in
+the simulator's catalogue), so adding an effect means adding one module (see
+``doc/effects.md``). :data:`EFFECTS` maps each id to its (stateless) instance;
+:data:`PROBES` maps each residual probe the effects declare to its spec;
 :func:`get_effect` looks one up with an error that lists the known ids.
 """
 
@@ -11,31 +13,42 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 import importlib
-import inspect
 import pkgutil
 
-from .base import Effect, EffectError, ModelSpec, Outcome, Physical, Search
+from .base import (Effect, EffectError, ModelSpec, Outcome, Physical, registry, ResidualView,
+                   Search)
+from .probe import ProbeData, ProbeSpec
 
-__all__ = ['EFFECTS', 'Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical', 'Search',
-           'describe_effects', 'disturbance_trackers', 'get_effect', 'ordered']
+__all__ = ['EFFECTS', 'PROBES', 'Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical',
+           'ProbeData', 'ProbeSpec', 'ResidualView', 'Search', 'describe_effects',
+           'disturbance_trackers', 'get_effect', 'ordered', 'probe_owner']
 
-
-def _discover() -> dict[str, Effect]:
-    found: dict[str, Effect] = {}
-    for info in pkgutil.iter_modules(__path__):
-        if info.name == 'base':
-            continue
-        module = importlib.import_module(f'{__name__}.{info.name}')
-        for _, cls in inspect.getmembers(module, inspect.isclass):
-            if issubclass(cls, Effect) and cls.id and cls.__module__ == module.__name__:
-                if cls.id in found:
-                    raise TypeError(f'effect id {cls.id!r} is defined twice')
-                found[cls.id] = cls()
-    return dict(sorted(found.items(), key=lambda item: (item[1].order, item[0])))
-
+for _module in pkgutil.iter_modules(__path__):
+    importlib.import_module(f'{__name__}.{_module.name}')
 
 #: Effect instances by id, in signal-path order.
-EFFECTS: dict[str, Effect] = _discover()
+EFFECTS: dict[str, Effect] = {
+    cls.id: cls() for cls in sorted(registry().values(), key=lambda c: (c.order, c.id))}
+
+
+def _declared_probes() -> dict[str, ProbeSpec]:
+    found: dict[str, ProbeSpec] = {}
+    for effect in EFFECTS.values():
+        for probe in effect.probes:
+            if probe.name in found:
+                raise TypeError(f'residual probe {probe.name!r} is declared twice')
+            found[probe.name] = probe
+    return found
+
+
+#: The residual probes the effects declare, by name, in signal-path order.
+PROBES: dict[str, ProbeSpec] = _declared_probes()
+
+
+def probe_owner(name: str) -> str | None:
+    """Return the id of the effect declaring the residual probe ``name``, or None."""
+    return next((e.id for e in EFFECTS.values() if any(p.name == name for p in e.probes)),
+                None)
 
 
 def get_effect(effect_id: str) -> Effect:

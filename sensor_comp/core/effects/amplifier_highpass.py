@@ -11,13 +11,37 @@ loss (log scale, 1 ms to 10 s). The sensor polynomials keep their static sensiti
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
-from .base import (Effect, ModelSpec, modifier_value, Outcome, parameters_text, Physical,
-                   probe_of, Search, sentence, stored_std, tail_share)
+import numpy as np
+from scipy import signal
 
-__all__ = ['AmplifierHighpass']
+from .base import (Effect, FittedModel, ModelSpec, modifier_value, Outcome, parameters_text,
+                   Physical, probe_of, ResidualView, Search, sentence, stored_std, tail_share)
+from .probe import PROBE_TIME_CONSTANTS_MS, ProbeData, ProbeSpec
+
+__all__ = ['AmplifierHighpass', 'INTEGRAL_PROBE']
 
 KEY = 'amplifier_highpass.tau_ms'
+
+
+def _integrals(data: ProbeData, tau_ms: float | None) -> list[np.ndarray]:
+    """Return ``∫ŷ e^(−(t−s)/τ) ds`` per window (τ = ∞: the plain running integral)."""
+    pole = math.exp(-1e3 / (tau_ms * data.fs))
+    return [signal.lfilter([1.0 / data.fs], [1.0, -pole], y)[np.newaxis]
+            for y in data.simulated]
+
+
+#: The residual explained by a leaky integral of ŷ: its coefficient is −1/τ for a
+#: high-pass of the same τ.
+INTEGRAL_PROBE = ProbeSpec(
+    'integral', tests='G·∫a_z dt, the running integral of the model output from the window '
+    'start, leaking with the best time constant (or none): an amplifier high-pass '
+    'τs/(τs + 1) leaves ε = −ŷ/(τs + 1)',
+    words='the running integral of a through the model (amplifier high-pass)',
+    regressors=_integrals, grid=PROBE_TIME_CONSTANTS_MS + (math.inf,),
+    reading=lambda c, tau_ms: {'tau_ms': -1e3 / c[0] if c[0] < 0 else math.nan,
+                               'shape_tau_ms': tau_ms})
 
 
 class AmplifierHighpass(Effect):
@@ -38,6 +62,7 @@ class AmplifierHighpass(Effect):
         'with the running integral of the acceleration passed through the model.')
     parameters = {'tau_ms': 'ms'}
     order = 60
+    probes = (INTEGRAL_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Filter every input by the high-pass, its time constant searched."""
@@ -45,15 +70,16 @@ class AmplifierHighpass(Effect):
         return replace(spec, modifiers=spec.modifiers + (('highpass_ms', f'{{{KEY}}}'),),
                        searches=spec.searches + (search,))
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the time constant (ms) carried by the model's inputs."""
         return {'tau_ms': (modifier_value(model, 'highpass_ms'),
                            stored_std(model, self.id, 'tau_ms'))}
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say where the residual sits (tail) and what the high-pass removes."""
         parts = tail_share(analysis)
-        probe = probe_of(analysis, 'integral')
+        probe = probe_of(analysis, INTEGRAL_PROBE)
         if probe is not None:
             parts.append(f'G·∫a explains {100 * probe.fraction:.0f} % of the base residual')
         parts.append(f'a first-order high-pass removes {100 * outcome.score:.1f} % of the '

@@ -20,6 +20,12 @@ The physical parameters come back from a fitted model in physical units
 the delta method when the parameter covariance is known (at fit time; the model file
 keeps the numbers in its ``effects`` entry), those found by a scalar search carry the
 curvature of the loss.
+
+Subclassing :class:`Effect` with a class attribute ``id`` registers the effect
+(:func:`registry`), as in the simulator's catalogue (:mod:`sensor_comp.sim.effects`). What
+an effect reads from a fitted model, a fit or a residual analysis is stated by the
+protocols here (:class:`FittedModel`, :class:`FitView`, :class:`ResidualView`), so the
+catalogue imports none of them.
 """
 
 from __future__ import annotations
@@ -29,21 +35,23 @@ from contextvars import ContextVar
 from dataclasses import dataclass, replace
 import math
 import re
-from typing import ClassVar, Protocol, TYPE_CHECKING
+from typing import ClassVar, Protocol, runtime_checkable, TYPE_CHECKING
 
 import numpy as np
 
+from .probe import ProbeSpec
 from ..inputs import AXES, mode_pair, parse_channel
 from ...errors import SensorCompError
 
 if TYPE_CHECKING:
     from ..windows import Window
 
-__all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FittedModel', 'ModelSpec',
-           'Outcome', 'Physical', 'Search', 'dc_delay_s', 'delta_std', 'effect_entry',
-           'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
-           'parameters_text', 'probe_of', 'row_of', 'segment_of', 'sentence', 'static_gain',
-           'stored_std', 'tail_share']
+__all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FitView', 'FittedModel',
+           'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView',
+           'Search', 'SegmentView', 'SpectrumView', 'TrendView', 'dc_delay_s', 'delta_std',
+           'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s',
+           'modifier_value', 'parameters_text', 'probe_of', 'registry', 'row_of',
+           'segment_of', 'sentence', 'static_gain', 'stored_std', 'tail_share']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -55,6 +63,13 @@ BASE_CONTEXT: ContextVar[Mapping | None] = ContextVar('sensor_comp_base_context'
 EDGE_FACTOR = 1.05
 #: Physical parameters: name -> (value, standard deviation or None).
 Physical = dict[str, tuple[float, float | None]]
+
+_REGISTRY: dict[str, type[Effect]] = {}
+
+
+def registry() -> dict[str, type[Effect]]:
+    """Return the registered effect classes by id (import the modules first)."""
+    return dict(sorted(_REGISTRY.items()))
 
 
 class EffectError(SensorCompError, ValueError):
@@ -75,6 +90,110 @@ class FittedModel(Protocol):
     a: np.ndarray
     nk: int
     effects: tuple[Mapping, ...]
+
+
+class FitView(Protocol):
+    """What an effect reads from an extended fit (:class:`~.extended.ExtendedFit`)."""
+
+    @property
+    def spec(self) -> ModelSpec:
+        ...
+
+    @property
+    def values(self) -> Mapping[str, float]:
+        ...
+
+    def parameters(self, effect_id: str) -> Physical:
+        ...
+
+    def model(self) -> FittedModel:
+        ...
+
+
+class ProbeView(Protocol):
+    """What an effect reads from a probe result (:class:`~sensor_comp.core.residual.Probe`)."""
+
+    @property
+    def fraction(self) -> float:
+        ...
+
+
+class SegmentView(Protocol):
+    """A segment's energy (:class:`~sensor_comp.core.residual.SegmentEnergy`)."""
+
+    @property
+    def name(self) -> str:
+        ...
+
+    @property
+    def energy_fraction(self) -> float:
+        ...
+
+    @property
+    def sample_fraction(self) -> float:
+        ...
+
+
+class PeakView(Protocol):
+    """A residual spectral peak (:class:`~sensor_comp.core.residual.SpectralPeak`)."""
+
+    @property
+    def frequency_hz(self) -> float:
+        ...
+
+    @property
+    def prominence(self) -> float:
+        ...
+
+    @property
+    def model_resonance(self) -> bool:
+        ...
+
+
+class SpectrumView(Protocol):
+    """The residual spectrum (:class:`~sensor_comp.core.residual.ResidualSpectrum`)."""
+
+    @property
+    def peaks(self) -> Sequence[PeakView]:
+        ...
+
+
+class TrendView(Protocol):
+    """The amplitude trend (:class:`~sensor_comp.core.residual.AmplitudeTrend`)."""
+
+    @property
+    def exponent(self) -> float | None:
+        ...
+
+
+@runtime_checkable
+class ResidualView(Protocol):
+    """
+    What an effect's evidence reads from a residual analysis.
+
+    A protocol of :class:`~sensor_comp.core.residual.ResidualAnalysis`: the analysis runs
+    the catalogue's probes, so the catalogue must not import it back.
+    """
+
+    @property
+    def probes(self) -> Mapping[str, ProbeView]:
+        ...
+
+    @property
+    def segments(self) -> Sequence[SegmentView]:
+        ...
+
+    @property
+    def spectrum(self) -> SpectrumView:
+        ...
+
+    @property
+    def amplitude(self) -> TrendView:
+        ...
+
+    @property
+    def pretrigger_excess(self) -> float:
+        ...
 
 
 @dataclass(frozen=True)
@@ -187,8 +306,9 @@ class Effect:
     """
     A physical effect the base model leaves out (subclass per module; see the module docs).
 
-    Subclasses set the class attributes and override :meth:`extend` and :meth:`physical`;
-    disturbances (``acceleration_driven = False``) override :meth:`columns` too.
+    Subclasses set the class attributes (``id`` registers the class) and override
+    :meth:`extend` and :meth:`physical`; disturbances (``acceleration_driven = False``)
+    override :meth:`columns` too.
     """
 
     #: Canonical id, e.g. ``'channel_delay'``.
@@ -205,6 +325,15 @@ class Effect:
     acceleration_driven: ClassVar[bool] = True
     #: Position when several effects extend one spec (lower first).
     order: ClassVar[int] = 50
+    #: The residual probes that are its signature (:mod:`sensor_comp.core.effects.probe`).
+    probes: ClassVar[tuple[ProbeSpec, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get('id'):
+            if cls.id in _REGISTRY and _REGISTRY[cls.id].__module__ != cls.__module__:
+                raise TypeError(f'effect id {cls.id!r} is defined twice')
+            _REGISTRY[cls.id] = cls
 
     def applicable(self, windows: Sequence[Window]) -> str | None:
         """Return why the effect cannot be fitted on ``windows``, or None when it can."""
@@ -246,13 +375,12 @@ class Effect:
         """Return a streaming disturbance estimator for compensation, or None."""
         return None
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """
         Return one human sentence with numbers saying why the data point at this effect.
 
         Args:
-            analysis: The base model's residual analysis on the validation shots (a
-                ``sensor_comp.core.residual.ResidualAnalysis``) or None.
+            analysis: The base model's residual analysis on the validation shots or None.
             outcome: What the diagnosis measured for this effect.
 
         """
@@ -260,7 +388,7 @@ class Effect:
                          f'{100 * outcome.score:.1f} % of the validation residual energy'
                          f'{parameters_text(self, outcome.parameters)}'])
 
-    def implausible(self, fit) -> str | None:
+    def implausible(self, fit: FitView) -> str | None:
         """
         Return why a fit of this effect is no physical reading of it, or None when it is one.
 
@@ -272,7 +400,7 @@ class Effect:
         constant as short as allowed), the extension fits something else.
 
         Args:
-            fit: The :class:`~sensor_comp.core.extended.ExtendedFit` with this effect.
+            fit: The extended fit with this effect.
 
         """
         if self.parameters and not fit.parameters(self.id):
@@ -305,15 +433,15 @@ def parameters_text(effect: Effect, parameters: Physical) -> str:
     return ' (' + ', '.join(parts) + ')'
 
 
-def segment_of(analysis, name: str):
+def segment_of(analysis: ResidualView | None, name: str) -> SegmentView | None:
     """Return the residual analysis's pooled segment ``name``, or None without one."""
-    for seg in getattr(analysis, 'segments', ()):
+    for seg in analysis.segments if analysis is not None else ():
         if seg.name == name:
             return seg
     return None
 
 
-def tail_share(analysis) -> list[str]:
+def tail_share(analysis: ResidualView | None) -> list[str]:
     """Return the sentence part on the residual share of the tail, or none without a tail."""
     tail = segment_of(analysis, 'tail')
     if tail is None or tail.sample_fraction <= 0:
@@ -322,9 +450,9 @@ def tail_share(analysis) -> list[str]:
             f'residual energy in {100 * tail.sample_fraction:.0f} % of the samples']
 
 
-def probe_of(analysis, name: str):
-    """Return the residual analysis's probe ``name``, or None without one."""
-    return (getattr(analysis, 'probes', None) or {}).get(name)
+def probe_of(analysis: ResidualView | None, probe: ProbeSpec) -> ProbeView | None:
+    """Return the residual analysis's result of ``probe``, or None without one."""
+    return analysis.probes.get(probe.name) if analysis is not None else None
 
 
 def sentence(parts: Sequence[str]) -> str:

@@ -21,14 +21,30 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .base import (delta_std, Effect, excess_delay_s, ModelSpec, Outcome, parameters_text,
-                   Physical, probe_of, row_of, Search, sentence, stored_std)
+import numpy as np
 
-__all__ = ['ChannelDelay']
+from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
+                   parameters_text, Physical, probe_of, ResidualView, row_of, Search, sentence,
+                   stored_std)
+from .probe import ProbeData, ProbeSpec
+
+__all__ = ['ChannelDelay', 'RATE_PROBE']
 
 KEY = 'channel_delay.delay_us'
 #: Search range in µs.
 MAX_DELAY_US = 200.0
+
+
+def _rates(data: ProbeData, _) -> list[np.ndarray]:
+    return [(np.gradient(y) * data.fs if y.size > 1 else np.zeros_like(y))[np.newaxis]
+            for y in data.simulated]
+
+
+#: The residual following the model output's rate: ε ≈ −delay·dŷ/dt.
+RATE_PROBE = ProbeSpec(
+    'delay', tests='d(G·a_z)/dt = G·(da_z/dt), the simulated output\'s rate: a channel '
+    'delay (ε ≈ −d·dŷ/dt)', words='the rate of the model output (a delay between the '
+    'channels)', regressors=_rates, reading=lambda c, _: {'delay_us': -1e6 * c[0]})
 
 
 class ChannelDelay(Effect):
@@ -48,6 +64,7 @@ class ChannelDelay(Effect):
         'lag 0.')
     parameters = {'delay_us': 'µs'}
     order = 0
+    probes = (RATE_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Delay every input continuously; numerator on lags 0 … nf."""
@@ -55,7 +72,8 @@ class ChannelDelay(Effect):
                        nb=max(spec.nb, spec.nf + 1),
                        searches=spec.searches + (Search(KEY, 0.0, MAX_DELAY_US, grid=21),))
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the delay of the ``a_z`` path beyond its mechanics, µs."""
         row = row_of(model, 'a')
 
@@ -66,7 +84,7 @@ class ChannelDelay(Effect):
                else stored_std(model, self.id, 'delay_us'))
         return {'delay_us': (delay(model.a, model.b), std)}
 
-    def implausible(self, fit) -> str | None:
+    def implausible(self, fit: FitView) -> str | None:
         """Return why the fit is no delay: the generic checks, a lead, or an absurd lag."""
         why = super().implausible(fit)
         if why is not None:
@@ -79,10 +97,10 @@ class ChannelDelay(Effect):
                     f'searched: its poles imitate something slower than a delay')
         return None
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say what the rate probe and the delayed model find."""
         parts = []
-        probe = probe_of(analysis, 'delay')
+        probe = probe_of(analysis, RATE_PROBE)
         if probe is not None:
             parts.append(f'the residual follows the output\'s rate dŷ/dt '
                          f'({100 * probe.fraction:.0f} % of its energy)')

@@ -31,15 +31,18 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (Effect, entry_of, ModelSpec, Outcome, parameters_text, Physical, probe_of,
-                   sentence)
+from .base import (Effect, entry_of, FittedModel, ModelSpec, Outcome, parameters_text, Physical,
+                   probe_of, ResidualView, sentence)
+from .probe import ProbeSpec
 
-__all__ = ['HARMONICS', 'LineTracker', 'MainsHum', 'line_columns']
+__all__ = ['HARMONICS', 'HUM_PROBES', 'LineTracker', 'MainsHum', 'line_columns']
 
 #: Odd harmonics above the fundamental (3rd, 5th).
 HARMONICS = 2
 #: Default averaging time of the compensation's line tracker, s.
 AVERAGING_S = 0.1
+#: The mains frequencies, Hz.
+MAINS_HZ = (50.0, 60.0)
 
 
 def line_columns(freq_hz: float, *, start: int, n: int, fs: float, baseline: int,
@@ -68,6 +71,31 @@ def line_columns(freq_hz: float, *, start: int, n: int, fs: float, baseline: int
     if baseline > 0:
         out -= out[:, :baseline].mean(axis=1, keepdims=True)
     return out
+
+
+def _hum_columns(start: int, n: int, noise_stop: int, fs: float, mains: float) -> np.ndarray:
+    """Return sin/cos of the mains lines, minus their baseline as the window lost it."""
+    t = (start + np.arange(n)) / fs
+    rows = []
+    for k in range(1, 2 * HARMONICS + 2, 2):
+        if k * mains < fs / 2:
+            rows += [np.sin(2 * math.pi * k * mains * t), np.cos(2 * math.pi * k * mains * t)]
+    rows = np.array(rows)
+    return rows - rows[:, :max(noise_stop, 1)].mean(axis=1, keepdims=True)
+
+
+def _hum_probe(mains: float) -> ProbeSpec:
+    lines = ', '.join(f'{k * mains:g}' for k in range(1, 2 * HARMONICS + 2, 2))
+    return ProbeSpec(
+        f'hum_{mains:.0f}', tests=f'sin/cos at {lines} Hz in recording time: mains hum',
+        words=f'a {mains:g} Hz mains line and its odd harmonics',
+        regressors=lambda data, _: [_hum_columns(start, b[4], b[0], data.fs, mains)
+                                    for start, b in zip(data.starts, data.bounds)],
+        reading=lambda c, _: {'freq_hz': mains, 'amplitude_pa': math.hypot(c[0], c[1])})
+
+
+#: The residual explained by the mains lines, by mains frequency (Hz).
+HUM_PROBES = {mains: _hum_probe(mains) for mains in MAINS_HZ}
 
 
 class LineTracker:
@@ -151,6 +179,7 @@ class MainsHum(Effect):
     parameters = {'freq_hz': 'Hz', 'amplitude_pa': 'Pa'}
     acceleration_driven = False
     order = 70
+    probes = tuple(HUM_PROBES.values())
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the hum regressors as a disturbance."""
@@ -158,7 +187,7 @@ class MainsHum(Effect):
 
     def choices(self):
         """Return the two mains frequencies."""
-        return ({'freq_hz': 50.0}, {'freq_hz': 60.0})
+        return tuple({'freq_hz': mains} for mains in MAINS_HZ)
 
     def columns(self, window, *, fs: float, choice: Mapping[str, float]) -> np.ndarray:
         """Return the sin/cos regressors of one window (pre-trigger mean removed)."""
@@ -192,18 +221,20 @@ class MainsHum(Effect):
         return LineTracker(lines, fs=fs, averaging_s=float(entry.get('averaging_s',
                                                                      AVERAGING_S)))
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the frequency and amplitude stored in the model's entry."""
         entry = entry_of(model, self.id)
         std = entry.get('std') or {}
         return {name: (float(entry['parameters'][name]), std.get(name))
                 for name in self.parameters}
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say where the residual sits (before the trigger too) and what the lines remove."""
         parts = []
-        probe = probe_of(analysis, f'hum_{outcome.parameters.get("freq_hz", (50,))[0]:.0f}')
-        excess = getattr(analysis, 'pretrigger_excess', None)
+        mains = outcome.parameters.get('freq_hz', (MAINS_HZ[0],))[0]
+        probe = probe_of(analysis, HUM_PROBES[mains]) if mains in HUM_PROBES else None
+        excess = analysis.pretrigger_excess if analysis is not None else None
         if excess is not None and math.isfinite(excess):
             parts.append(f'the pre-trigger residual is {excess:.1f}× the sample-to-sample '
                          f'noise')

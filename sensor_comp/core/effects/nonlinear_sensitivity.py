@@ -10,13 +10,27 @@ separately.
 
 from __future__ import annotations
 
-from .base import (delta_std, Effect, EffectError, ModelSpec, Outcome, parameters_text,
-                   Physical, probe_of, row_of, sentence, stored_std)
+import numpy as np
+
+from .base import (delta_std, Effect, EffectError, FittedModel, ModelSpec, Outcome,
+                   parameters_text, Physical, probe_of, ResidualView, row_of, sentence, stored_std)
+from .probe import ProbeData, ProbeSpec
 from ...streams import G0
 
-__all__ = ['NonlinearSensitivity']
+__all__ = ['ABS_SQUARE_PROBE', 'NonlinearSensitivity']
 
 CHANNEL = 'a_z_abs_a_z'
+
+
+def _abs_square(data: ProbeData, _) -> list[np.ndarray]:
+    return [g[np.newaxis] for g in data.through([a * np.abs(a) for a in data.axial])]
+
+
+#: The residual explained by ``G·(a|a|)`` beyond a gain correction.
+ABS_SQUARE_PROBE = ProbeSpec(
+    'abs_square', tests='G·(a_z|a_z|): sensitivity changing with the load',
+    words='G·(a|a|) (sensitivity changing with load)', regressors=_abs_square,
+    reading=lambda c, _: {'beta_per_g': G0 * c[0]})
 
 
 class NonlinearSensitivity(Effect):
@@ -38,12 +52,14 @@ class NonlinearSensitivity(Effect):
         'cross-correlation (even in a) but explained by G·(a|a|).')
     parameters = {'beta_per_g': '1/g'}
     order = 20
+    probes = (ABS_SQUARE_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the ``a_z·|a_z|`` input through the common dynamics."""
         return spec.with_inputs(CHANNEL)
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return ``beta_per_g = g·K(a|a|)/K(a)`` (ratio of the static gains)."""
         linear, square = row_of(model, 'a'), row_of(model, 'a_abs_a')
 
@@ -56,13 +72,13 @@ class NonlinearSensitivity(Effect):
                else stored_std(model, self.id, 'beta_per_g'))
         return {'beta_per_g': (beta(model.a, model.b), std)}
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say how the residual grows with the amplitude and what a|a| explains."""
         parts = []
-        trend = getattr(analysis, 'amplitude', None)
-        if trend is not None and trend.exponent is not None:
-            parts.append(f'the excess residual grows as |a|^{trend.exponent:.1f} across shots')
-        probe = probe_of(analysis, 'abs_square')
+        exponent = analysis.amplitude.exponent if analysis is not None else None
+        if exponent is not None:
+            parts.append(f'the excess residual grows as |a|^{exponent:.1f} across shots')
+        probe = probe_of(analysis, ABS_SQUARE_PROBE)
         if probe is not None:
             parts.append(f'G·(a|a|) explains {100 * probe.fraction:.0f} % of the base '
                          f'residual')

@@ -24,9 +24,9 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, ModelSpec, modifier_value,
-                   Outcome, parameters_text, Physical, row_of, Search, segment_of, sentence,
-                   stored_std)
+from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FittedModel, ModelSpec,
+                   modifier_value, Outcome, parameters_text, Physical, ResidualView, row_of,
+                   Search, segment_of, sentence, stored_std)
 from ..ident.least_squares import delayed_numerator
 from ..inputs import mode_pair
 
@@ -88,7 +88,8 @@ class SecondResonance(Effect):
         return replace(spec, nb=spec.nb + 2, searches=spec.searches + searches,
                        modifiers=spec.modifiers + (('mode', f'{{{FREQ}}},{{{ZETA}}}'),))
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the second mode's frequency (kHz), damping and relative static gain."""
         row = row_of(model, 'a')
         freq, zeta = modifier_value(model, 'mode')
@@ -110,11 +111,11 @@ class SecondResonance(Effect):
                 'zeta': (zeta, stored_std(model, self.id, 'zeta')),
                 'gain': (gain(model.a, model.b), std)}
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Name the residual's spectral peak and what the second mode removes."""
         parts = []
-        spectrum = getattr(analysis, 'spectrum', None)
-        peaks = [p for p in getattr(spectrum, 'peaks', ()) if not p.model_resonance]
+        peaks = [p for p in (analysis.spectrum.peaks if analysis is not None else ())
+                 if not p.model_resonance]
         if peaks:
             parts.append(f'the residual spectrum peaks at {peaks[0].frequency_hz / 1e3:.2f} '
                          f'kHz ({peaks[0].prominence:.0f}× its floor) where the model has '

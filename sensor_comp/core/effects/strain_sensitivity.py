@@ -27,11 +27,16 @@ from __future__ import annotations
 from dataclasses import replace
 import math
 
-from .base import (delta_std, Effect, excess_delay_s, ModelSpec, Outcome, parameters_text,
-                   Physical, probe_of, row_of, sentence, static_gain, stored_std)
+import numpy as np
+from scipy import signal
+
+from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
+                   parameters_text, Physical, probe_of, ResidualView, row_of, sentence,
+                   static_gain, stored_std)
+from .probe import ProbeSpec
 from ...streams import G0
 
-__all__ = ['StrainSensitivity']
+__all__ = ['JERK_PROBE', 'StrainSensitivity', 'jerk']
 
 #: One g per millisecond in m/s³.
 G_PER_MS = G0 * 1e3
@@ -42,6 +47,37 @@ SMOOTHING_ZETA = 0.7
 #: Largest plausible strain coefficient as a time, ``|c/S|`` in ms: the strain term then
 #: equals the axial response shifted by that time at low frequencies.
 MAX_LEAD_MS = 1.0
+#: The jerk probe is low-passed at this multiple of the model's highest resonance ...
+JERK_CUTOFF_FACTOR = 2.0
+#: ... or at this frequency (Hz) for a model without resonance.
+JERK_CUTOFF_HZ = 10e3
+
+
+def jerk(a: np.ndarray, fs: float, resonances_hz: tuple[float, ...]) -> np.ndarray:
+    """
+    Return da/dt, low-passed without phase shift at twice the model's highest resonance.
+
+    Differentiating the accelerometer's white noise gives a spectrum rising as f² up to
+    fs/2; the pulse's jerk lies far below the sensor's resonance. The cut keeps it and
+    removes most of the noise (whose energy falls as the cube of the cut-off).
+    """
+    if a.size < 2:
+        return np.zeros_like(a)
+    cutoff = min(JERK_CUTOFF_FACTOR * max(resonances_hz,
+                                          default=JERK_CUTOFF_HZ / JERK_CUTOFF_FACTOR),
+                 0.4 * fs)
+    rate = np.gradient(a) * fs
+    sos = signal.butter(4, cutoff, fs=fs, output='sos')
+    return signal.sosfiltfilt(sos, rate) if a.size > 3 * (2 * sos.shape[0] + 1) else rate
+
+
+#: The residual following the jerk directly (not through the model's dynamics).
+JERK_PROBE = ProbeSpec(
+    'jerk', tests='da_z/dt not through G (low-passed at twice the model resonance, zero '
+    'phase): base strain acting at the element', words='da/dt (base strain)',
+    regressors=lambda data, _: [jerk(a, data.fs, data.resonances_hz)[np.newaxis]
+                                for a in data.axial],
+    reading=lambda c, _: {'pa_per_g_per_ms': G_PER_MS * c[0]})
 
 
 class StrainSensitivity(Effect):
@@ -62,6 +98,7 @@ class StrainSensitivity(Effect):
         'peak/width rather than with the peak alone.')
     parameters = {'pa_per_g_per_ms': 'Pa/(g/ms)'}
     order = 40
+    probes = (JERK_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the smoothed ``da_z`` input; numerators on lags 0 … nf."""
@@ -69,7 +106,8 @@ class StrainSensitivity(Effect):
         return replace(spec.with_inputs(f'da_z@mode={corner!r},{SMOOTHING_ZETA!r}'), nk=0,
                        nb=max(spec.nb, spec.nf + 1))
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the derivative coefficient of the whole ``a_z`` response, Pa/(g/ms)."""
         row, axial = row_of(model, 'da'), row_of(model, 'a')
 
@@ -82,7 +120,7 @@ class StrainSensitivity(Effect):
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
         return {'pa_per_g_per_ms': (coefficient(model.a, model.b), std)}
 
-    def implausible(self, fit) -> str | None:
+    def implausible(self, fit: FitView) -> str | None:
         """Return why the fit is no base strain: the generic checks or an absurd lead."""
         why = super().implausible(fit)
         if why is not None:
@@ -97,10 +135,10 @@ class StrainSensitivity(Effect):
                     f'behind: no strain of a sensor mount, the paths imitate something else')
         return None
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say what the jerk probe and the da/dt path explain."""
         parts = []
-        probe = probe_of(analysis, 'jerk')
+        probe = probe_of(analysis, JERK_PROBE)
         if probe is not None:
             parts.append(f'the jerk da/dt explains {100 * probe.fraction:.0f} % of the base '
                          f'residual')

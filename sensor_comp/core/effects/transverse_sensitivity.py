@@ -13,10 +13,25 @@ import math
 
 import numpy as np
 
-from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
-                   probe_of, row_of, sentence, static_gain, stored_std)
+from .base import (delta_std, Effect, FittedModel, FitView, ModelSpec, Outcome, parameters_text,
+                   Physical, probe_of, ResidualView, row_of, sentence, static_gain, stored_std)
+from .probe import ProbeData, ProbeSpec
 
-__all__ = ['TransverseSensitivity']
+__all__ = ['LATERAL_PROBE', 'TransverseSensitivity']
+
+
+def _lateral(data: ProbeData, _) -> list[np.ndarray]:
+    x = data.through([a[0] for a in data.acceleration])
+    y = data.through([a[1] for a in data.acceleration])
+    return [np.array([gx, gy]) for gx, gy in zip(x, y)]
+
+
+#: The residual following the lateral acceleration through the model.
+LATERAL_PROBE = ProbeSpec(
+    'lateral', tests='G·a_x and G·a_y beyond the axial path: transverse sensitivity',
+    words='the lateral acceleration through the model (transverse sensitivity)',
+    regressors=_lateral, reading=lambda c, _: {
+        'ratio': math.hypot(*c), 'angle_deg': math.degrees(math.atan2(c[1], c[0]))})
 
 
 class TransverseSensitivity(Effect):
@@ -36,6 +51,7 @@ class TransverseSensitivity(Effect):
         'shot with the lateral motion.')
     parameters = {'ratio': '1', 'angle_deg': 'deg'}
     order = 10
+    probes = (LATERAL_PROBE,)
 
     def applicable(self, windows) -> str | None:
         """Refuse recordings whose lateral channels are missing or empty."""
@@ -49,7 +65,8 @@ class TransverseSensitivity(Effect):
         """Add the ``a_x`` and ``a_y`` inputs."""
         return spec.with_inputs('a_x', 'a_y')
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the transverse ratio and the direction of greatest sensitivity."""
         rz, rx, ry = (row_of(model, 'a', axis) for axis in 'zxy')
 
@@ -69,7 +86,7 @@ class TransverseSensitivity(Effect):
             out[name] = (func(model.a, model.b), std)
         return out
 
-    def implausible(self, fit) -> str | None:
+    def implausible(self, fit: FitView) -> str | None:
         """Return why the fit is no transverse sensitivity: a lateral path above the axial."""
         why = super().implausible(fit)
         ratio = fit.parameters(self.id)['ratio'][0] if why is None else 0.0
@@ -78,10 +95,10 @@ class TransverseSensitivity(Effect):
                    f'paths imitate something else')
         return why
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say what the lateral probe and the lateral paths explain."""
         parts = []
-        probe = probe_of(analysis, 'lateral')
+        probe = probe_of(analysis, LATERAL_PROBE)
         if probe is not None:
             parts.append(f'G·a_x and G·a_y explain {100 * probe.fraction:.0f} % of the base '
                          f'residual')

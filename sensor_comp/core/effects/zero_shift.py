@@ -14,15 +14,45 @@ sense); an offset that does not scale with the shot's peak is not captured.
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
-from .base import (delta_std, Effect, ModelSpec, Outcome, parameters_text, Physical,
-                   probe_of, row_of, Search, sentence, static_gain, stored_std, tail_share)
+import numpy as np
+
+from .base import (delta_std, Effect, FittedModel, ModelSpec, Outcome, parameters_text, Physical,
+                   probe_of, ResidualView, row_of, Search, sentence, static_gain, stored_std,
+                   tail_share)
+from .probe import PROBE_TIME_CONSTANTS_MS, ProbeData, ProbeSpec
 from ..inputs import parse_channel
 from ...streams import G0
 
-__all__ = ['ZeroShift']
+__all__ = ['OFFSET_PROBE', 'ZeroShift']
 
 KEY = 'zero_shift.tau_ms'
+
+
+def _offset(n: int, onset: int, end: int, peak_g: float, tau_s: float,
+            fs: float) -> np.ndarray:
+    """Return an offset of ``peak_g`` building up over the pulse and decaying with ``tau_s``."""
+    out = np.zeros(n)
+    width = max(end - onset, 1)
+    ramp = np.arange(min(end, n) - onset) / width
+    out[onset:min(end, n)] = 0.5 * (1.0 - np.cos(math.pi * ramp))
+    out[end:] = np.exp(-np.arange(n - min(end, n)) / (tau_s * fs))
+    return peak_g * out
+
+
+def _offsets(data: ProbeData, tau_ms: float | None) -> list[np.ndarray]:
+    return [_offset(b[4], b[1], b[2], g, tau_ms * 1e-3, data.fs)[np.newaxis]
+            for b, g in zip(data.bounds, data.peak_g)]
+
+
+#: The residual explained by a decaying offset ∝ each shot's peak g.
+OFFSET_PROBE = ProbeSpec(
+    'zero_shift', tests='an offset ∝ the peak g building up over the pulse and decaying '
+    f'after it (best decay time of {", ".join(f"{t:g}" for t in PROBE_TIME_CONSTANTS_MS)} '
+    f'ms)', words='a decaying offset after each pulse (zero shift)', regressors=_offsets,
+    reading=lambda c, tau_ms: {'pa_per_g': c[0], 'tau_ms': tau_ms},
+    grid=PROBE_TIME_CONSTANTS_MS)
 
 
 class ZeroShift(Effect):
@@ -42,6 +72,7 @@ class ZeroShift(Effect):
         'acceleration; the pre-trigger is clean.')
     parameters = {'pa_per_g': 'Pa/g', 'tau_ms': 'ms'}
     order = 50
+    probes = (OFFSET_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the leaky-peak channel, its decay time searched."""
@@ -49,7 +80,8 @@ class ZeroShift(Effect):
                        searches=spec.searches + (Search(KEY, 1.0, 2000.0, log=True,
                                                         grid=13, start=50.0),))
 
-    def physical(self, model, *, covariance=None) -> Physical:
+    def physical(self, model: FittedModel, *,
+                 covariance: np.ndarray | None = None) -> Physical:
         """Return the offset per g (static gain of the peak channel) and the decay time."""
         row = row_of(model, 'peak')
 
@@ -62,10 +94,10 @@ class ZeroShift(Effect):
                 'tau_ms': (parse_channel(model.inputs[row]).tau_ms,
                            stored_std(model, self.id, 'tau_ms'))}
 
-    def evidence(self, analysis, outcome: Outcome) -> str:
+    def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say where the residual sits and what the decaying offset removes."""
         parts = tail_share(analysis)
-        probe = probe_of(analysis, 'zero_shift')
+        probe = probe_of(analysis, OFFSET_PROBE)
         if probe is not None:
             parts.append(f'a decaying offset ∝ peak g explains {100 * probe.fraction:.0f} % '
                          f'of the base residual')

@@ -2,8 +2,9 @@
 Switchable physical effects of the rig, one module each, selected by id.
 
 Adding an effect means adding one module here that subclasses
-:class:`~sensor_comp.sim.effects.base.Effect` with a new ``id``: every module of this
-package is imported and registered on import. Select effects with :func:`make_effect` or
+:class:`~sensor_comp.sim.effects.base.Effect` with a new ``id`` (and its counterpart in
+:mod:`sensor_comp.core.effects`; see ``doc/effects.md``): every module of this package is
+imported here, and subclassing registers the effect. Select effects with :func:`make_effect` or
 the CLI form parsed by :func:`parse_effect`, ``ID[:param=value,...]``.
 """
 
@@ -19,8 +20,7 @@ __all__ = ['EFFECTS', 'Effect', 'Line', 'Mode', 'describe_effects', 'make_effect
            'parse_effect']
 
 for _module in pkgutil.iter_modules(__path__):
-    if _module.name != 'base':
-        importlib.import_module(f'{__name__}.{_module.name}')
+    importlib.import_module(f'{__name__}.{_module.name}')
 
 #: Effect classes by id, sorted by id.
 EFFECTS: dict[str, type[Effect]] = registry()

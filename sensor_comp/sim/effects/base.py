@@ -3,8 +3,11 @@ The interface of a switchable physical effect, and the checks of its parameters.
 
 An effect is a frozen, keyword-only dataclass whose fields are its physical parameters
 (declared with :func:`param`, which records unit, meaning and valid range). Subclassing
-:class:`Effect` with a class attribute ``id`` registers it. The simulator calls every hook on
-every enabled effect, in ascending ``order``, along the signal path of the pressure channel:
+:class:`Effect` with a class attribute ``id`` registers it (as in the diagnosis's catalogue,
+:mod:`sensor_comp.core.effects`, which has an effect of the same id, parameter names and
+units for every one here; ``identified=False`` marks a simulation setting it does not fit).
+The simulator calls every hook on every enabled effect, in ascending ``order``, along the
+signal path of the pressure channel:
 
 1. :meth:`Effect.delay_s` — the channel's time shift; the anvil motion is evaluated at the
    shifted instants, so the delay is exact and continuous.
@@ -75,7 +78,8 @@ class Line:
 
 def param(default: float | int, *, unit: str, doc: str, low: float = -math.inf,
           high: float = math.inf, low_open: bool = False, high_open: bool = False,
-          choices: tuple[float, ...] | None = None, allow_inf: bool = False) -> Any:
+          choices: tuple[float, ...] | None = None, allow_inf: bool = False,
+          identified: bool = True) -> Any:
     """
     Declare an effect parameter: a dataclass field with its unit and valid range.
 
@@ -89,6 +93,8 @@ def param(default: float | int, *, unit: str, doc: str, low: float = -math.inf,
         high_open: Exclude ``high`` itself.
         choices: The only valid values, if the parameter is a choice.
         allow_inf: Accept ``inf`` (e.g. "no saturation").
+        identified: The diagnosis fits it (its effect declares the parameter); False for a
+            simulation setting (e.g. the number of harmonics).
 
     Returns:
         The dataclass field.
@@ -96,7 +102,8 @@ def param(default: float | int, *, unit: str, doc: str, low: float = -math.inf,
     """
     return field(default=default, metadata={
         'unit': unit, 'doc': doc, 'low': low, 'high': high, 'low_open': low_open,
-        'high_open': high_open, 'choices': choices, 'allow_inf': allow_inf})
+        'high_open': high_open, 'choices': choices, 'allow_inf': allow_inf,
+        'identified': identified})
 
 
 def _valid_text(meta: dict) -> str:
@@ -129,7 +136,7 @@ class Effect:
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
-        if cls.id:
+        if cls.__dict__.get('id'):
             if cls.id in _REGISTRY and _REGISTRY[cls.id].__module__ != cls.__module__:
                 raise TypeError(f'effect id {cls.id!r} is registered twice')
             _REGISTRY[cls.id] = cls

@@ -38,9 +38,9 @@ class MainsHum(Effect):
     freq_hz: float = param(50.0, unit='Hz', choices=(50.0, 60.0), doc='mains frequency')
     amplitude_pa: float = param(1000.0, unit='Pa', low=0.0, high=1e8,
                                 doc='amplitude of the fundamental')
-    harmonics: int = param(2, unit='1', low=0, high=50,
+    harmonics: int = param(2, unit='1', low=0, high=50, identified=False,
                            doc='number of odd harmonics above the fundamental (3rd, 5th, ...)')
-    harmonic_ratio: float = param(0.3, unit='1', low=0.0, high=1.0,
+    harmonic_ratio: float = param(0.3, unit='1', low=0.0, high=1.0, identified=False,
                                   doc='amplitude ratio of each odd harmonic to the previous')
 
     def check(self, *, fs: float, sensor: SensorConfig) -> None:

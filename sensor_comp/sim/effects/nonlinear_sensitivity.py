@@ -46,7 +46,8 @@ class NonlinearSensitivity(Effect):
     beta_per_g: float = param(-3e-4, unit='1/g', low=-0.01, high=0.01,
                               doc='relative change of sensitivity per g of acceleration')
     saturation_g: float = param(math.inf, unit='g', low=0.0, high=math.inf, low_open=True,
-                                allow_inf=True, doc='soft saturation level (inf: none)')
+                                allow_inf=True, identified=False,
+                                doc='soft saturation level (inf: none)')
 
     def drive(self, force: np.ndarray, motion: Motion) -> np.ndarray:
         """

@@ -1,0 +1,81 @@
+"""
+Residual probes: the regressors whose fit to a base model's residual points at one effect.
+
+An effect declares its probes (:attr:`~sensor_comp.core.effects.base.Effect.probes`);
+:mod:`sensor_comp.core.residual` runs every declared probe, plus a few generic ones, on
+the residual of the validation windows. A probe builds its regressors from
+:class:`ProbeData` (the windows' model output and acceleration, the shots' timing) and
+reads physical parameters from the fitted coefficients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ['PROBE_TIME_CONSTANTS_MS', 'ProbeData', 'ProbeSpec']
+
+#: Time constants (ms) tried by the probes of slow effects (zero shift, high-pass).
+PROBE_TIME_CONSTANTS_MS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
+
+
+@dataclass(frozen=True)
+class ProbeData:
+    """
+    What a probe may build its regressors from: one entry per residual window.
+
+    Args:
+        fs: Sample rate in Hz.
+        simulated: The model output ŷ per window, Pa.
+        acceleration: ``(3, n)`` acceleration (x, y, z rows) per window, m/s².
+        starts: Recording sample index of each window's first sample.
+        bounds: ``(pre-trigger end, onset, pulse end, ringing end, n)`` per window.
+        peak_g: Each shot's peak axial acceleration, g (sign kept).
+        resonances_hz: Natural frequencies of the model's complex pole pairs.
+        through: Passes one block per window through the model's ``a_z`` dynamics G.
+
+    """
+
+    fs: float
+    simulated: Sequence[np.ndarray]
+    acceleration: Sequence[np.ndarray]
+    starts: Sequence[int]
+    bounds: Sequence[tuple[int, int, int, int, int]]
+    peak_g: Sequence[float]
+    resonances_hz: tuple[float, ...]
+    through: Callable[[Sequence[np.ndarray]], list[np.ndarray]]
+
+    @property
+    def axial(self) -> list[np.ndarray]:
+        """Return ``a_z`` per window."""
+        return [a[2] for a in self.acceleration]
+
+
+@dataclass(frozen=True)
+class ProbeSpec:
+    """
+    One residual probe.
+
+    Args:
+        name: Key in the residual analysis's ``probes``.
+        tests: The regressor and what it tests (the :data:`~sensor_comp.core.residual.
+            PROBES` table).
+        words: The phrase naming it in the analysis's sentences.
+        regressors: ``(data, grid value or None) -> one (k, n) block per window``.
+        reading: ``(coefficients, grid value or None) -> physical parameters``.
+        grid: Values searched (the one explaining most wins; the p-value is multiplied
+            by their number); empty for none.
+        with_output: Fit it together with ŷ (a gain correction, as re-identification
+            would); only the generic ``gain`` probe stands alone.
+
+    """
+
+    name: str
+    tests: str
+    words: str
+    regressors: Callable[[ProbeData, float | None], list[np.ndarray]]
+    reading: Callable[[np.ndarray, float | None], Mapping[str, float]]
+    grid: tuple[float, ...] = ()
+    with_output: bool = True
