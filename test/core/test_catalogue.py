@@ -7,11 +7,14 @@ import pytest
 
 from sensor_comp.core.effects import EFFECTS, PROBES, probe_owner
 from sensor_comp.core.effects import base
+from sensor_comp.core.effects.mains_hum import HARMONICS
+from sensor_comp.core.effects.strain_sensitivity import G_PER_MS
 from sensor_comp.core.extended import ExtendedFit
 from sensor_comp.core.model import Model
 from sensor_comp.core import residual
 from sensor_comp.sim.effects import base as sim_base
 from sensor_comp.sim.effects import EFFECTS as SIM_EFFECTS
+from sensor_comp.sim.effects.strain_sensitivity import G_PER_MS as SIM_G_PER_MS
 
 
 def identified(cls) -> dict[str, str]:
@@ -73,3 +76,16 @@ def test_the_protocols_effects_read_match_what_they_stand_for(protocol, cls):
                if not n.startswith('_')}
     has = set(dir(cls)) | ({f.name for f in fields(cls)} if is_dataclass(cls) else set())
     assert members and members <= has
+
+
+def test_the_mains_settings_agree():
+    # The diagnosis chooses between the simulator's mains frequencies and fits as many odd
+    # harmonics as the simulator adds by default.
+    sim = {f.name: f for f in fields(SIM_EFFECTS['mains_hum'])}
+    assert tuple(c['freq_hz'] for c in EFFECTS['mains_hum'].choices()) == \
+        sim['freq_hz'].metadata['choices']
+    assert HARMONICS == sim['harmonics'].default
+
+
+def test_the_strain_unit_is_the_same_g_per_ms():
+    assert G_PER_MS == SIM_G_PER_MS
