@@ -9,6 +9,7 @@ whole signal at 1e-9 of its peak (float64 round-off of short recursions).
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,9 +17,9 @@ from scipy import signal
 
 from sensor_comp.core.compensation import CompensationFilter
 from sensor_comp.core.effects import (describe_effects, disturbance_trackers, EFFECTS,
-                                      EffectError, get_effect, ordered)
+                                      EffectError, get_effect, ordered, Outcome)
 from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, mechanics_delay_s,
-                                           ModelSpec)
+                                           ModelSpec, ResidualView)
 from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
 from sensor_comp.core.inputs import (fractional_delay, input_channels, InputError,
                                      mode_pair, needs_rate, parse_channel)
@@ -68,6 +69,23 @@ def test_catalogue_lists_every_effect_with_its_description():
     assert all(effect_id in text for effect_id in IDS)
     assert [e.id for e in ordered(['zero_shift', 'channel_delay', 'zero_shift'])] == \
         ['channel_delay', 'zero_shift']
+
+
+def test_evidence_reads_the_analysis_through_its_protocol_or_goes_without():
+    peak = SimpleNamespace(frequency_hz=20e3, prominence=30.0, model_resonance=False)
+    analysis = SimpleNamespace(
+        probes={}, spectrum=SimpleNamespace(peaks=[peak]),
+        segments=[SimpleNamespace(name='tail', energy_fraction=0.6, sample_fraction=0.3),
+                  SimpleNamespace(name='ringing', energy_fraction=0.2, sample_fraction=0.1)],
+        amplitude=SimpleNamespace(exponent=2.0), pretrigger_excess=3.0)
+    assert isinstance(analysis, ResidualView)
+    for effect in EFFECTS.values():
+        outcome = Outcome(score=0.25, parameters={}, statistic=1.0, p_value=0.01)
+        assert '25.0 %' in effect.evidence(None, outcome)
+        analysis.probes = {p.name: SimpleNamespace(fraction=0.37) for p in effect.probes}
+        text = effect.evidence(analysis, outcome)
+        assert '25.0 %' in text and text.endswith('.')
+        assert ('37 %' in text) == bool(effect.probes), (effect.id, text)
 
 
 def test_unknown_effect_names_the_known_ones():
