@@ -38,36 +38,26 @@ class RigConfig:
     """
     Everything that defines a simulated rig run; the same config and seed give the same run.
 
-    Each shot gets its own window: ``pre_trigger_s`` of quiet, the pulse, then
-    ``post_shot_s`` of quiet for ringing and slow tails, unless ``spacing_s`` fixes the
-    onset-to-onset interval. Onsets fall at random sub-sample instants (the hammer does not
-    know the digitiser's clock).
+    Timing, noise and integration rules: ``doc/simulator.md``, configuration.
 
     Args:
         shots: The hammer shots in order (default: the seed paper's Table 2).
         fs: Sample rate in Hz.
         sensor: The sensor's linear acceleration response.
-        effects: Enabled physical effects (instances, or ``'ID[:param=value,...]'`` strings);
-            each id at most once.
-        pressure_noise: White-noise standard deviation on the pressure channel relative to
-            the largest induced peak (0.005 = 0.5 %).
-        accel_noise: White-noise standard deviation on each accelerometer axis relative to
-            the largest axial peak.
+        effects: Enabled effects (instances or ``'ID[:param=value,...]'``), each id once.
+        pressure_noise: Pressure white-noise std relative to the largest induced peak.
+        accel_noise: Accelerometer white-noise std per axis relative to the largest axial peak.
         lateral_ratio: Largest lateral (x, y) acceleration relative to the axial peak.
         pre_trigger_s: Quiet time before each shot in s.
-        post_shot_s: Quiet time after each shot in s; None: long enough for the slowest
-            enabled tail to decay by e**-5 (at least ``MIN_POST_SHOT_S``).
+        post_shot_s: Quiet time after each shot in s; None: until the slowest enabled tail
+            decayed by e**-5 (at least ``MIN_POST_SHOT_S``).
         spacing_s: Fixed onset-to-onset interval in s, or None.
         seed: Seed of every random draw (non-negative integer).
         t0_ns: Acquisition time of the first sample in ns.
         frame_id: Sensor frame of the recording.
-        anti_alias_hz: -3 dB frequency of the digitiser's anti-alias filter (a 4-pole
-            Bessel low-pass acting alike on every channel before sampling), or None for
-            ideal sampling of the continuous signals.
-        max_step_s: Largest integration step; the pressure channel is integrated on the
-            sample grid refined by an integer factor until the step is at most this. At the
-            default 0.5 µs the first-order-hold error at a pulse corner (see :mod:`.lti`)
-            stays below 0.5 % of the default noise even with a 10 kHz second mode.
+        anti_alias_hz: -3 dB frequency of the digitiser's 4-pole Bessel anti-alias filter, or
+            None for ideal sampling.
+        max_step_s: Largest integration step (the sample grid is refined to reach it).
 
     Raises:
         SimConfigError: On any invalid value, naming it and the valid range.
@@ -138,7 +128,6 @@ class RigConfig:
             object.__setattr__(self, 'spacing_s', spacing)
 
     def _set_effects(self) -> None:
-        """Parse, check and store the effects."""
         if isinstance(self.effects, (str, Effect)):
             raise SimConfigError('rig effects must be a sequence of effects, not one effect')
         effects = []

@@ -1,16 +1,8 @@
 """
 The anvil's motion during hammer touches, as continuous functions of time.
 
-The axial (z) acceleration of a touch is the shot's half-sine. A hammer never hits exactly
-along the axis, so the anvil also moves laterally: each of x and y gets a few per cent of the
-axial peak with its own width, delay and shape, a mix of a half-sine (a skewed push) and a
-full sine cycle (the anvil rocking)::
-
-    a_i(t) = ratio_i * A * (cos(mix_i) sin(pi s) + sin(mix_i) sin(2 pi s)),
-    s = (t - onset - delay_i) / width_i in [0, 1],
-
-which, like the axial pulse, starts and ends at zero acceleration. Everything is evaluated
-analytically at any instant, so delays and sample offsets are exact.
+Axial half-sines plus lateral motion per axis ``ratio·A·(cos(mix) sin(πs) + sin(mix)
+sin(2πs))``, evaluated analytically (``doc/simulator.md``).
 """
 
 from __future__ import annotations
@@ -31,7 +23,7 @@ __all__ = ['LateralMotion', 'Motion', 'Touch', 'acceleration', 'draw_touches']
 @dataclass(frozen=True)
 class LateralMotion:
     """
-    One lateral axis's share of a touch (see the module docstring for the shape).
+    One lateral axis's share of a touch.
 
     Args:
         ratio: Amplitude relative to the axial peak (signed).
@@ -49,15 +41,7 @@ class LateralMotion:
 
 @dataclass(frozen=True)
 class Touch:
-    """
-    One hammer touch: a shot at an instant, with its lateral motion.
-
-    Args:
-        onset_s: Start of the axial pulse in s after the recording's first sample.
-        shot: Peak and width of the axial pulse.
-        lateral: Lateral motion along x and y.
-
-    """
+    """One hammer touch: a shot at ``onset_s`` (s after the first sample) and lateral motion."""
 
     onset_s: float
     shot: Shot
@@ -76,22 +60,7 @@ class Touch:
 
 def draw_touches(shots: Sequence[Shot], onsets_s: Sequence[float], *, lateral_ratio: float,
                  rng: np.random.Generator) -> tuple[Touch, ...]:
-    """
-    Give each shot its lateral motion: amplitude 30–100 % of ``lateral_ratio``.
-
-    Each lateral axis gets a random sign, a width within ±15 % of the axial one, a delay of
-    0–10 % of the axial width and a random shape mix.
-
-    Args:
-        shots: The shots, in order.
-        onsets_s: Onset of each shot in s.
-        lateral_ratio: Largest lateral amplitude relative to the axial peak.
-        rng: Source of the random draws.
-
-    Returns:
-        One touch per shot.
-
-    """
+    """Give each shot a random lateral motion of 30–100 % of ``lateral_ratio``."""
     touches = []
     for shot, onset in zip(shots, onsets_s):
         lateral = tuple(
@@ -123,17 +92,9 @@ def _add_pulse(out: np.ndarray, t: np.ndarray, *, start: float, width: float, am
 def acceleration(touches: Sequence[Touch], t: np.ndarray, *, axis: int,
                  derivative: bool = False) -> np.ndarray:
     """
-    Return the anvil's acceleration in m/s² (or its rate in m/s³) along one axis.
+    Return the anvil's acceleration in m/s² (or jerk in m/s³) along ``axis`` at times ``t``.
 
-    Args:
-        touches: The touches.
-        t: Sorted times in s at which to evaluate it.
-        axis: 0 = x, 1 = y, 2 = z (sensor axis).
-        derivative: Return the time derivative (jerk) instead.
-
-    Returns:
-        One value per time.
-
+    ``axis`` is 0 = x, 1 = y, 2 = z (sensor axis).
     """
     out = np.zeros(t.shape)
     for touch in touches:
@@ -149,16 +110,7 @@ def acceleration(touches: Sequence[Touch], t: np.ndarray, *, axis: int,
 
 
 class Motion:
-    """
-    The anvil's motion sampled at the instants the pressure channel responds to.
-
-    Effects read the parts they need; each is computed once, on first use.
-
-    Args:
-        touches: The touches.
-        t: Sorted times in s (the pressure channel's grid, shifted back by its delay).
-
-    """
+    """The anvil's motion at times ``t`` (pressure grid shifted back); parts computed once."""
 
     def __init__(self, touches: Sequence[Touch], t: np.ndarray):
         self.touches = tuple(touches)

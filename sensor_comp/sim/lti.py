@@ -1,15 +1,7 @@
 """
-Continuous-time linear systems, discretised exactly for sampled inputs.
+Continuous-time linear systems, discretised exactly for sampled inputs (first-order hold).
 
-The simulator integrates every linear element of the sensor (mechanical modes, charge
-amplifier) in continuous time. A state-space model ``x' = A x + B u, y = C x + D u`` is
-discretised with the first-order hold (triangle hold): the discrete model is *exact* when the
-input is linear between samples, so the only error is how far the true input departs from
-its piecewise-linear interpolant. Inside a half-sine of width ``T`` sampled every ``h`` that
-is at most ``(pi h / T)**2 / 8`` of its peak; at a pulse corner (slope jump ``A pi / T``)
-the chord misses an area of at most ``A pi h**2 / (8 T)``, which rings a mode of natural
-frequency ``wn`` by at most ``wn`` times that area (2e-5 of the static response for 5 kHz,
-1 ms and h = 1 µs). There is no frequency warping, unlike a bilinear design.
+Exact for inputs linear between samples; error bounds: ``doc/simulator.md``.
 """
 
 from __future__ import annotations
@@ -33,12 +25,7 @@ class StateSpace:
     """
     A single-input single-output continuous system ``x' = A x + B u, y = C x + D u``.
 
-    Args:
-        a: ``(n, n)`` state matrix (1/s).
-        b: ``(n, 1)`` input matrix.
-        c: ``(1, n)`` output matrix.
-        d: ``(1, 1)`` feed-through.
-
+    ``a`` is ``(n, n)`` (1/s), ``b`` ``(n, 1)``, ``c`` ``(1, n)``, ``d`` ``(1, 1)``.
     """
 
     a: np.ndarray
@@ -48,21 +35,7 @@ class StateSpace:
 
     @classmethod
     def second_order_lowpass(cls, *, fn: float, zeta: float, gain: float = 1.0) -> StateSpace:
-        """
-        Return ``gain * wn**2 / (s**2 + 2 zeta wn s + wn**2)`` (paper eq. 3, up to sign).
-
-        This is a spring-mass-damper driven by its base acceleration: the relative
-        displacement times ``wn**2``, so the static gain is ``gain``.
-
-        Args:
-            fn: Undamped natural frequency in Hz.
-            zeta: Damping ratio.
-            gain: Static gain.
-
-        Returns:
-            The system.
-
-        """
+        """Return ``gain * wn**2 / (s**2 + 2 zeta wn s + wn**2)`` (paper eq. 3; ``fn`` in Hz)."""
         wn = 2.0 * math.pi * fn
         return cls(np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]]),
                    np.array([[0.0], [1.0]]), np.array([[gain * wn * wn, 0.0]]),
@@ -76,12 +49,7 @@ class StateSpace:
 
     @classmethod
     def bessel_lowpass(cls, *, fc: float, order: int = 4) -> StateSpace:
-        """
-        Return a Bessel low-pass with unit static gain and -3 dB at ``fc`` (Hz).
-
-        Bessel filters have the flattest group delay, so a shock pulse passes delayed but
-        hardly distorted: the usual anti-alias filter of a shock-measurement digitiser.
-        """
+        """Return a Bessel low-pass (unit static gain, -3 dB at ``fc`` Hz): flat group delay."""
         num, den = signal.bessel(order, 2.0 * math.pi * fc, analog=True, norm='mag')
         a, b, c, d = signal.tf2ss(num, den)
         return cls(a, b, c, d)
@@ -96,15 +64,9 @@ class StateSpace:
 
 class FohFilter:
     """
-    A continuous system discretised with the first-order hold, fed chunk after chunk.
+    A continuous ``system`` discretised at ``fs`` with the first-order hold, fed chunk by chunk.
 
-    The filter starts at rest; consecutive calls continue from the state the previous call
-    left, so a long signal can be processed in pieces with the same result.
-
-    Args:
-        system: The continuous system.
-        fs: Sample rate of the input in Hz.
-
+    Starts at rest; each call continues from the state the previous one left.
     """
 
     def __init__(self, system: StateSpace, *, fs: float):

@@ -1,26 +1,9 @@
 """
 The drop-hammer rig simulator: shots in, a recording of pressure and acceleration out.
 
-The pressure channel is simulated in continuous time and then sampled:
-
-1. The anvil motion (analytic half-sines plus lateral motion, :mod:`.hammer`) is evaluated
-   on the sample grid refined by ``RigConfig.oversample``, shifted back by the channel delay.
-2. Effects map the axial acceleration to the force driving the element (transverse
-   sensitivity, nonlinear sensitivity).
-3. Every mechanical mode (the sensor's own, paper eq. 3, plus any further mode) is
-   integrated exactly for a piecewise-linear input (first-order hold, :mod:`.lti`).
-4. Element terms (base strain) are added; together this is the induced pressure.
-5. Shock-locked disturbances (zero shift) are added beside it; the channel filters (the
-   charge amplifier's high-pass) act on both, starting from rest before the first shot.
-6. The digitiser's anti-alias filter (``RigConfig.anti_alias_hz``, if set) acts on the grid,
-   which is then sampled down to ``fs``; stationary pickup (mains hum) is added
-   analytically through the channel's frequency response and delay, so it is in steady
-   state from the first sample; white noise is added last (the digitiser).
-
-The accelerometer is ideal apart from its white noise; it passes the same anti-alias filter
-(integrated on the same refined grid) before it is sampled. Every random draw comes from its own
-stream of the seed, so switching an effect on leaves the shots, lateral motion and noise of
-a run unchanged: runs with and without an effect differ only by that effect.
+Continuous-time pressure channel (modes, effects, amplifier, anti-alias) sampled to ``fs``;
+each random draw has its own seed stream, so effects can be switched on alone. The signal
+path step by step: ``doc/simulator.md``.
 """
 
 from __future__ import annotations
@@ -48,20 +31,18 @@ _CHUNK = 1 << 18
 @dataclass(frozen=True, eq=False)
 class Simulation:
     """
-    The result of a simulated rig run, with the truth behind it.
+    The result of a simulated rig run, with the truth behind it (all clean signals at ``fs``).
 
     Args:
         recording: What the digitiser recorded: noisy pressure (Pa) and acceleration (m/s²).
-        induced: ``(N,)`` clean acceleration-induced pressure in Pa, after every
-            acceleration-driven effect and the channel (delay, amplifier), without noise.
-        disturbance: ``(N,)`` clean additive part in Pa that the acceleration does not drive
-            (zero shift, mains hum), after the channel.
+        induced: ``(N,)`` acceleration-induced pressure in Pa after every effect and the
+            channel, without noise.
+        disturbance: ``(N,)`` additive part in Pa the acceleration does not drive (zero shift,
+            mains hum), after the channel.
         onsets: Index of the first sample at or after each shot's onset.
         config: The configuration that produced the run.
-        acceleration: ``(3, N)`` clean acceleration in m/s² as sampled (after the
-            anti-alias filter, if any).
-        touches: Exact onset times (s after the first sample) and lateral motion of every
-            shot.
+        acceleration: ``(3, N)`` acceleration in m/s² as sampled (after any anti-alias filter).
+        touches: Exact onset times (s after the first sample) and lateral motion of each shot.
         pressure_noise_pa: Standard deviation of the pressure noise in Pa.
         accel_noise_ms2: Standard deviation of the accelerometer noise in m/s².
 
@@ -219,12 +200,6 @@ def _metadata(config: RigConfig) -> dict[str, str]:
 def simulate(config: RigConfig) -> Simulation:
     """
     Run the rig: fire every shot and record pressure and acceleration.
-
-    Args:
-        config: The rig configuration (shots, sensor, effects, noise, seed).
-
-    Returns:
-        The recording with the clean signals and shot onsets behind it.
 
     Raises:
         SimConfigError: If an effect cannot act on these shots (e.g. a nonlinearity that

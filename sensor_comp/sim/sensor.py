@@ -1,21 +1,7 @@
 """
-The pressure sensor's linear acceleration response (seed paper, Section 2).
+The pressure sensor's linear acceleration response (seed paper, Section 2, eq. 3).
 
-The diaphragm's equivalent mass ``m`` sits on the crystal (stiffness ``k``, damping ``c``);
-the base acceleration ``a`` drives the relative displacement ``y`` (paper eq. 1):
-``m y'' + c y' + k y = -m a``. The crystal's charge, hence the indicated pressure, is
-proportional to ``y``, so the induced pressure is ``p = sign * S * wn**2 / (s**2 + 2 zeta wn
-s + wn**2) * a`` (eq. 3) with ``S`` the static acceleration sensitivity.
-
-Default ``fn = 5 kHz``, ``zeta = 0.05``: the criterion is that the free ringing left after
-the shortest Table-2 pulses (0.94–0.99 ms, the 1963 g and 2185 g shots) stands clearly above
-the default 0.5 % noise. The closed-form response of this system to those half-sines leaves a
-ringing envelope of 10–12 % of their static response at the pulse end, about 20 standard
-deviations of the noise (0.5 % of the largest peak), which stays above the noise for about
-2 ms (ten cycles). Softer, longer shots ring less (the 180 g, 2.94 ms shot at 3.4 % of its
-own 25 kPa, below the noise). The peak overshoots the static response by 0–5 %
-(fn·T = 4.7–15). ``S = 1.4e-4 MPa/g`` is the paper's sensitivity near 1000 g
-(0.1402 MPa at 1006 g); ``charge_sensitivity = 100 pC/MPa`` is its 14.33 pC ↔ 0.1402 MPa.
+Defaults (5 kHz, ζ 0.05, 1.4e-4 MPa/g, 100 pC/MPa) and why: ``doc/simulator.md``.
 """
 
 from __future__ import annotations
@@ -78,11 +64,6 @@ class SensorConfig:
 
 
 def mode_settling_s(fn_hz: float, zeta: float) -> float:
-    """
-    Return the time in s for a 2nd-order mode's free response to decay by e**-5.
-
-    The slowest pole decays at ``wn (zeta - sqrt(zeta**2 - 1))`` when overdamped and at
-    ``zeta wn`` otherwise.
-    """
+    """Return the time in s for a 2nd-order mode's free response to decay by e**-5."""
     rate = 2.0 * math.pi * fn_hz * (zeta - math.sqrt(max(zeta * zeta - 1.0, 0.0)))
     return 5.0 / rate

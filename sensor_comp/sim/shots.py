@@ -1,11 +1,4 @@
-"""
-Drop-hammer shots: the axial half-sine pulses a Machete hammer delivers.
-
-A Machete hammer falls onto an anvil through a felt pad; the contact gives an axial
-acceleration close to a half-sine. Raising the hammer raises the peak and, for a given felt,
-shortens the pulse (the felt is compressed harder); a thicker felt lengthens it. The rig's
-range is about 150–2500 g and 0.9–3 ms.
-"""
+"""Drop-hammer shots: the axial half-sines a Machete hammer delivers (150–2500 g, 0.9–3 ms)."""
 
 from __future__ import annotations
 
@@ -36,13 +29,8 @@ class Shot:
     """
     One hammer blow: an axial half-sine ``peak_g * sin(pi t / width_s)``, ``0 <= t <= width_s``.
 
-    Args:
-        peak_g: Peak axial acceleration in g (positive: towards the sensor's diaphragm).
-        width_s: Pulse width (base of the half-sine) in s.
-
-    Raises:
-        SimConfigError: On a non-positive or non-finite peak or width.
-
+    ``peak_g`` is positive towards the diaphragm; SimConfigError on a non-positive or
+    non-finite peak or width.
     """
 
     peak_g: float
@@ -70,20 +58,10 @@ TABLE2_PEAK_PRESSURE_MPA = (0.07, 0.089, 0.11, 0.167, 0.1932, 0.041, 0.086, 0.10
 def random_shots(count: int, *, seed: int, peak_g: tuple[float, float] = PEAK_G_RANGE,
                  width_s: tuple[float, float] = WIDTH_S_RANGE) -> tuple[Shot, ...]:
     """
-    Draw shots the way an operator varies drop height on one felt.
+    Draw ``count`` shots as an operator varies drop height on one felt (harder is shorter).
 
-    Peaks are log-uniform in ``peak_g``. As on the real rig a harder blow is shorter: the
-    width falls geometrically from ``width_s[1]`` at the lowest peak to ``width_s[0]`` at
-    the highest, times a ±10 % felt-to-felt scatter, clipped to ``width_s``.
-
-    Args:
-        count: Number of shots.
-        seed: Seed of the random draw (same seed, same shots).
-        peak_g: ``(min, max)`` peak acceleration in g.
-        width_s: ``(min, max)`` pulse width in s.
-
-    Returns:
-        The shots.
+    Peaks are log-uniform in ``peak_g``; widths within ``width_s`` fall with the peak, ±10 %
+    scatter (``doc/simulator.md``). The same seed gives the same shots.
 
     Raises:
         SimConfigError: On a non-positive count or an empty or non-positive range.
