@@ -1,50 +1,26 @@
 """
 The ``acquisition`` node: publish a rig's pressure and acceleration as block streams.
 
-Run it as ``acquisition --ros-args -p source:=sim -p pacing:=realtime`` (or
-``python -m sensor_comp.nodes.acquisition``). It stands in for the digitiser: it takes a
-recording from the simulator, a bag or a CSV export and publishes it the way the DAQ
-would, then exits (unless ``loop``).
+Run ``acquisition --ros-args -p source:=sim -p pacing:=realtime``. It stands in for the
+digitiser: publishes ``acceleration`` and ``pressure/raw`` (``64FC1`` Image blocks, keep-all)
+and the latched ``stream_info``, then exits (unless ``loop``). Topics, QoS and pacing:
+``doc/nodes.md``, acquisition.
 
-Topics, relative to the node's namespace (default ``/rig``), as in the stream contract:
+Parameters (read once at start):
 
-- ``acceleration``: ``sensor_msgs/msg/Image`` ``64FC1`` blocks, 3 rows x, y, z in m/s².
-- ``pressure/raw``: the same with 1 row in Pa. Both topics get blocks of the same width
-  with the same stamps; ``header.stamp`` is the acquisition time of the block's first
-  sample, ``header.frame_id`` the sensor frame.
-- ``stream_info`` (latched): ``diagnostic_msgs/msg/DiagnosticArray`` with the rate,
-  channels, unit and sensor metadata of both streams, published before the first block.
-
-QoS: blocks are reliable, volatile, keep-all (a slow reader slows the node down, nothing is
-dropped; see :mod:`sensor_comp.nodes.qos`); ``stream_info`` is reliable,
-transient-local, depth 1 so that late subscribers get it.
-
-Parameters (read once at start; invalid values stop the node with a message naming them, a
-parameter it does not have is logged with the closest name it has):
-
-- ``source`` (``sim``, ``bag`` or ``csv``; default ``sim``) and ``path`` (the bag or CSV
-  file for ``bag`` and ``csv``).
-- ``block_size`` (samples per block, default 1000).
-- ``pacing`` (default ``realtime``): ``realtime`` publishes each block when its last sample
-  would have been acquired, a number ``k`` does so ``k`` times faster, ``fast`` publishes as
-  fast as DDS delivers the blocks. Nothing is lost, but a subscriber slower than the source
-  buffers what it has not handled yet in memory (keep-all queues): give a factor when the
-  subscribers are slower than the source.
-- ``loop`` (bool, default false): start over at the end; stamps keep running on, so the
-  streams stay contiguous.
-- ``stamp_origin`` (``now`` or ``source``; default ``now``): stamp the first sample with the
-  wall-clock time when publishing starts (after the wait for subscribers, so stamps follow
-  the pacing), or keep the source's own ``t0``.
-- ``wait_for_subscribers`` (int, default 0) and ``wait_timeout`` (s, default 10.0): wait
-  for this many matched subscriptions on each topic (``stream_info`` too: a fast run may
-  end before a late subscriber gets it) before the first block.
-- ``ack_timeout`` (s, default 10.0): at the end, how long to wait for subscribers to
-  acknowledge the last blocks.
-- Simulator (``source:=sim``, see :class:`~sensor_comp.sim.RigConfig`): ``sim_shots``
-  (0: the seed paper's Table-2 shots, N: N random shots; default 0), ``sim_fs`` (Hz,
-  default 1e6), ``sim_seed`` (default 0), ``sim_effects`` (``ID[:param=value,...]``
-  strings), ``sim_pressure_noise`` and ``sim_accel_noise`` (relative to the largest peak),
-  ``sim_spacing`` (s between shot onsets; 0: automatic).
+- ``source`` (``sim``/``bag``/``csv``, default ``sim``); ``path``: the bag or CSV file.
+- ``block_size`` (default 1000): samples per block.
+- ``pacing`` (default ``realtime``): ``realtime``, a speed factor ``k``, or ``fast`` (DDS
+  speed; slow subscribers buffer in memory).
+- ``loop`` (default false): start over at the end, stamps running on.
+- ``stamp_origin`` (``now``/``source``, default ``now``): wall clock at start, or source t0.
+- ``wait_for_subscribers`` (default 0), ``wait_timeout`` (s, default 10.0): matched
+  subscriptions per topic to wait for before the first block.
+- ``ack_timeout`` (s, default 10.0): wait at the end for the last acknowledgements.
+- Simulator (``source:=sim``, :class:`~sensor_comp.sim.RigConfig`): ``sim_shots`` (0:
+  Table 2, N: N random; default 0), ``sim_fs`` (default 1e6), ``sim_seed`` (0),
+  ``sim_effects`` (``ID[:param=value,...]``), ``sim_pressure_noise``,
+  ``sim_accel_noise`` (relative to the largest peak), ``sim_spacing`` (s; 0: automatic).
 """
 
 from __future__ import annotations
@@ -80,18 +56,11 @@ _PACINGS = {'realtime': 1.0, 'fast': None}
 
 class Acquisition(Node):
     """
-    Publish a recording as block streams (see the module documentation for parameters).
-
-    Call :meth:`run`; it returns when the recording has been published (never with
-    ``loop``) or ``stop`` is set, in both cases after the subscribers acknowledged the
-    blocks sent (at most ``ack_timeout``) and a log line with the count. A stop never
-    splits a pair: the pressure block of an acceleration block sent goes out too. The node
-    needs no spinning while it runs.
+    Publish a recording as block streams; call :meth:`run` (no spinning needed).
 
     Args:
         node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
-            ``/rig``; ``context``; ``parameter_overrides``; ...).
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default ``/rig``).
 
     Attributes:
         recording: What the node publishes (stamps as in the source).
@@ -100,7 +69,7 @@ class Acquisition(Node):
 
     Raises:
         NodeError: On a bad parameter or a missing file.
-        SensorCompError: If the source cannot be read or simulated (the message says why).
+        SensorCompError: If the source cannot be read or simulated.
 
     """
 
@@ -202,10 +171,9 @@ class Acquisition(Node):
 
     def run(self, stop: threading.Event | None = None) -> None:
         """
-        Publish ``stream_info`` and then the blocks, paced as configured.
+        Publish ``stream_info``, then the paced blocks until the end or ``stop``, then await acks.
 
-        Args:
-            stop: Set it to stop between two blocks.
+        A stop never splits a pair of blocks.
 
         Raises:
             NodeError: If too few subscribers show up, or they stop taking blocks.

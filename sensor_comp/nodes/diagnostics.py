@@ -1,9 +1,4 @@
-"""
-ROS diagnostics of the nodes: the ``/diagnostics`` topic, its QoS, and one-status arrays.
-
-Every node reports its state as a ``diagnostic_msgs/msg/DiagnosticArray`` on the shared,
-absolute :data:`DIAGNOSTICS` topic, where ``rqt_runtime_monitor`` and aggregators read it.
-"""
+"""ROS diagnostics of the nodes: the shared ``/diagnostics`` topic, its QoS, one-status arrays."""
 
 from __future__ import annotations
 
@@ -28,10 +23,10 @@ DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
 def diagnostics(node: Node, *, name: str, level: bytes, message: str,
                 values: dict) -> DiagnosticArray:
     """
-    Return a ``diagnostic_msgs/msg/DiagnosticArray`` with one status of this node.
+    Return a ``DiagnosticArray`` with one status of this node (its name the hardware id).
 
     Args:
-        node: The node (its clock stamps the array, its name is the hardware id).
+        node: The node.
         name: Status name, e.g. ``'sensor_comp: compensation'``.
         level: ``DiagnosticStatus.OK``, ``WARN`` or ``ERROR``.
         message: One human line.

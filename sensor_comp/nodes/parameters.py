@@ -1,9 +1,7 @@
 """
 Node parameters: declare them typed and read-only, check them, warn about unknown ones.
 
-:func:`declare` returns a parameter's value (``float`` parameters accept integers), :func:`check`
-and :func:`check_output_parameter` raise a :class:`~sensor_comp.nodes.errors.NodeError` naming
-the node, the parameter and the rule, :func:`warn_unknown_parameters` names a misspelt one.
+Errors are :class:`~sensor_comp.nodes.errors.NodeError` naming the node, parameter and rule.
 """
 
 from __future__ import annotations
@@ -34,21 +32,15 @@ _ARRAY_TYPES = {str: Parameter.Type.STRING_ARRAY, int: Parameter.Type.INTEGER_AR
 def declare(node: Node, name: str, default, description: str, *, dynamic: bool = False,
             item_type: type = str):
     """
-    Declare a read-only parameter and return its value.
-
-    ``float`` parameters accept integers too (``-p rate:=2``); ``list`` defaults declare an
-    array of ``item_type`` (an unset one reads as ``[]``).
+    Declare a read-only parameter and return its value (given, else ``default``).
 
     Args:
         node: The node.
         name: Parameter name.
-        default: Default value; its Python type fixes the parameter's type.
+        default: Default value; its Python type fixes the parameter's type (``float`` accepts
+            integers; a ``list`` is an array of ``item_type``: ``str``, ``int`` or ``float``).
         description: What the parameter does, with unit and allowed values.
         dynamic: Accept a value of any type (the caller checks it).
-        item_type: Element type of a ``list`` parameter: ``str``, ``int`` or ``float``.
-
-    Returns:
-        The value given on the command line or by ``parameter_overrides``, else ``default``.
 
     Raises:
         NodeError: If the given value has the wrong type.
@@ -83,13 +75,7 @@ def check(node: Node, name: str, value, ok: bool, expected: str):
 def check_output_parameter(node: Node, name: str, path: str, *, kind: str,
                            inputs: Sequence[str] = ()) -> Path:
     """
-    Check an output file parameter with :func:`sensor_comp.files.check_output`.
-
-    Its folder must exist and be writable; an existing file must be of ``kind`` and none of
-    ``inputs``. Nothing is created.
-
-    Returns:
-        The path.
+    Check an output file parameter with :func:`sensor_comp.files.check_output`; return the path.
 
     Raises:
         NodeError: Naming the node, the parameter and the reason.
@@ -105,11 +91,9 @@ def check_output_parameter(node: Node, name: str, path: str, *, kind: str,
 
 def warn_unknown_parameters(node: Node) -> None:
     """
-    Log a warning for each parameter given to ``node`` that it does not declare.
+    Log a warning, naming the closest declared one, for each parameter the node does not declare.
 
-    Call it once the node has declared all of its parameters. A misspelt name (``sorce``)
-    would otherwise be dropped without a word and its parameter keep its default; the
-    warning names the closest declared parameter.
+    Call it once the node has declared all of its parameters.
     """
     # rclpy 7.1 has no public getter for the values given to a node: Node.__init__ merges
     # --ros-args -p, parameter files and ``parameter_overrides`` into this dict, which

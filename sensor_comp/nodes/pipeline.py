@@ -1,40 +1,9 @@
 """
 Launch-free composition: the rig's nodes in one process, on one executor.
 
-There is no ``ros2 launch`` here (and a script is easier to test and to stop), so
-:func:`pipeline` starts the nodes itself::
-
-    from sensor_comp.nodes.pipeline import pipeline
-
-    with pipeline(parameters={'acquisition': {'source': 'sim', 'sim_shots': 6},
-                              'identification': {'structure': 'oe', 'min_shots': 4},
-                              'recorder': {'output': 'run.mcap'}}) as p:
-        p.wait_until(lambda p: p.compensation.model is not None, timeout=60)
-        p.wait_for_acquisition(timeout=60)
-    # stopped: nodes destroyed, the bag finalised
-
-What it does:
-
-- creates the nodes asked for (``acquisition``, ``identification``, ``compensation``,
-  ``recorder``; any subset) in ``namespace``, each with its ``parameters``, consumers
-  before the acquisition;
-- spins them on one ``MultiThreadedExecutor`` (2 threads) in a background thread: the
-  identification's ``~/fit`` service can wait for a fit on one thread while blocks keep
-  flowing on the other (fits themselves run in the identification node's worker process,
-  which never imports the calling script: no ``if __name__ == '__main__':`` guard needed);
-- with a recorder, waits until it has subscribed to every topic the other nodes publish
-  under the namespace (volatile block topics are otherwise lost until it discovers them);
-- runs :meth:`Acquisition.run <sensor_comp.nodes.acquisition.Acquisition.run>` in a thread
-  of its own; unless told otherwise its ``wait_for_subscribers`` is the number of
-  consumers in the pipeline, so no block leaves before they listen.
-
-:meth:`Pipeline.stop` (or leaving the ``with`` block) stops the acquisition, lets the
-consumers take what is still queued (until nothing happened for 0.2 s, at most 10 s),
-then follows the shutdown order that keeps rclpy from aborting: ``executor.shutdown()``,
-join the spinning thread, wait for the callbacks still running in the executor's thread
-pool (:func:`~sensor_comp.nodes.lifecycle.join_callbacks`), destroy the nodes (the recorder
-finalises its bag, the identification's worker ends), and shut down the context if the
-pipeline made it.
+``with pipeline(parameters={...}) as p: p.wait_until(...)`` starts the nodes, spins them on
+a 2-thread executor, runs the acquisition once consumers listen, and stops them in the
+order rclpy needs. Example and shutdown order: ``doc/nodes.md``, composition.
 """
 
 from __future__ import annotations
@@ -134,22 +103,18 @@ class Pipeline:
 
     @property
     def acquisition(self) -> Acquisition | None:
-        """Return the acquisition node, or None."""
         return self.nodes.get('acquisition')
 
     @property
     def identification(self) -> Identification | None:
-        """Return the identification node, or None."""
         return self.nodes.get('identification')
 
     @property
     def compensation(self) -> Compensation | None:
-        """Return the compensation node, or None."""
         return self.nodes.get('compensation')
 
     @property
     def recorder(self) -> Recorder | None:
-        """Return the recorder node, or None."""
         return self.nodes.get('recorder')
 
     def _wait_for_recorder(self) -> None:
@@ -180,17 +145,11 @@ class Pipeline:
     def wait_until(self, predicate: Callable[[Pipeline], bool], *, timeout: float,
                    poll: float = 0.01, what: str = '') -> None:
         """
-        Wait until ``predicate(self)`` is true.
-
-        Args:
-            predicate: The condition, e.g. ``lambda p: p.identification.model is not None``.
-            timeout: Longest wait in seconds.
-            poll: Seconds between two evaluations.
-            what: What is awaited, for the timeout message.
+        Wait until ``predicate(self)`` is true, evaluating it every ``poll`` s.
 
         Raises:
-            PipelineTimeout: After ``timeout`` seconds; the message says where the
-                identification stands (shots kept, fits, why the last one failed).
+            PipelineTimeout: After ``timeout`` seconds (``what`` names it); the message says where
+                the identification stands.
             SensorCompError: The acquisition's error, if it failed meanwhile.
 
         """
@@ -279,17 +238,13 @@ def pipeline(*, namespace: str = DEFAULT_NAMESPACE,
              parameters: Mapping[str, Mapping[str, object]] | None = None,
              context: Context | None = None) -> Pipeline:
     """
-    Start the rig's nodes in this process (see the module documentation).
+    Start the rig's nodes in this process; use the result in a ``with`` block.
 
     Args:
         namespace: Namespace of every node and its topics.
         nodes: The nodes to run, a subset of :data:`NODES`.
         parameters: ``{node name: {parameter: value}}``.
-        context: The rclpy context to run in; None: a new one (its domain from
-            ``ROS_DOMAIN_ID``), shut down by :meth:`Pipeline.stop`.
-
-    Returns:
-        The running pipeline; use it in a ``with`` block or call :meth:`Pipeline.stop`.
+        context: The rclpy context; None: a new one (``ROS_DOMAIN_ID``), shut down on stop.
 
     Raises:
         NodeError: On an unknown node, a bad parameter, or a recorder that does not

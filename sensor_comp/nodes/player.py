@@ -1,48 +1,22 @@
 """
 The ``player`` node: publish the messages of a bag with their original timing.
 
-Run it as ``player --ros-args -p bag:=run.mcap`` (or ``python -m sensor_comp.nodes.player``);
-it exits when the bag has been played (unless ``loop``), so scripts and tests can wait for it.
+Run ``player --ros-args -p bag:=run.mcap``; it exits when the bag has been played (unless
+``loop``). Raw CDR, keep-all, latched topics first. Timing and loss rules:
+``doc/nodes.md``, player.
 
-Parameters (read once at start; a bad value stops the node with a message naming it, a
-parameter it does not have is logged with the closest name it has):
+Parameters (read once at start):
 
-- ``bag`` (string, required): the MCAP file (or rosbag2 directory holding one).
-- ``topics`` (string array, default empty = all): absolute topic names to play.
-- ``rate`` (default 1.0): time scale; 2.0 plays twice as fast as recorded.
-- ``start_offset`` (s, default 0.0): skip this much of the bag, counted from its first
-  message that is not latched.
-- ``loop`` (bool, default false): play again from ``start_offset`` until stopped. The
-  messages are published unchanged, so their stamps repeat on every pass.
-- ``as_fast_as_possible`` (bool, default false): ignore the timing and publish as fast as
-  the subscribers take the messages.
-- ``wait_for_subscribers`` (int, default 0): before playing, wait until every topic has
-  this many matched subscriptions (e.g. 1 for a recorder), at most ``wait_timeout`` (s,
-  default 10.0). Latched topics count too: the player may be gone before a subscriber
-  that comes late gets them.
-- ``namespace_remap`` (string ``OLD:=NEW``, default empty): publish the topics under
-  ``OLD`` (e.g. ``/rig``) under ``NEW`` instead (e.g. ``/bench``). The bag's topic names are
-  absolute, so the node's own namespace does not move them; ``--ros-args -r`` remaps single
-  topics as usual.
-- ``ack_timeout`` (s, default 10.0): at the end, how long to wait for subscribers to
-  acknowledge the last messages before exiting.
-
-Timing follows each message's ``log_time`` (its receive time when recorded, as
-``ros2 bag play`` does), in file order; a message logged earlier than its predecessor goes
-out at once.
-
-QoS and loss: latched topics (``transient_local`` in the bag's ``offered_qos_profiles``)
-are published first, transient-local with a depth of their message count, so a late
-subscriber gets all of them (e.g. every ``stream_info``). Every other topic is published
-reliable, volatile, **keep-all**: no message leaves the publisher's history before every
-matched subscriber has acknowledged it, a full history makes the player wait (see
-:func:`~sensor_comp.nodes.transport.publish_raw`), and the player waits for the last
-acknowledgements before it exits. Nothing is lost to a subscriber that is matched before
-playing starts (``wait_for_subscribers``) and keeps all messages (keep-all history, like
-the recorder); a keep-last subscriber may still drop what it does not take in time.
-
-The messages are published as raw CDR bytes, never deserialised; their types must be
-installed as rclpy message packages.
+- ``bag`` (required): the MCAP file (or rosbag2 directory holding one).
+- ``topics`` (default empty: all): absolute topic names to play.
+- ``rate`` (default 1.0): time scale; 2.0 plays twice as fast.
+- ``start_offset`` (s, default 0.0): skip this much after the first non-latched message.
+- ``loop`` (default false): play again from ``start_offset`` until stopped.
+- ``as_fast_as_possible`` (default false): ignore the timing.
+- ``wait_for_subscribers`` (default 0), ``wait_timeout`` (s, default 10.0): matched
+  subscriptions per topic to wait for before playing.
+- ``namespace_remap`` (``OLD:=NEW``, default empty): publish ``OLD/...`` topics as ``NEW/...``.
+- ``ack_timeout`` (s, default 10.0): wait at the end for the last acknowledgements.
 """
 
 from __future__ import annotations
@@ -71,15 +45,7 @@ _NS_PER_S = 1_000_000_000
 
 class Player(Node):
     """
-    Publish the messages of a bag (see the module documentation for the parameters).
-
-    Call :meth:`play`; it returns when the bag has been played or ``stop`` is set. The node
-    needs no spinning while it plays.
-
-    Args:
-        node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``context``,
-            ``parameter_overrides``, ...).
+    Publish the messages of a bag; call :meth:`play` (no spinning needed).
 
     Raises:
         NodeError: On a bad parameter, or a message type that is not installed.
@@ -158,10 +124,7 @@ class Player(Node):
 
     def play(self, stop: threading.Event | None = None) -> int:
         """
-        Publish the bag; return the number of messages published.
-
-        Args:
-            stop: Set it to stop playing between two messages.
+        Publish the bag until its end or ``stop``; return the number of messages published.
 
         Raises:
             NodeError: If too few subscribers show up, or they stop taking messages.
@@ -184,13 +147,7 @@ class Player(Node):
         return self.published
 
     def _play_timed(self, stop: threading.Event) -> bool:
-        """
-        Play the non-latched topics once; return False if stopped.
-
-        Raises:
-            NodeError: If ``start_offset`` skips every message.
-
-        """
+        """Play the non-latched topics once; return False if stopped (NodeError: none to play)."""
         first = wall = last = None
         sent = 0
         for msg in self._reader.messages(self._timed):

@@ -1,16 +1,9 @@
 """
-QoS profiles of the nodes' topics.
+QoS profiles of the nodes' topics: all reliable (a lost block is a gap in the signal).
 
-QoS choices (all reliable, because a lost block is a gap in the signal):
-
-- :data:`BLOCK_QOS` for sample blocks: reliable, **keep-all**, volatile. Keep-all makes a
-  publisher keep every block until every matched reader has acknowledged it, so a slow
-  reader slows the publisher down instead of losing blocks (a keep-last depth of 10 lost
-  10 000-sample blocks at 20 MS/s in a player-to-recorder run). A reader must be keep-all
-  too (a keep-last reader overwrites what it has not taken yet) and able to queue its
-  backlog (see the Fast DDS settings in :mod:`sensor_comp.nodes.lifecycle`).
-- :data:`LATCHED_QOS` for ``stream_info``: reliable, transient-local, depth 1, so that a
-  reader joining late still gets the description of the streams.
+:data:`BLOCK_QOS` (keep-all, volatile: a slow reader slows the publisher, nothing is lost)
+and :data:`LATCHED_QOS` (transient-local, depth 1). Why and the measured loss of keep-last:
+``doc/nodes.md``, QoS.
 """
 
 from __future__ import annotations

@@ -1,67 +1,20 @@
 """
 The ``recorder`` node: record topics into a rosbag2-layout MCAP file, or a series of them.
 
-Run it as ``recorder --ros-args -r __ns:=/rig -p output:=run.mcap`` (or
-``python -m sensor_comp.nodes.recorder ...``); stop it with Ctrl-C or SIGTERM.
+Run ``recorder --ros-args -r __ns:=/rig -p output:=run.mcap``; stop with Ctrl-C or SIGTERM
+(the bag is finalised). Raw CDR is stored, subscriptions are keep-all with QoS matching
+every publisher. Splitting, QoS and timing rules: ``doc/nodes.md``, recorder.
 
-Parameters (read once at start; a bad value stops the node with a message naming it, a
-parameter it does not have is logged with the closest name it has):
+Parameters (read once at start):
 
-- ``output`` (string, default ``recording_<date>-<time>.mcap`` in the working directory):
-  the bag to create, in a folder that exists and is writable; an existing file (a bag
-  being played, say) is never overwritten: the node refuses to start.
-- ``topics`` (string array, default empty = every topic under the node's namespace, also
-  those that appear later; in namespace ``/`` every topic but ``/rosout`` and
-  ``/parameter_events``): topics to record; relative names resolve in the node's namespace.
-  Hidden topics (a part starting with ``_``) are recorded only when listed.
-- ``compression`` (``zstd``, ``lz4`` or ``none``; default ``zstd``) and ``chunk_size``
-  (bytes, default 4 MiB): MCAP chunking.
-- ``flush_period`` (s, default 1.0; 0 = only when a chunk is full): how often the open
-  chunk is written out, which bounds what a crash (SIGKILL, power loss) can lose.
-- ``discovery_period`` (s, default 0.5): how often the graph is searched for new topics.
-- ``max_bag_duration`` (s, default 0 = no limit) and ``max_bag_size`` (bytes, default 0 =
-  no limit): split the recording into files, like rosbag2's options of the same names (see
-  below).
-- ``diagnostics_period`` (s, default 1.0): how often the status goes to ``/diagnostics``.
-
-Splitting: with ``max_bag_duration`` or ``max_bag_size`` set, ``output`` ``run.mcap``
-becomes the series ``run_0000.mcap``, ``run_0001.mcap``, ... in the same directory (four
-digits at least, so that names sort in recording order up to 10 000 files; the recorder
-refuses to start if files of such a series exist already). A new file is started before
-the message whose receive time is ``max_bag_duration`` or more past the first message of
-the current file, or before any message once the current file reached ``max_bag_size``
-bytes on disk (a file grows by whole compressed chunks, so it ends at most one chunk past
-the size). The current file is closed (summary written) before the next one is created:
-when ``run_0001.mcap`` exists, ``run_0000.mcap`` is complete. Every message is in exactly
-one file, except the latched ones: each new file starts with the latest messages of every
-latched topic (as many per topic as the depths of its publishers add up to, with their
-original times), the ones a subscriber joining at that moment would get, so that every
-file is readable alone (``stream_info`` gives the blocks' rate). Under a backlog the
-recorder takes messages in per-topic runs (see below), so a file may hold a few messages
-received just before its first one.
-
-How messages are stored: the subscriptions are ``raw``, so the CDR bytes go to the bag
-without being deserialised. ``log_time`` is the DDS receive time and ``publish_time`` the
-DDS source (send) time from the message info, both on the system clock. When messages queue
-up, the recorder takes up to 256 of a topic in one turn (8x cheaper than one executor round
-each), so in a backlog the file interleaves topics in runs rather than strictly by
-``log_time``.
-
-QoS: each topic is subscribed once its first publisher is seen, with a profile that every
-publisher offering it can match: transient-local when all publishers offer transient-local
-(the topic is then recorded as latched and replays latched), reliable when all offer
-reliable (else best effort), and always keep-all so that no message is lost while the
-recorder is busy writing.
-
-``/diagnostics`` (status ``sensor_comp: recorder``): messages recorded per topic, the file
-being written and the number of files, and ``newest_age_s``, the time since the receive
-time of the newest message written: under a steady stream this is how far the recorder
-lags behind what DDS has received for it (its queues grow meanwhile).
-
-On SIGINT/SIGTERM the recorder stops discovering topics, takes what its subscriptions still
-hold (messages received before the signal), writes the MCAP summary and logs how many
-messages it recorded per topic. A killed recorder leaves a file without summary from which
-:class:`~sensor_comp.io.bag_reader.BagReader` recovers every chunk written so far.
+- ``output`` (default ``recording_<date>-<time>.mcap``): the bag; never overwritten.
+- ``topics`` (default empty: every topic under the namespace, also later ones).
+- ``compression`` (``zstd``/``lz4``/``none``, default ``zstd``), ``chunk_size`` (4 MiB).
+- ``flush_period`` (s, default 1.0; 0: only full chunks): bounds what a crash loses.
+- ``discovery_period`` (s, default 0.5): how often new topics are searched for.
+- ``max_bag_duration`` (s), ``max_bag_size`` (bytes), default 0 (no limit): split the
+  recording into ``run_0000.mcap``, ``run_0001.mcap``, ...
+- ``diagnostics_period`` (s, default 1.0): status on ``/diagnostics``.
 """
 
 from __future__ import annotations
@@ -112,22 +65,20 @@ def split_path(output: Path, index: int) -> Path:
 
 class Recorder(Node):
     """
-    Record topics into an MCAP bag or a split series (see the module documentation).
+    Record topics into an MCAP bag or a split series (``doc/nodes.md``).
 
-    Spin it with any executor and call :meth:`close` (or ``destroy_node``) when done, or
-    call :meth:`run`, which spins it until an event is set and then finalises the bag.
+    Spin it with any executor and call :meth:`close` (or ``destroy_node``), or call
+    :meth:`run`.
 
     Args:
         node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
-            ``/rig``; ``context``; ``parameter_overrides``; ...).
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default ``/rig``).
 
     Attributes:
         output: The ``output`` parameter (the series' base name when splitting).
         splitting: Whether the recording is split into files.
-        files: The files created so far, the one being written last (see :attr:`path`).
-        counts: Messages recorded per topic, all files together (latched messages repeated
-            in split files not counted again).
+        files: The files created so far, the one being written last.
+        counts: Messages recorded per topic, all files together.
 
     Raises:
         NodeError: On a bad parameter or an existing output file (or split series).
@@ -364,13 +315,7 @@ class Recorder(Node):
             self._dirty = False
 
     def run(self, stop: threading.Event) -> None:
-        """
-        Record until ``stop`` is set, take what the subscriptions still hold, then close.
-
-        Args:
-            stop: Set it (from a signal handler or another thread) to finish the recording.
-
-        """
+        """Record until ``stop`` is set, take what the subscriptions still hold, then close."""
         with SingleThreadedExecutor(context=self.context) as executor:
             executor.add_node(self)
             try:
@@ -402,7 +347,6 @@ class Recorder(Node):
                                f'topics to {where}{lines}')
 
     def publish_diagnostics(self) -> None:
-        """Publish the recorder's status on ``/diagnostics``."""
         age = (time.time_ns() - self._newest_ns) / 1e9 if self._newest_ns else ''
         values = {'messages': self.received, 'file': str(self.path),
                   'files': len(self.files), 'newest_age_s': age, **self.counts}
