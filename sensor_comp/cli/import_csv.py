@@ -68,9 +68,8 @@ def run(args: argparse.Namespace) -> int:
     Import ``args.csv`` into the bag ``args.output``; return the exit code.
 
     Raises:
-        SensorCompError: On a malformed CSV file (:class:`CsvError`), an output refused by
-            :func:`~sensor_comp.files.check_output` (e.g. the CSV file itself), or a failure
-            writing the bag.
+        SensorCompError: On a malformed CSV file, a refused output (e.g. the CSV file itself),
+            or a failure writing the bag.
 
     """
     args.output = check_output(args.output, inputs=(args.csv,), kind='bag', force=args.force)

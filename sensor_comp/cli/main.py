@@ -1,9 +1,4 @@
-"""
-Entry point of the ``sensor-comp`` command: one sub-command per module.
-
-Each sub-command module exposes ``register(subparsers)``, which adds its parser and sets
-``func`` to a callable taking the parsed arguments and returning an exit code.
-"""
+"""Entry point of ``sensor-comp``: each sub-command module's ``register`` sets ``func``."""
 
 import argparse
 import importlib
@@ -45,11 +40,10 @@ def _terminate(signum, frame) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """
-    Run ``sensor-comp``; return the process exit code.
+    Run ``sensor-comp``; return the exit code.
 
-    User errors (bad files, bad values) print one ``sensor-comp: error:`` line and exit 1;
-    argparse usage errors exit 2. Ctrl-C exits 130 and SIGTERM 143, both through the
-    writers' cleanup (no temporary file is left behind).
+    User errors print one ``sensor-comp: error:`` line and exit 1, usage errors 2; Ctrl-C exits
+    130 and SIGTERM 143, both after the writers removed their temporary files.
     """
     args = build_parser().parse_args(argv)
     # signal.signal works only in the main thread (tests may call main from others).

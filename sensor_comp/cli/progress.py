@@ -15,8 +15,7 @@ class Progress:
     Args:
         label: What is being done, e.g. ``'EMD'``.
         total: Units of work in all.
-        quiet: Draw nothing (``--quiet``), or when stderr is not a terminal and
-            ``force`` is false.
+        quiet: Draw nothing (``--quiet``).
         force: Draw even when stderr is not a terminal.
 
     """
@@ -48,7 +47,6 @@ class Progress:
             sys.stderr.flush()
 
     def close(self) -> None:
-        """Finish the line."""
         if self._enabled:
             sys.stderr.write('\n')
             sys.stderr.flush()

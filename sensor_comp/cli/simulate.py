@@ -100,13 +100,7 @@ def register(subparsers) -> None:
 
 
 def build_config(args: argparse.Namespace) -> RigConfig:
-    """
-    Return the rig configuration the parsed arguments describe.
-
-    Raises:
-        SensorCompError: On inconsistent or invalid settings (the message names them).
-
-    """
+    """Return the rig configuration of the parsed arguments; SensorCompError if invalid."""
     if args.shots == 'table2':
         if args.peak_g is not None or args.width_ms is not None:
             raise SensorCompError('--peak-g and --width-ms shape random shots; use them with '

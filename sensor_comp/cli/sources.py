@@ -18,24 +18,14 @@ __all__ = ['add_force', 'calibration_sources', 'check_plots', 'load_model', 'loa
 
 def add_force(parser, *, help: str = 'replace an existing output file even if it is of '
                                      'another kind (never an input)') -> None:
-    """
-    Add ``--force``: replace an existing output file of another kind.
-
-    Without it, :func:`~sensor_comp.files.check_output` refuses to replace, say, a bag with
-    a model; an input is never replaced, whatever the flag.
-    """
+    """Add ``--force`` (replace an existing output of another kind; never an input)."""
     parser.add_argument('--force', action='store_true', help=help)
 
 
 def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
                threshold_g: float | None = None) -> ShotSource:
     """
-    Read a recording and find its shots (or use the manual ``windows`` in seconds).
-
-    Args:
-        path: The bag or CSV file.
-        windows: Manual shot windows ``(start, stop)`` in s; detection when None or empty.
-        threshold_g: Trigger level of the detection in g; automatic when None.
+    Read a recording and find its shots, or take the manual ``windows`` ``(start, stop)`` in s.
 
     Raises:
         SensorCompError: If the file does not read or holds no shot (naming the threshold
@@ -50,13 +40,7 @@ def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
 
 
 def load_model(path: str) -> Model:
-    """
-    Read a model file.
-
-    Raises:
-        SensorCompError: If it is missing or malformed.
-
-    """
+    """Read a model file; SensorCompError if it is missing or malformed."""
     if not os.path.exists(path):
         raise SensorCompError(f'{path}: no such model file')
     return load(path)
@@ -70,10 +54,7 @@ def progress_factory(quiet: bool):
 
 def check_plots(args, flags: tuple[str, ...], *, inputs) -> dict[str, str]:
     """
-    Check the plot files named by the options ``flags`` of ``args`` before any work.
-
-    Returns:
-        ``{flag: path written}`` for the flags given (``.png`` added where no suffix).
+    Check the plot files of the options ``flags`` before any work; return ``{flag: path}``.
 
     Raises:
         SensorCompError: If a plot path is refused, or two flags name the same file.
@@ -92,15 +73,11 @@ def check_plots(args, flags: tuple[str, ...], *, inputs) -> dict[str, str]:
 def usable_source(path: str, models: dict[str, Model], *, windows=None,
                   threshold_g: float | None = None) -> tuple[ShotSource, list[str]]:
     """
-    Load a recording to compare ``models`` (by file name) with; return it and its warnings.
-
-    Shots with a defect (clipped, NaN/Inf, no shock) are left out, one warning each; so is
-    a warning for a peak pressure per acceleration outside the usual range.
+    Load a recording to compare ``models`` with, without defective shots; return it and warnings.
 
     Raises:
         SensorCompError: If the file does not read, holds no usable shot, its pressure is
-            dead, its units are impossible, or a model is unstable or belongs to another
-            sample rate.
+            dead, its units are impossible, or a model is unstable or of another sample rate.
 
     """
     for name, model in models.items():
