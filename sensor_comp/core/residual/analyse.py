@@ -75,16 +75,16 @@ from typing import NamedTuple
 import numpy as np
 from scipy import signal, stats
 
-from .compare import compare, Comparison
-from .effects import ProbeData, PROBES as EFFECT_PROBES, ProbeSpec
-from .effects.probe import PROBE_TIME_CONSTANTS_MS
-from .ident.simulate import simulate
-from .model import Model, ModelError
-from .noise_floor import (gram, json_number, noise_model, NoiseModel, PRACTICAL_SHARE,
+from ..compare import compare, Comparison
+from ..effects import ProbeData, PROBES as EFFECT_PROBES, ProbeSpec
+from ..effects.probe import PROBE_TIME_CONSTANTS_MS
+from ..ident.simulate import simulate
+from ..model import Model, ModelError
+from ..noise_floor import (gram, json_number, noise_model, NoiseModel, PRACTICAL_SHARE,
                           segment_bounds)
-from .shots import mad_sigma, segments, Shot
-from ..errors import SensorCompError
-from ..streams import G0, Recording
+from ..shots import mad_sigma, segments, Shot
+from ...errors import SensorCompError
+from ...streams import G0, Recording
 
 __all__ = [
     'ALPHA',
