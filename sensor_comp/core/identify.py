@@ -18,7 +18,9 @@ so that its result can be trusted:
   physical effects (:mod:`sensor_comp.core.effects`), fitted as an output-error model by
   :func:`~sensor_comp.core.extended.fit_extended`; the model's inputs, orders and
   ``effects`` entries (physical parameters with standard deviations) describe the
-  extension. Without effects the workflow is unchanged.
+  extension. The deviations hold for coloured residuals and for scatter between shots
+  (:func:`~sensor_comp.core.extended.robust_uncertainty`), with the residual of the
+  measured, not the denoised, pressure. Without effects the workflow is unchanged.
 
 What fails on valid data falls back, and says so (``Identification.notes``, the model's
 ``fit['notes']``, a ``note:`` line of the CLI): a fit to the EMD-denoised pressure that
@@ -70,7 +72,7 @@ import numpy as np
 from .compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from .effects import EffectError, ordered
-from .extended import fit_extended
+from .extended import fit_extended, robust_uncertainty
 from .windows import shot_windows
 from .ident import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                     fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
@@ -576,8 +578,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                           f'nk={base.nk}' + (' or nf=2' if len(tries) > 1 else '') + f': {why}')
     chosen = min(fits, key=lambda nf: _bic(fits[nf]))
     notes = []
-    if data.denoiser is not None:
-        fits[chosen] = _measured_noise(fits[chosen], measured)
+    if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
+        fits[chosen] = robust_uncertainty(fits[chosen], measured)
     if chosen != base.na:
         if base.na in failed:
             notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
@@ -589,32 +591,6 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                          f'instead of the nf={base.na} chosen without them: BIC lower by '
                          f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} ({why})')
     return fits[chosen], notes
-
-
-def _measured_noise(fit, windows):
-    """
-    Return ``fit`` with its uncertainties for the noise of the measured pressure.
-
-    A fit to the EMD-denoised pressure leaves a residual with most of the measurement
-    noise taken out, so the covariance it implies (and every standard deviation derived
-    from it) is too small by the ratio of the residual variances on the measured and the
-    denoised pressure: all are scaled up by that ratio (never down).
-    """
-    prediction = fit.predict(windows).total
-    sse = sum(float(np.sum((w.y - p) ** 2)) for w, p in zip(windows, prediction))
-    n = sum(w.y.size for w in windows)
-    variance = sse / max(n - fit.estimate.n_parameters, 1)
-    ratio = variance / fit.estimate.noise_variance if fit.estimate.noise_variance > 0 else 1.0
-    if not ratio > 1.0:
-        return fit
-    root = math.sqrt(ratio)
-    entries = tuple({**entry, 'std': {k: None if v is None else v * root
-                                      for k, v in (entry.get('std') or {}).items()}}
-                    for entry in fit.entries)
-    estimate = replace(fit.estimate, covariance=fit.estimate.covariance * ratio,
-                       noise_variance=variance)
-    value_std = {k: None if v is None else v * root for k, v in fit.value_std.items()}
-    return replace(fit, estimate=estimate, entries=entries, value_std=value_std)
 
 
 def _bic(fit) -> float:
