@@ -7,8 +7,11 @@ Separate processes for the node benchmarks: a private ROS domain, launch, readin
   --ros-args -p key:=value ...``, its log in a file; readiness is a line it logs.
 - :func:`start_role` and :func:`role_result` run a benchmark module's own helper role
   (``python -m bench.bench_<name> --role ROLE ...``) that prints one JSON line at the end.
+- :func:`peak_rss` runs a command alone and returns its peak RSS (``getrusage``).
 - :func:`cpu_seconds`, :func:`rss_bytes`, :func:`tree_usage` (a process with its children)
   and :class:`CpuSampler` read ``/proc`` (no psutil).
+- :class:`Competitor` is a CPU-bound process (a pure-Python busy loop) that loads the
+  machine while a benchmark measures, started and killed by it.
 - :func:`write_model_file` writes the 2nd-order model of the simulator's default sensor
   that the benchmarks start the compensation node with.
 
@@ -28,11 +31,13 @@ import subprocess
 import sys
 import threading
 import time
+from typing import Sequence
 
 import numpy as np
 
-__all__ = ['CpuSampler', 'NodeProcess', 'ROOT', 'cpu_seconds', 'isolate_ros', 'log_time',
-           'role_result', 'rss_bytes', 'start_role', 'write_model_file']
+__all__ = ['Competitor', 'CpuSampler', 'NodeProcess', 'ROOT', 'cpu_seconds', 'isolate_ros',
+           'log_time', 'peak_rss', 'role_result', 'rss_bytes', 'start_role',
+           'write_model_file']
 
 #: The repository root (the children's working directory and ``PYTHONPATH``).
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,6 +85,9 @@ class NodeProcess:
         name: Node module, e.g. ``'compensation'``.
         params: ROS parameters (bool, int, float, str or lists of them).
         log: File that receives the process's stdout and stderr (the ROS log).
+        profile: Run the node under ``cProfile`` and write its stats to this file.
+        module: Run this module instead of ``sensor_comp.nodes.<name>`` (a variant of the
+            node that a benchmark defines).
 
     Attributes:
         name: The node module.
@@ -88,10 +96,13 @@ class NodeProcess:
 
     """
 
-    def __init__(self, name: str, params: dict, *, log: Path):
+    def __init__(self, name: str, params: dict, *, log: Path, profile: Path | None = None,
+                 module: str | None = None):
         self.name = name
         self.log = Path(log)
-        args = [sys.executable, '-m', f'sensor_comp.nodes.{name}', '--ros-args']
+        args = [sys.executable, '-m', module or f'sensor_comp.nodes.{name}', '--ros-args']
+        if profile is not None:  # the stats are written when the node's main returns
+            args[1:1] = ['-m', 'cProfile', '-o', str(profile)]
         for key, value in params.items():
             args += ['-p', f'{key}:={_ros_value(value)}']
         with open(self.log, 'w') as out:
@@ -207,6 +218,31 @@ def rss_bytes(pid: int) -> int:
     raise RuntimeError(f'/proc/{pid}/status has no VmRSS line (a zombie?)')
 
 
+def peak_rss(command: Sequence[str]) -> tuple[int, str, float]:
+    """
+    Run ``command`` alone in a helper process; return its peak RSS, output and wall time.
+
+    The peak is the command's own ``ru_maxrss`` (``RUSAGE_CHILDREN`` of a helper process
+    that ran only it: the benchmark's own memory does not count).
+
+    Returns:
+        ``(peak RSS in bytes, its stdout, seconds)``.
+
+    Raises:
+        subprocess.CalledProcessError: If it failed (its stderr in ``stderr``).
+
+    """
+    probe = ('import resource, subprocess, sys, time; began = time.perf_counter(); '
+             'out = subprocess.run(sys.argv[1:], check=True, stdout=subprocess.PIPE, '
+             'text=True).stdout; seconds = time.perf_counter() - began; print(out); '
+             'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, seconds)')
+    result = subprocess.run([sys.executable, '-c', probe, *command], check=True, cwd=ROOT,
+                            env=_child_env(), capture_output=True, text=True)
+    printed, _, last = result.stdout.rstrip().rpartition('\n')
+    peak, seconds = last.split()
+    return int(peak) * 1024, printed, float(seconds)  # Linux: ru_maxrss in kB
+
+
 def process_tree(pid: int) -> list[int]:
     """Return ``pid`` and its live descendants (e.g. a node's fit worker), from ``/proc``."""
     children: dict[int, list[int]] = {}
@@ -268,6 +304,44 @@ class CpuSampler:
         times, cpu = np.array(self.samples).T
         used = np.interp([start_ns, stop_ns], times, cpu)
         return float((used[1] - used[0]) / ((stop_ns - start_ns) / 1e9))
+
+
+class Competitor:
+    """
+    A CPU-bound competitor: a pure-Python busy loop in a process of its own.
+
+    It runs at the default priority (nobody's priority is changed) and wants a whole core
+    all the time. Use it as a context manager: started on entry, killed on exit.
+
+    Attributes:
+        popen: The process (None before entry).
+        cpu: Its CPU use between entry and exit, in cores (1.0 = one core).
+
+    """
+
+    _LOOP = 'x = 0\nwhile True:\n    x += 1\n'
+
+    def __init__(self):
+        self.popen: subprocess.Popen | None = None
+        self.cpu = float('nan')
+        self._began = (0.0, 0.0)
+
+    def __enter__(self) -> Competitor:
+        """Start the busy loop."""
+        self.popen = subprocess.Popen([sys.executable, '-c', self._LOOP], cwd=ROOT,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self._began = (time.monotonic(), cpu_seconds(self.popen.pid))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Kill the busy loop and record its CPU use."""
+        try:
+            used = cpu_seconds(self.popen.pid) - self._began[1]
+            self.cpu = used / max(time.monotonic() - self._began[0], 1e-9)
+        except OSError:
+            pass
+        self.popen.kill()
+        self.popen.wait()
 
 
 def write_model_file(path: Path, fs: float) -> None:

@@ -27,6 +27,25 @@ CPU: user + system time of the node process from ``/proc/<pid>/stat`` (sampled e
 20 ms) from the first block sent to the last output received, in % of one core (the
 machine has 2 cores, shared with the other two processes).
 
+Load (``--load``, default ``both``): every measurement is made on the quiet machine and
+again while a **competitor** runs, one CPU-bound process this benchmark starts before the
+publisher and kills after the run (a pure-Python busy loop at the default priority: it
+wants a whole core all the time; nobody's priority is changed, the node must cope), and
+the two figures are printed side by side. ``--load quiet`` or ``--load loaded`` makes
+only one of them.
+
+Baseline (``--baseline``): every run is made with three variants of the node, side by
+side: ``executor``, the node as it was before issue 14.4 (an executor round for every
+message not already queued, default time slices); ``waitset``, the block wait set alone;
+``deployed``, the node as it is (block wait set and short time slices). The variants are
+this module run as the node (``_variant_node``).
+
+Profile (``--profile FILE``): one more loaded latency run (1 000-sample blocks at 1 MS/s),
+the node under ``cProfile`` (wall time, so the executor's wait counts); the stats go to
+FILE and the share of the node's time per stage is printed (executor wait, take,
+decoding, pairing and filter, encoding, publishing). cProfile slows Python calls down,
+so its shares are indicative; the unprofiled runs give the rates.
+
 Run: ``python -m bench --only compensation_node [--quick]`` from the repository root
 (with ``AMENT_PREFIX_PATH`` set to the ROS prefix).
 """
@@ -34,6 +53,7 @@ Run: ``python -m bench --only compensation_node [--quick]`` from the repository 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import json
 import os
@@ -45,12 +65,18 @@ import time
 
 import numpy as np
 
-from ._processes import (CpuSampler, isolate_ros, NodeProcess, role_result, start_role,
-                         write_model_file)
+from ._processes import (Competitor, CpuSampler, isolate_ros, NodeProcess, role_result,
+                         start_role, write_model_file)
 
 __all__ = ['main']
 
 _MODULE = 'bench_compensation_node'
+# The environment variable naming the node variant this module runs as (--baseline).
+_VARIANT = 'BENCH_NODE'
+#: ``--baseline``: the node variants run, the one before issue 14.4 first.
+VARIANTS = {'executor': 'an executor round per message, default time slices (before)',
+            'waitset': 'the block wait set, default time slices',
+            'deployed': 'the block wait set and short time slices (the node as it is)'}
 #: (block width, block pairs) of the throughput runs: ~1-3 s each.
 FULL = {1000: 6000, 10_000: 1500}
 QUICK = {1000: 1500, 10_000: 300}
@@ -58,6 +84,8 @@ QUICK = {1000: 1500, 10_000: 300}
 LATENCY_FS = 1e6
 FULL_LATENCY = ((1000, 6.0), (10_000, 6.0))
 QUICK_LATENCY = ((1000, 2.5),)
+#: ``--load``: the runs made, False = quiet machine, True = with the competitor.
+LOADS = {'both': (False, True), 'quiet': (False,), 'loaded': (True,)}
 _WARMUP_S = 0.2
 _TIMEOUT_S = 120.0
 _T0_NS = 1_700_000_000_000_000_000
@@ -98,7 +126,7 @@ def _publish(args) -> dict:
     rng = np.random.default_rng(0)
     pool = [(rng.normal(0, 1e5, (1, width)), rng.normal(0, 100, (3, width)))
             for _ in range(8)]
-    first = None
+    first, sent = None, []
     for k in range(args.pairs):
         stamp = t0 + round(k * step)
         if args.paced:
@@ -109,11 +137,14 @@ def _publish(args) -> dict:
         first = time.time_ns() if first is None else first
         publish_raw(pressure, encode_block(p, stamp_ns=stamp, frame_id='bench'), stop)
         publish_raw(acceleration, encode_block(a, stamp_ns=stamp, frame_id='bench'), stop)
+        if args.paced:
+            sent.append(time.time_ns() - stamp)  # when the pair was out, after its stamp
     last = time.time_ns()
     finish_publishing(node, publishers, timeout=30.0)
     node.destroy_node()
     rclpy.try_shutdown()
-    return {'first_send_ns': first, 'last_send_ns': last}
+    return {'first_send_ns': first, 'last_send_ns': last, 't0_ns': t0, 'step_ns': step,
+            'sent_after_stamp_ns': sent}
 
 
 def _subscribe(args) -> dict:
@@ -162,30 +193,36 @@ def _subscribe(args) -> dict:
     return {'samples': samples, 'last_receive_ns': last[0], 'latency': latency}
 
 
-def _run(*, width: int, pairs: int, fs: float, paced: bool, tmp: Path) -> dict:
-    """Run node, subscriber and publisher once; return the measurements."""
+def _run(*, width: int, pairs: int, fs: float, paced: bool, tmp: Path, load: bool,
+         profile: Path | None = None, variant: str = 'deployed') -> dict:
+    """Run node, subscriber and publisher once (with the competitor if ``load``)."""
     model = tmp / f'model_{fs:g}.json'
     write_model_file(model, fs)
+    os.environ[_VARIANT] = variant  # read by this module run as the node
     node = NodeProcess('compensation', {'model_file': str(model), 'diagnostics_period': 1.0},
-                       log=tmp / 'node.log')
+                       log=tmp / 'node.log', profile=profile,
+                       module=None if variant == 'deployed' else f'bench.{_MODULE}')
+    competitor = Competitor()
     try:
         node.wait_for_log('compensating', timeout=30)
         subscriber = start_role(_MODULE, 'subscriber', expect=width * pairs)
         if subscriber.stdout.readline().strip() != 'ready':
             raise RuntimeError(f'subscriber failed:\n{subscriber.communicate()[1]}')
         sampler = CpuSampler(node.pid)
-        publisher = start_role(_MODULE, 'publisher', width=width, pairs=pairs, fs=fs,
-                               paced=paced)
-        try:
-            sent = role_result(publisher, timeout=_TIMEOUT_S + 30)
-            received = role_result(subscriber, timeout=_TIMEOUT_S + 30)
-        finally:
-            sampler.stop()
+        with competitor if load else contextlib.nullcontext():
+            publisher = start_role(_MODULE, 'publisher', width=width, pairs=pairs, fs=fs,
+                                   paced=paced)
+            try:
+                sent = role_result(publisher, timeout=_TIMEOUT_S + 30)
+                received = role_result(subscriber, timeout=_TIMEOUT_S + 30)
+            finally:
+                sampler.stop()
         cpu = sampler.usage(sent['first_send_ns'], received['last_receive_ns'])
     finally:
         node.stop(timeout=30)
     return {'width': width, 'pairs': pairs, 'fs': fs, 'sent': sent, 'received': received,
-            'cpu': cpu, 'node_log': node.output()}
+            'cpu': cpu, 'competitor_cpu': competitor.cpu if load else None,
+            'node_log': node.output()}
 
 
 def _throughput(run: dict) -> tuple[float, bool]:
@@ -195,11 +232,170 @@ def _throughput(run: dict) -> tuple[float, bool]:
     return n / seconds, any(v != n for v in run['received']['samples'].values())
 
 
-def _latencies(run: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Return (publish − stamp, receive − stamp) in ms after the warm-up."""
+def _latencies(run: dict) -> dict[str, np.ndarray]:
+    """
+    Return the latencies in ms of the compensated blocks after the warm-up.
+
+    ``publish``: compensated publish − stamp; ``node``: compensated publish − the time the
+    publisher had sent both blocks of the pair (the node and DDS alone: a publisher that
+    a competitor delays sends late, which is not the node's latency); ``receive``: receipt
+    at the subscriber − stamp.
+    """
     rows = np.array(run['received']['latency'], dtype=np.int64)
     rows = rows[rows[:, 0] >= rows[0, 0] + _WARMUP_S * 1e9]
-    return (rows[:, 1] - rows[:, 0]) / 1e6, (rows[:, 2] - rows[:, 0]) / 1e6
+    sent = run['sent']
+    late = np.asarray(sent['sent_after_stamp_ns'], dtype=np.int64)
+    index = np.rint((rows[:, 0] - sent['t0_ns']) / sent['step_ns']).astype(np.int64)
+    return {'publish': (rows[:, 1] - rows[:, 0]) / 1e6,
+            'node': (rows[:, 1] - rows[:, 0] - late[index]) / 1e6,
+            'receive': (rows[:, 2] - rows[:, 0]) / 1e6}
+
+
+def _label(variant: str, load: bool) -> str:
+    return f'{variant} {"loaded" if load else "quiet"}'
+
+
+def _measure_throughput(setups, sizes, tmp: Path, report: dict) -> bool:
+    """Print the throughput table (one row per setup); return whether a sample was lost."""
+    lost = False
+    print('throughput: the publisher sends as fast as the node takes the blocks')
+    print(f'{"width":>6} {"pairs":>6} {"node, machine":>17} | {"MS/s":>6} | {"node":>4} '
+          f'{"comp.":>5} | {"received":>17}')
+    for width, pairs in sizes.items():
+        for variant, load in setups:
+            run = _run(width=width, pairs=pairs, fs=1e6, paced=False, tmp=tmp, load=load,
+                       variant=variant)
+            rate, missing = _throughput(run)
+            lost |= missing
+            got = min(run['received']['samples'].values())
+            other = run['competitor_cpu']
+            print(f'{width:6d} {pairs:6d} {_label(variant, load):>17} | {rate / 1e6:6.2f} | '
+                  f'{100 * run["cpu"]:3.0f}% ' +
+                  (f'{100 * other:4.0f}%' if load else f'{"-":>5}') +
+                  f' | {got:8d}/{width * pairs:<8d}', flush=True)
+            report['throughput'].append({
+                'width': width, 'pairs': pairs, 'node': variant, 'loaded': load,
+                'samples_per_s': rate, 'node_cpu': run['cpu'], 'competitor_cpu': other,
+                'lost': missing})
+    return lost
+
+
+def _measure_latency(setups, runs, tmp: Path, report: dict) -> bool:
+    """Print the latency table (one row per setup); return whether a sample was lost."""
+    lost = False
+    print(f'\nlatency at {LATENCY_FS / 1e6:g} MS/s in real time (stamp = send time on the '
+          f'sample grid; first {_WARMUP_S:g} s left out); node = compensated publish - '
+          f'pair sent (the publisher, delayed by the competitor, may send late)')
+    kinds = ('publish', 'node', 'receive')
+    titles = ('publish - stamp (ms)', 'node: publish - sent', 'receive - stamp (ms)')
+    print(f'{"":>6} {"":>17} {"":>6} | ' + ' | '.join(f'{t:^24}' for t in titles) +
+          ' | CPU')
+    print(f'{"width":>6} {"node, machine":>17} {"blocks":>6} | ' +
+          ' | '.join(f'{"median":>7} {"p99":>7} {"max":>8}' for _ in kinds) +
+          f' | {"node":>4} {"comp.":>5}')
+    for width, seconds in runs:
+        for variant, load in setups:
+            pairs = round(seconds * LATENCY_FS / width)
+            run = _run(width=width, pairs=pairs, fs=LATENCY_FS, paced=True, tmp=tmp,
+                       load=load, variant=variant)
+            lost |= _throughput(run)[1]
+            latency = _latencies(run)
+            cells = [f'{np.median(latency[k]):7.3f} {np.percentile(latency[k], 99):7.3f} '
+                     f'{np.max(latency[k]):8.3f}' for k in kinds]
+            other = run['competitor_cpu']
+            print(f'{width:6d} {_label(variant, load):>17} {latency["publish"].size:6d} | '
+                  f'{" | ".join(cells)} | {100 * run["cpu"]:3.0f}% ' +
+                  (f'{100 * other:4.0f}%' if load else f'{"-":>5}'), flush=True)
+            report['latency'].append({
+                'width': width, 'node': variant, 'loaded': load,
+                'blocks': int(latency['publish'].size), 'node_cpu': run['cpu'],
+                'competitor_cpu': other,
+                **{f'{name}_ms': {'median': float(np.median(x)),
+                                  'p99': float(np.percentile(x, 99)), 'max': float(np.max(x))}
+                   for name, x in latency.items()}})
+    return lost
+
+
+def _variant_node(argv: list[str]) -> int:
+    """
+    Run a variant of the compensation node (``--baseline``), named by ``$BENCH_NODE``.
+
+    - ``executor``: the node as it was before :class:`~sensor_comp.nodes.transport.
+      BlockWaitSet` and :func:`~sensor_comp.nodes.lifecycle.request_short_slices`:
+      ``spin_once`` for every message not already queued, the default time slices;
+    - ``waitset``: the node as deployed but with the default time slices.
+    """
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_comp.nodes import compensation
+    from sensor_comp.nodes.lifecycle import run_main, spin_until
+
+    def run(node: compensation.Compensation, stop) -> None:
+        with SingleThreadedExecutor(context=node.context) as executor:
+            executor.add_node(node)
+            try:
+                spin_until(executor, stop, progress=lambda: node.received)
+            finally:
+                executor.remove_node(node)
+        node.finish()
+
+    variant = os.environ.get(_VARIANT)
+    if variant == 'executor':
+        return run_main(argv, compensation.Compensation, run)
+    if variant == 'waitset':
+        compensation.request_short_slices = lambda: 0
+        return run_main(argv, compensation.Compensation, compensation.Compensation.run)
+    raise SystemExit(f'{_VARIANT}={variant!r}: no such variant of the node')
+
+
+#: Stages of the node's hot path in a cProfile: (name, [(file suffix, function)], cumulative?)
+#: Built-in methods have the file ``~`` and a function text naming the method.
+_STAGES = (
+    ('executor wait (rcl wait)', [('~', '_rclpy_pybind11.wait>')], False),
+    ('take (rcl take)', [('~', '_rclpy_pybind11.take_message>')], False),
+    ('decode_block', [('messages.py', 'decode_block')], True),
+    ('pairing + filter', [('streaming.py', 'add_pressure'),
+                          ('streaming.py', 'add_acceleration')], True),
+    ('encode_block', [('messages.py', 'encode_block')], True),
+    ('publish (rcl publish)', [('~', '_rclpy_pybind11.publish_raw>')], False),
+)
+
+
+def _stage_seconds(stats, parts) -> float:
+    """Return the time of the functions ``parts`` (cumulative or own) in a pstats table."""
+    total = 0.0
+    for (filename, _, function), (_, _, own, cumulative, _) in stats.stats.items():
+        for suffix, name in parts[0]:
+            if filename.endswith(suffix) and (name in function if suffix == '~'
+                                              else function == name):
+                total += cumulative if parts[1] else own
+    return total
+
+
+def _profile(path: Path, tmp: Path, *, seconds: float) -> dict:
+    """Run the node under cProfile, loaded and paced (1 000-sample blocks); print stages."""
+    import pstats
+    width = 1000
+    pairs = round(seconds * LATENCY_FS / width)
+    run = _run(width=width, pairs=pairs, fs=LATENCY_FS, paced=True, tmp=tmp, load=True,
+               profile=path)
+    latency = _latencies(run)['node']
+    stats = pstats.Stats(str(path))
+    spin = _stage_seconds(stats, ([('lifecycle.py', 'spin_until')], True))
+    times = {name: _stage_seconds(stats, (parts, cumulative))
+             for name, parts, cumulative in _STAGES}
+    wait = times.pop('executor wait (rcl wait)')
+    busy = spin - wait
+    times['executor rounds and the rest'] = busy - sum(times.values())
+    print(f'\nprofile: the node under cProfile, loaded, {width}-sample blocks at '
+          f'{LATENCY_FS / 1e6:g} MS/s, {pairs} pairs (node latency median / p99 '
+          f'{np.median(latency):.2f} / {np.percentile(latency, 99):.2f} ms under the '
+          f'profiler); spinning {spin:.2f} s, of which waiting in rcl {wait:.2f} s and busy '
+          f'{busy:.2f} s = {1e6 * busy / pairs:.0f} µs per block pair')
+    print(f'{"stage":<32} {"s":>7} {"µs/pair":>8} {"% busy":>7}')
+    for name, value in times.items():
+        print(f'{name:<32} {value:7.3f} {1e6 * value / pairs:8.1f} {100 * value / busy:6.1f}%')
+    print(f'(stats in {path}: python -m pstats {path})')
+    return {'pairs': pairs, 'spin_s': spin, 'wait_s': wait, 'busy_s': busy, 'stages_s': times}
 
 
 def main(argv=None) -> int:
@@ -207,54 +403,39 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--quick', action='store_true', help='fewer blocks, one latency run')
     parser.add_argument('--json', metavar='FILE', help='also write the numbers as JSON')
+    parser.add_argument('--load', choices=tuple(LOADS), default='both',
+                        help='measure on the quiet machine, with the CPU-bound competitor '
+                             'running, or both side by side (default)')
+    parser.add_argument('--profile', metavar='FILE',
+                        help='add a loaded latency run with the node under cProfile; '
+                             'write the stats to FILE and print the time per stage')
     parser.add_argument('--role', choices=('publisher', 'subscriber'), help=argparse.SUPPRESS)
     parser.add_argument('--width', type=int, help=argparse.SUPPRESS)
     parser.add_argument('--pairs', type=int, help=argparse.SUPPRESS)
     parser.add_argument('--fs', type=float, help=argparse.SUPPRESS)
     parser.add_argument('--paced', action='store_true', help=argparse.SUPPRESS)
     parser.add_argument('--expect', type=int, help=argparse.SUPPRESS)
+    parser.add_argument('--baseline', action='store_true',
+                        help='also run the node with an executor round per message and the '
+                             'default time slices (as before), side by side')
     args = parser.parse_args(argv)
     if args.role:
         print(json.dumps(_publish(args) if args.role == 'publisher' else _subscribe(args)))
         return 0
     domain = isolate_ros()
+    variants = tuple(VARIANTS) if args.baseline else ('deployed',)
+    setups = [(variant, load) for load in LOADS[args.load] for variant in variants]
     report = {'throughput': [], 'latency': [], 'load_average': os.getloadavg()[0]}
-    lost = False
-    print(f'compensation node, separate processes (ROS_DOMAIN_ID '
-          f'{domain}, load average {os.getloadavg()[0]:.2f} on '
-          f'{os.cpu_count()} cores); publisher as fast as the node takes the blocks')
-    print(f'{"width":>6} {"pairs":>6} | {"MS/s":>7} {"blocks/s":>9} | {"node CPU":>8} | '
-          f'{"received":>17}')
+    print(f'compensation node, separate processes (ROS_DOMAIN_ID {domain}, load average '
+          f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores); "loaded": one CPU-bound '
+          f'competitor process runs (comp. = its CPU)')
     with tempfile.TemporaryDirectory(prefix='bench_compensation_node_') as tmp:
-        for width, pairs in (QUICK if args.quick else FULL).items():
-            run = _run(width=width, pairs=pairs, fs=1e6, paced=False, tmp=Path(tmp))
-            rate, missing = _throughput(run)
-            lost |= missing
-            got = run['received']['samples']['pressure/compensated']
-            print(f'{width:6d} {pairs:6d} | {rate / 1e6:7.2f} {rate / width:9.0f} | '
-                  f'{100 * run["cpu"]:7.0f}% | {got:8d}/{width * pairs:<8d}')
-            report['throughput'].append({'width': width, 'pairs': pairs, 'samples_per_s': rate,
-                                         'node_cpu': run['cpu'], 'lost': missing})
-        print(f'\nlatency at {LATENCY_FS / 1e6:g} MS/s in real time (stamp = send time on the '
-              f'sample grid; first {_WARMUP_S:g} s left out)')
-        print(f'{"width":>6} {"blocks":>6} | {"publish - stamp (ms)":>27} | '
-              f'{"receive - stamp (ms)":>27} | {"node CPU":>8}')
-        print(f'{"":>6} {"":>6} | {"median":>8} {"p99":>8} {"max":>9} | '
-              f'{"median":>8} {"p99":>8} {"max":>9} |')
-        for width, seconds in (QUICK_LATENCY if args.quick else FULL_LATENCY):
-            pairs = round(seconds * LATENCY_FS / width)
-            run = _run(width=width, pairs=pairs, fs=LATENCY_FS, paced=True, tmp=Path(tmp))
-            lost |= _throughput(run)[1]
-            published, received = _latencies(run)
-            cells = [f'{np.median(x):8.3f} {np.percentile(x, 99):8.3f} {np.max(x):9.3f}'
-                     for x in (published, received)]
-            print(f'{width:6d} {published.size:6d} | {cells[0]} | {cells[1]} | '
-                  f'{100 * run["cpu"]:7.0f}%')
-            report['latency'].append({
-                'width': width, 'blocks': int(published.size), 'node_cpu': run['cpu'],
-                **{f'{name}_ms': {'median': float(np.median(x)),
-                                  'p99': float(np.percentile(x, 99)), 'max': float(np.max(x))}
-                   for name, x in (('publish', published), ('receive', received))}})
+        lost = _measure_throughput(setups, QUICK if args.quick else FULL, Path(tmp), report)
+        lost |= _measure_latency(setups, QUICK_LATENCY if args.quick else FULL_LATENCY,
+                                 Path(tmp), report)
+        if args.profile:
+            report['profile'] = _profile(Path(args.profile), Path(tmp),
+                                         seconds=QUICK_LATENCY[0][1])
     print(f'MS/s: million samples per second per stream (acceleration 3 rows, pressure 1); '
           f'CPU in % of one core; load average now {os.getloadavg()[0]:.2f}')
     if args.json:
@@ -263,4 +444,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == '__main__':
+    if '--ros-args' in sys.argv:  # the executor-per-message variant, run as a node process
+        sys.exit(_variant_node(sys.argv))
     sys.exit(main())

@@ -6,11 +6,13 @@ writer's history stays full for its blocking time (100 ms); the message is then 
 :func:`publish_raw` retries, which is what makes keep-all lossless from Python.
 
 :func:`take_queued` takes what raw subscriptions (:func:`subscribe_blocks`) already hold,
-faster than an executor round; :func:`merge_stream_infos` keeps the raw streams' rates.
+faster than an executor round, and :class:`BlockWaitSet` waits for them without one;
+:func:`merge_stream_infos` keeps the raw streams' rates.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
 import threading
@@ -29,6 +31,7 @@ from .errors import NodeError
 from .qos import BLOCK_QOS
 
 __all__ = [
+    'BlockWaitSet',
     'DEFAULT_NAMESPACE',
     'finish_publishing',
     'merge_stream_infos',
@@ -209,6 +212,43 @@ def take_queued(handlers: Sequence[tuple[Subscription, Callable[[bytes, dict], N
         if taken == before:
             break
     return taken
+
+
+class BlockWaitSet:
+    """
+    Wait for messages on a few subscriptions (the block inputs), with one reused wait set.
+
+    An executor round rebuilds its wait set from every entity of the node (subscriptions,
+    timers, the parameter services...) before it waits, and hands out one callback: in
+    the compensation node that was about half of the busy time per block pair at 1 000
+    pairs/s. This waits on the given subscriptions alone; the caller takes their messages
+    itself (:func:`take_queued`) and still spins the executor now and then for the rest.
+
+    Args:
+        node: The node owning the subscriptions (its context).
+        subscriptions: The subscriptions to wait on.
+
+    """
+
+    def __init__(self, node: Node, subscriptions: Sequence[Subscription]):
+        self._subscriptions = list(subscriptions)
+        self._context = node.context
+        with self._context.handle:
+            self._wait_set = _rclpy.WaitSet(len(self._subscriptions), 0, 0, 0, 0, 0,
+                                            self._context.handle)
+
+    def wait(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` seconds; return whether a subscription has a message."""
+        with contextlib.ExitStack() as handles:
+            for subscription in self._subscriptions:
+                handles.enter_context(subscription.handle)
+            handles.enter_context(self._context.handle)
+            wait_set = self._wait_set
+            wait_set.clear_entities()
+            for subscription in self._subscriptions:
+                wait_set.add_subscription(subscription.handle)
+            wait_set.wait(max(0, int(timeout * 1e9)))
+            return bool(wait_set.get_ready_entities('subscription'))
 
 
 def subscribe_blocks(node: Node, topics: Sequence[str], on_block: Callable[[str, bytes], None],
