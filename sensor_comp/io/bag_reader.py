@@ -724,7 +724,7 @@ class _StreamFiller:
         self.data = grown
 
     def stream(self, info: StreamInfo) -> Stream:
-        """Return the stream (``info``: its final description)."""
+        """Return the assembled stream, described by ``info`` (the final description)."""
         if self.t0 is None:
             return assemble(info, (), name=self.sequence.name)  # raises: no samples
         return Stream(info, self.t0, self.data[:, :self.n], tuple(self.gaps))

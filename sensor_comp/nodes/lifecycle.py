@@ -87,10 +87,11 @@ def spin_until(executor: Executor, stop: threading.Event, *,
         progress: A count that grows while messages are handled (e.g. blocks received):
             after the stop, spinning goes on while it grows, at most 10 s.
         wait: With ``take``, the fast path for a node's busy subscriptions: ``wait(timeout)``
-            waits for their messages (e.g. :meth:`~.transport.BlockWaitSet.wait`) and
-            ``take()`` handles those queued; the executor then runs one round every
-            :data:`ROUND_S` (timers, the other subscriptions, services) instead of one per
-            message.
+            waits for their messages (e.g. :meth:`~.transport.BlockWaitSet.wait`); the
+            executor then runs one round every :data:`ROUND_S` (timers, the other
+            subscriptions, services) instead of one per message.
+        take: Handle the messages queued on those subscriptions (e.g. with
+            :func:`~.transport.take_queued`).
 
     """
     context = executor.context
