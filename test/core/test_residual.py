@@ -492,3 +492,17 @@ def test_leftover_is_noise_or_says_where_and_what_it_is():
     assert 'in the tail' in found.describe()
     doc = json.loads(json.dumps(found.to_dict()))
     assert doc['where'] == 'tail' and doc['consistent'] is False
+
+
+def test_the_package_exports_its_api_and_each_module_its_own():
+    import importlib
+    import pkgutil
+
+    import sensor_comp.core.residual as package
+    for name in package.__all__:
+        assert getattr(package, name) is not None, name
+    assert callable(package.analyse) and package.ALPHA == ALPHA
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f'{package.__name__}.{info.name}')
+        assert module.__doc__ and module.__all__, info.name
+        assert all(hasattr(module, name) for name in module.__all__), info.name

@@ -185,7 +185,7 @@ def _cross(w: _Windows, notes: list[str]) -> dict[str, Correlation]:
 
 
 def _noise_level(w: _Windows, shot_results: Sequence[ShotResidual], comparison: Comparison,
-                 notes: list[str]) -> dict[str, float]:
+                 notes: list[str]) -> dict[str, float | int]:
     """Return the analysis's noise-level fields: σ, residual RMS, ratios and tolerances."""
     sigma = math.sqrt(pooled_square([s.noise_sigma_pa for s in shot_results], w.pre))
     white_sigma = math.sqrt(pooled_square([s.white_sigma_pa for s in shot_results], w.pre))
