@@ -255,14 +255,19 @@ def _label(variant: str, load: bool) -> str:
     return f'{variant} {"loaded" if load else "quiet"}'
 
 
-def _measure_throughput(setups, sizes, tmp: Path, report: dict) -> bool:
+def _order(setups: list, repeats: int) -> list:
+    """Return ``setups`` ``repeats`` times, every second time in reverse order."""
+    return [setup for k in range(repeats) for setup in (setups[::-1] if k % 2 else setups)]
+
+
+def _measure_throughput(setups, sizes, tmp: Path, report: dict, *, repeats: int = 1) -> bool:
     """Print the throughput table (one row per setup); return whether a sample was lost."""
     lost = False
     print('throughput: the publisher sends as fast as the node takes the blocks')
     print(f'{"width":>6} {"pairs":>6} {"node, machine":>17} | {"MS/s":>6} | {"node":>4} '
           f'{"comp.":>5} | {"received":>17}')
     for width, pairs in sizes.items():
-        for variant, load in setups:
+        for variant, load in _order(setups, repeats):
             run = _run(width=width, pairs=pairs, fs=1e6, paced=False, tmp=tmp, load=load,
                        variant=variant)
             rate, missing = _throughput(run)
@@ -280,7 +285,7 @@ def _measure_throughput(setups, sizes, tmp: Path, report: dict) -> bool:
     return lost
 
 
-def _measure_latency(setups, runs, tmp: Path, report: dict) -> bool:
+def _measure_latency(setups, runs, tmp: Path, report: dict, *, repeats: int = 1) -> bool:
     """Print the latency table (one row per setup); return whether a sample was lost."""
     lost = False
     print(f'\nlatency at {LATENCY_FS / 1e6:g} MS/s in real time (stamp = send time on the '
@@ -294,7 +299,7 @@ def _measure_latency(setups, runs, tmp: Path, report: dict) -> bool:
           ' | '.join(f'{"median":>7} {"p99":>7} {"max":>8}' for _ in kinds) +
           f' | {"node":>4} {"comp.":>5}')
     for width, seconds in runs:
-        for variant, load in setups:
+        for variant, load in _order(setups, repeats):
             pairs = round(seconds * LATENCY_FS / width)
             run = _run(width=width, pairs=pairs, fs=LATENCY_FS, paced=True, tmp=tmp,
                        load=load, variant=variant)
@@ -415,6 +420,9 @@ def main(argv=None) -> int:
     parser.add_argument('--fs', type=float, help=argparse.SUPPRESS)
     parser.add_argument('--paced', action='store_true', help=argparse.SUPPRESS)
     parser.add_argument('--expect', type=int, help=argparse.SUPPRESS)
+    parser.add_argument('--repeats', type=int, default=1, metavar='N',
+                        help='make every run N times, every second time in reverse order of '
+                             'the setups (the machine\'s other load drifts)')
     parser.add_argument('--baseline', action='store_true',
                         help='also run the node with an executor round per message and the '
                              'default time slices (as before), side by side')
@@ -430,9 +438,10 @@ def main(argv=None) -> int:
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores); "loaded": one CPU-bound '
           f'competitor process runs (comp. = its CPU)')
     with tempfile.TemporaryDirectory(prefix='bench_compensation_node_') as tmp:
-        lost = _measure_throughput(setups, QUICK if args.quick else FULL, Path(tmp), report)
+        lost = _measure_throughput(setups, QUICK if args.quick else FULL, Path(tmp), report,
+                                   repeats=args.repeats)
         lost |= _measure_latency(setups, QUICK_LATENCY if args.quick else FULL_LATENCY,
-                                 Path(tmp), report)
+                                 Path(tmp), report, repeats=args.repeats)
         if args.profile:
             report['profile'] = _profile(Path(args.profile), Path(tmp),
                                          seconds=QUICK_LATENCY[0][1])
