@@ -79,11 +79,12 @@ def run(args: argparse.Namespace) -> int:
 
     print('\n3. diagnose: which physical effect is missing?')
     diagnosis = diagnose([calibration], [validation], base=base, progress=progress)
+    effect, lines = next_step(diagnosis)
+    print(f'   {lines[0]}')  # the verdict, then the ranking, why and what next
     for entry in diagnosis.ranking[:3]:
         print(f'   {entry.effect:24s} score {entry.score:.3f}'
               f'{"  (significant)" if entry.significant else ""}')
-    effect, lines = next_step(diagnosis)
-    for line in lines:
+    for line in lines[1:]:
         print(f'   {line}')
     if effect is None:
         return 0
