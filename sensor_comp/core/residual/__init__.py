@@ -1,16 +1,9 @@
 """
-Residual analysis: whether what a model leaves over the shot windows is noise, and if not, what.
+Residual analysis: is what a model leaves over the shot windows noise, and if not, what.
 
-One concept per module, in the order of the analysis:
-
-- :mod:`.analysis`: :func:`analyse`, the steps in order, and the lag range;
-- :mod:`.dynamics`: the model's ``a_z`` path, resonances and ringing time;
-- :mod:`.statistics`: pooled whiteness and independence tests, noise-level tolerances;
-- :mod:`.probes`: the probe catalogue (generic and declared by the effects) and its fits;
-- :mod:`.localisation`: energy per segment and per shot, the amplitude trend;
-- :mod:`.spectrum`: the pooled residual spectrum and its significant peaks;
-- :mod:`.results`: the parts of the result; :mod:`.verdict`: the whole result
-  (:class:`ResidualAnalysis`) and its verdict; :mod:`.sentences`: its summary in words.
+One concept per module: :mod:`.analysis` (the steps), :mod:`.dynamics`, :mod:`.statistics`,
+:mod:`.probes`, :mod:`.localisation`, :mod:`.spectrum`, :mod:`.results`, :mod:`.verdict`,
+:mod:`.sentences`. Design and measured numbers: ``doc/residual.md``.
 """
 
 from .analysis import analyse, DEFAULT_MAX_LAG_S, MAX_LAG_LIMIT_S, MIN_LAGS

@@ -1,14 +1,8 @@
 """
 The residual analysis of a model over shot windows, step by step.
 
-:func:`analyse` simulates the model from rest in every window with the baselines removed
-(as :func:`~sensor_comp.core.compare.compare` does) and studies the residual ``ε = y − ŷ``
-over the windows only: the noise before the trigger, whiteness and independence
-(:mod:`~sensor_comp.core.residual.statistics`), probes, localisation and spectrum.
-
-The default lag range L spans the model's slowest time constant, at least 0.5 ms and at
-most 2 ms, and never fewer than MATLAB's 25 lags: those are 25 µs at 1 MS/s, an eighth of a
-period of a 5 kHz mode, where a coloured or delayed residual would show nothing.
+:func:`analyse` simulates the model from rest in every window and studies ``ε = y − ŷ``:
+noise, whiteness, independence, probes, localisation, spectrum (see ``doc/residual.md``).
 """
 
 from __future__ import annotations
@@ -64,26 +58,23 @@ def analyse(model: Model, recording: Recording, shots: Sequence[Shot], *,
             comparison: Comparison | None = None,
             max_lag: int | None = None) -> ResidualAnalysis:
     """
-    Analyse the residual of a model over shot windows (see the module docs).
+    Analyse the residual of a model over shot windows.
 
     Args:
-        model: The model (a :class:`~sensor_comp.core.model.Model`, possibly with effect
-            inputs; the probes use its ``a_z`` path).
+        model: The model; the probes use its ``a_z`` path.
         recording: Pressure and acceleration.
         shots: The shots to analyse, normally the validation shots.
-        comparison: The model's :class:`~sensor_comp.core.compare.Comparison` on these
-            shots, to reuse its simulation; computed when None.
-        max_lag: Lag range L in samples; default: the model's slowest time constant,
-            between 0.5 and 2 ms (and at least 25 lags), at most a quarter of the shortest
-            window.
+        comparison: The model's comparison on these shots, to reuse; computed when None.
+        max_lag: Lag range L in samples; default: the slowest time constant within
+            0.5–2 ms (at least 25 lags), at most a quarter of the shortest window.
 
     Returns:
         The analysis.
 
     Raises:
-        ResidualError: With no shot, a comparison on other shots or of denoised pressure, a
-            bad ``max_lag``, or windows without a pre-trigger to measure the noise on.
-        ShotError: When a window holds missing samples (from :func:`segments`).
+        ResidualError: No shot, a mismatched or denoised comparison, a bad ``max_lag``, or
+            too little pre-trigger to measure the noise on.
+        ShotError: When a window holds missing samples.
         CompensationError: When the model's rate differs from the recording's.
 
     """

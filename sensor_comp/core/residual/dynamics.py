@@ -1,10 +1,4 @@
-"""
-The model's dynamics as the residual analysis reads them: a_z path, resonances, ringing.
-
-The ringing segment after a pulse lasts ``5/(ζ 2π f_n)`` (2 ms for an overdamped model); the
-default lag range spans the slowest time constant (the dominant mode's envelope
-``1/(ζ 2π f_n)`` or the slowest real pole).
-"""
+"""The model's dynamics as the residual analysis reads them: a_z path, resonances, ringing."""
 
 from __future__ import annotations
 
@@ -87,12 +81,7 @@ def model_resonances(model: Model) -> tuple[tuple[float, float], ...]:
 
 
 def ringing_time_s(model: Model) -> float:
-    """
-    Return the length of the ringing segment after a pulse for ``model``, s.
-
-    :data:`RINGING_TIME_CONSTANTS` envelope time constants ``1/(ζ 2π f_n)`` of its dominant
-    mode, or :data:`OVERDAMPED_RINGING_S` for a model without one.
-    """
+    """Return the ringing segment after a pulse, s: 5 envelope time constants, or 2 ms."""
     return dynamics(model).ringing_s
 
 

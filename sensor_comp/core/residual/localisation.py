@@ -1,12 +1,4 @@
-"""
-Where the residual lies: energy per segment and per shot, and its growth with amplitude.
-
-Segments: pre-trigger, pulse, ringing (see :mod:`~sensor_comp.core.residual.dynamics`),
-tail, pooled and per shot. Per shot the pre-trigger σ (MAD, robust), the sample-to-sample σ
-(MAD of first differences / √2, blind to hum and drift) and the excess residual over the
-pulse and ringing with the noise power removed; the excess against the shot's peak
-acceleration in log-log has slope 1 for a gain error and 2 for a quadratic nonlinearity.
-"""
+"""Where the residual lies: energy per segment and per shot, and its growth with amplitude."""
 
 from __future__ import annotations
 
@@ -61,12 +53,7 @@ def localise(shots: Sequence[Shot], e: Sequence[np.ndarray], bounds: Sequence[tu
 
 
 def _excess(w: np.ndarray, bounds: tuple, noise: NoiseModel) -> tuple[float, float]:
-    """
-    Return a window's excess RMS over the pulse and ringing and its log variance (or NaNs).
-
-    The energy above the noise power, per pulse sample; its variance is the noise-only term
-    with Bartlett's factor plus the signal × noise term. NaN unless significant.
-    """
+    """Return a window's excess RMS over pulse and ringing and its log variance (or NaNs)."""
     _, onset, end, ring_end, _ = bounds
     sigma2 = noise.mean_square
     active = w[onset:ring_end]

@@ -1,21 +1,8 @@
 """
 Residual probes: how much of the residual candidate regressors explain, and beyond noise.
 
-A sign-symmetric nonlinearity (``a|a|``, ``a²``) barely shows in the cross-correlation with
-a zero-mean input, so the residual is projected on candidate regressors *passed through the
-identified dynamics* G (the model's ``a_z`` path) and on a few non-dynamic ones
-(:data:`PROBES`: the effects' declared probes, :mod:`sensor_comp.core.effects.probe`, and
-:data:`GENERIC_PROBES`). Every probe but ``gain`` is fitted together with the model output ŷ
-(a gain correction, as re-identification would make). Per probe: the fraction of the
-residual energy explained, and a Wald test of its coefficients beyond ŷ and a constant per
-window (the baseline removed from each window carries the mean of its pre-trigger noise).
-The test's covariance ``Var(X'ε) = Σ_j R_n(j) C_X(j)`` uses the AR model of the noise
-before the trigger (:func:`~sensor_comp.core.noise_floor.noise_model`): coloured noise
-lowers the effective sample size without the structured residual widening its own band.
-
-Probe significance assumes the model was not fitted on these windows; a model fitted on
-about as many calibration samples carries its own parameter error into the ``gain`` and
-``delay`` probes (their χ² can then run up to twice the noise-only value).
+Each probe is fitted with ŷ (a gain correction) and Wald-tested against the pre-trigger
+noise model (see ``doc/residual.md``).
 """
 
 from __future__ import annotations
@@ -74,11 +61,8 @@ def _probe_stats(e: Sequence[np.ndarray], x: Sequence[np.ndarray], noise: NoiseM
     """
     Return ``(fraction, fraction alone, Wald χ², dof, coefficients)`` of regressors ``x``.
 
-    ``x`` holds one ``(k, n)`` block per window. With ``nuisance`` (the model output) the
-    fraction and coefficients are those of the joint least-squares fit; without, the
-    probe stands alone. The Wald test is of ``x`` beyond the nuisance *and a constant per
-    window* (Frisch–Waugh): the baseline removed from each window carries the mean of the
-    pre-trigger noise, an offset that slow regressors would otherwise mistake for signal.
+    ``x`` holds one ``(k, n)`` block per window; the Wald test is beyond ``nuisance`` and a
+    constant per window (the baselines carry the pre-trigger noise's mean).
     """
     sizes = [w.size for w in e]
     splits = np.cumsum(sizes)[:-1]

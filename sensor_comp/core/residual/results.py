@@ -1,9 +1,4 @@
-"""
-The parts of a residual analysis: correlations, probes, segments, shots, spectrum, trend.
-
-Frozen value types, each with a ``to_dict`` of JSON-ready numbers (no arrays); the whole
-analysis that holds them is :class:`~sensor_comp.core.residual.verdict.ResidualAnalysis`.
-"""
+"""The parts of a residual analysis, frozen, each with a JSON-ready ``to_dict`` (no arrays)."""
 
 from __future__ import annotations
 
@@ -42,14 +37,12 @@ class Correlation:
     A pooled correlation function of the residual with its 99 % bands.
 
     Args:
-        name: What the residual is correlated with (``'residual'`` for the
-            autocorrelation, else the input channel, e.g. ``'a_z'``).
+        name: ``'residual'`` (autocorrelation) or the input channel, e.g. ``'a_z'``.
         lags: Lags in samples; ``values[i]`` is ``Σ ε(t + lags[i]) u(t)``, normalised.
         values: Normalised correlation.
         band: Per-lag 99 % half-width (MATLAB's band).
         family_band: Half-width for all tested lags together (1 % family-wise).
-        bartlett_factor: ``Σ_j ρ_ε(j) ρ_u(j)``, the factor that widens the white-noise band
-            (1 for the autocorrelation).
+        bartlett_factor: ``Σ_j ρ_ε(j) ρ_u(j)``, widening the white band (1 for autocorr.).
         worst_lag: Tested lag with the largest ``|value|/band``.
         worst_ratio: That ``|value|/band`` (above 1: outside the per-lag band).
         passed: Every tested lag lies inside ``family_band``.
@@ -83,24 +76,15 @@ class Probe(NamedTuple):
     """
     How much of the residual one candidate regressor explains, and whether beyond noise.
 
-    The first three fields are the ``(fraction explained, statistic, p-value)`` triple.
-    Every probe but ``gain`` is judged together with the model output ŷ (a gain
-    correction), as re-identifying with the term would: an identified model has already
-    absorbed the part of the term that looks like a gain (for ``a|a|`` most of it).
-
     Args:
-        fraction: Fraction of the residual energy the probe and a gain correction explain
-            together (least squares over all windows).
-        statistic: Wald χ² of the probe's coefficients beyond the gain correction, against
-            the noise measured before the triggers.
+        fraction: Residual energy share the probe and a gain correction explain together.
+        statistic: Wald χ² of the probe beyond the gain correction, against pre-trigger noise.
         p_value: Probability of that χ² or more from noise alone (grid searches included).
-        significant: ``p_value`` below :data:`~sensor_comp.core.residual.ALPHA` over the number
-            of probes.
+        significant: ``p_value`` below ``ALPHA`` over the number of probes.
         dof: Number of coefficients.
-        fraction_alone: Fraction of the residual energy the probe explains on its own.
-        coefficients: The probe's least-squares coefficients, one per regressor.
-        parameters: Physical reading of the coefficients (NaN where the sign makes no
-            physical sense), e.g. ``{'delay_us': 12.1}``.
+        fraction_alone: Residual energy share the probe explains on its own.
+        coefficients: Least-squares coefficients, one per regressor.
+        parameters: Physical reading (NaN where the sign is unphysical), e.g. ``delay_us``.
 
     """
 
@@ -162,11 +146,9 @@ class ShotResidual:
         peak_g: Its peak axial acceleration in g (sign kept).
         width_ms: Its pulse width in ms.
         noise_sigma_pa: Pre-trigger σ of the residual (MAD), Pa.
-        white_sigma_pa: Sample-to-sample σ in the pre-trigger (MAD of first differences
-            over √2), Pa.
+        white_sigma_pa: Pre-trigger sample-to-sample σ (MAD of differences / √2), Pa.
         rms_pa: Residual RMS over the window, Pa.
-        excess_rms_pa: Residual energy over the pulse and ringing with the noise power
-            removed, per pulse sample, square-rooted (Pa); NaN when not above the noise.
+        excess_rms_pa: RMS above the noise over pulse and ringing, Pa; NaN when not above.
         segments: Energy per segment of this window.
         onset: Pulse onset in window samples.
         end: Pulse end in window samples.
@@ -231,7 +213,7 @@ class ResidualSpectrum:
     Args:
         f: Frequencies in Hz.
         psd: One-sided spectral density, Pa²/Hz.
-        floor: Median of ``psd`` above 0 Hz (the noise level when most bins hold noise).
+        floor: Median of ``psd`` above 0 Hz.
         threshold: A peak must exceed ``threshold × floor`` (χ² level, Bonferroni over bins).
         resolution_hz: Bin spacing (``fs/nperseg``).
         peaks: Significant peaks, strongest first.
@@ -262,13 +244,13 @@ class AmplitudeTrend:
 
     Args:
         exponent: Fitted log-log slope (1: gain error, 2: quadratic nonlinearity), or None.
-        stderr: Its standard error (scaled up by the scatter when it exceeds the noise).
+        stderr: Its standard error.
         ci95: 95 % confidence interval of the exponent, or None.
         peak_g: Peak acceleration of every shot, g.
         excess_rms_pa: :attr:`ShotResidual.excess_rms_pa` of every shot.
         used: Which shots the fit used (excess significantly above the noise).
         reason: Why there is no exponent (empty when there is one).
-        scale_pa: The fitted law's excess at 1 g: ``excess = scale_pa · |g|^exponent``.
+        scale_pa: The fitted excess at 1 g.
 
     """
 

@@ -1,10 +1,4 @@
-"""
-The residual analysis in words: one sentence per finding, for its summary.
-
-Each function words one part of the analysis (:mod:`~sensor_comp.core.residual.results`);
-:meth:`~sensor_comp.core.residual.verdict.ResidualAnalysis.summary` picks the findings
-that hold and puts them in order, the verdict first.
-"""
+"""The residual analysis in words: one sentence per finding, for its summary."""
 
 from __future__ import annotations
 

@@ -1,10 +1,4 @@
-"""
-The pooled Welch spectrum of the residual windows and its significant peaks.
-
-A peak must exceed the χ² level of the pooled segments (Bonferroni over the bins) above
-the median level; each is flagged when the model resonates there (a mode it gets wrong)
-or not (a mode or disturbance it lacks).
-"""
+"""The pooled Welch spectrum of the residual windows and its significant peaks."""
 
 from __future__ import annotations
 

@@ -1,26 +1,8 @@
 """
-Pooled correlation tests of the residual and its noise-level tolerances.
+Pooled whiteness and independence tests of the residual, and its noise-level tolerances.
 
-Every sum runs per window and is pooled (sum of per-window products over the sum of
-energies): no product ever straddles two windows.
-
-- **Whiteness** (MATLAB ``resid``): ``r_ε(k) = R_ε(k)/R_ε(0)`` for lags 0..L with the 99 %
-  band ``2.58 √(Σ_w (n_w − k))/N`` of a white residual; ``passed`` tests all L lags at once
-  (Šidák-corrected band, 1 % family-wise false alarms). The residual of a correct model is
-  the pressure noise *plus the accelerometer noise passed through the model*, which the
-  resonance colours; so the residual after the onset is also compared with the residual
-  before the trigger (:func:`matches_pretrigger`), each lag against Bartlett's variance of
-  the *noise's own* autocorrelation (:mod:`sensor_comp.core.noise_floor`).
-- **Independence**: ``r_εu(k) = Σ ε(t+k) u(t)/√(Σε² Σu²)`` for ``k = −L..L``. A shock is
-  short and strongly coloured, so the naive ``±z/√N`` band is far too narrow: the band uses
-  Bartlett's variance of a cross-correlation between two independent series,
-  ``Var r(k) = Σ_j ρ_ε(j) ρ_u(j)/N``, exact for a fixed (non-stationary) input and a
-  stationary residual. A residual that is a function of the input without being correlated
-  with it (``a|a|`` left by the best linear model) has ``E r = 0`` but a larger scatter:
-  the band, built for independence, may then be exceeded by far smaller correlations.
-- **Noise level**: the residual's mean square against the pre-trigger σ² (MAD, robust),
-  with the effective degrees of freedom of the pre-trigger autocorrelation plus the
-  practical allowance :data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE`.
+Sums run per window and are pooled, so no product straddles two windows; the bands are
+Bartlett's (see ``doc/residual.md``).
 """
 
 from __future__ import annotations
@@ -89,17 +71,13 @@ def autocorrelation(windows: Sequence[np.ndarray], *, max_lag: int,
     """
     Return the pooled autocorrelation of a signal cut in windows, lags 0..max_lag.
 
-    ``R(k) = Σ_w Σ_t x_w(t) x_w(t + k)`` over the products inside each window, divided by
-    ``R(0)``. Under whiteness ``r(k)`` has variance ``Σ_w (n_w − k)/N²``; lag 0 is not
-    tested.
-
     Args:
         windows: One 1-D array per window.
         max_lag: Largest lag in samples.
         name: Label of the result.
 
     Returns:
-        The correlation with its per-lag and family-wise 99 % bands.
+        The correlation with its per-lag and family-wise 99 % bands (lag 0 untested).
 
     Raises:
         ResidualError: With no window or a negative lag.
@@ -122,12 +100,7 @@ def cross_correlation(residual: Sequence[np.ndarray], inputs: Sequence[np.ndarra
     """
     Return the pooled residual–input cross-correlation, lags −max_lag..max_lag, with bands.
 
-    ``r(k) = Σ_w Σ_t ε_w(t + k) u_w(t) / √(Σ ε² Σ u²)``, products inside each window only.
-    The band is Bartlett's: for a residual independent of the input,
-    ``Var r(k) = Σ_j ρ_ε(j) ρ_u(j) / N``, exact for a given (non-stationary) input and a
-    stationary residual. The sum runs over ``|j|`` up to twice the lag where ``|ρ_u|``
-    last reaches 0.05 (beyond it the input no longer correlates), at most half the
-    shortest window; ``ρ_ε`` is the residual's own pooled autocorrelation.
+    The band is Bartlett's for a residual independent of the input (``doc/residual.md``).
 
     Args:
         residual: One 1-D residual array per window.
@@ -136,8 +109,7 @@ def cross_correlation(residual: Sequence[np.ndarray], inputs: Sequence[np.ndarra
         name: The input's name.
 
     Returns:
-        The correlation; without input energy nothing is tested (``passed`` is True and
-        the bands are 0).
+        The correlation; without input energy nothing is tested (passed, bands 0).
 
     Raises:
         ResidualError: When windows are missing or do not match in length.
@@ -174,11 +146,7 @@ def matches_pretrigger(e: Sequence[np.ndarray], bounds: Sequence[tuple],
     """
     Return whether the residual after the onsets is correlated like before them.
 
-    ``r_after(k) − r_pre(k)`` of two stretches of the same noise has Bartlett's variance
-    of the noise's own autocorrelation (:meth:`~sensor_comp.core.noise_floor.NoiseModel.
-    autocorrelation_variance`) times ``1/N_after + 1/N_pre``; a difference counts when it
-    is outside its family-wise band and larger than :data:`~sensor_comp.core.noise_floor.
-    PRACTICAL_SHARE` (colour from less structure than that is no missing effect).
+    A lag differs when outside its family-wise Bartlett band and above ``PRACTICAL_SHARE``.
     """
     lag = int(pretrigger.lags[-1])
     if lag < 1:

@@ -1,12 +1,8 @@
 """
-The whole residual analysis: every finding, the verdict they give, and the summary.
+The whole residual analysis, its verdict and its summary.
 
-The residual is *consistent with the noise* when its mean square lies within the
-statistical tolerance of the pre-trigger σ² plus a practical allowance
-(:data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE` of the noise energy), it is white
-(or coloured like the pre-trigger), and no lag of ``a_z`` and no significant probe explains
-that share of the noise energy or more: with hundreds of thousands of samples far smaller
-structure is significant, but no model change is worth it.
+Consistent with the noise: noise-level energy, white (or coloured like the pre-trigger),
+and no relevant ``a_z`` lag or probe (verdict rules in ``doc/residual.md``).
 """
 
 from __future__ import annotations
@@ -48,8 +44,7 @@ class ResidualAnalysis:
         pretrigger_excess: Pre-trigger RMS over ``white_sigma_pa`` (1 for white noise).
         pretrigger_excess_limit: Largest ``pretrigger_excess`` white noise gives (3 σ).
         energy_ratio: Residual mean square over ``noise_sigma_pa²``.
-        energy_tolerance: Largest ``energy_ratio`` noise alone gives (99 %, one-sided),
-            plus the practical allowance :data:`~sensor_comp.core.noise_floor.PRACTICAL_SHARE`.
+        energy_tolerance: Largest ``energy_ratio`` noise gives (99 %), plus the allowance.
         notes: What the user should know (shortened lag range, missing channels, ...).
 
     """
@@ -100,13 +95,7 @@ class ResidualAnalysis:
 
     @property
     def relevant_probes(self) -> list[str]:
-        """
-        Return the significant probes that matter, most residual energy explained first.
-
-        A probe matters when what it explains is at least :data:`~sensor_comp.core.
-        noise_floor.PRACTICAL_SHARE` of the noise energy of the windows: with many samples
-        far smaller structure is significant, but not worth a model change.
-        """
+        """Return the significant probes explaining ``PRACTICAL_SHARE`` of the noise energy."""
         return [n for n in self.significant_probes
                 if self.probes[n].fraction * self.energy_ratio >= PRACTICAL_SHARE]
 
@@ -118,13 +107,7 @@ class ResidualAnalysis:
 
     @property
     def consistent_with_noise(self) -> bool:
-        """
-        Return whether the residual is the noise floor and nothing else that matters.
-
-        Its mean square lies within the tolerance of the pre-trigger σ² (with the practical
-        allowance), it is white or coloured like the pre-trigger noise, no lag of ``a_z``
-        and no probe explains a relevant share of it (:attr:`relevant_probes`).
-        """
+        """Return whether the residual is the noise floor and nothing that matters."""
         return (self.energy_ratio <= self.energy_tolerance
                 and (self.white or self.matches_pretrigger) and not self.relevant_dependence
                 and not self.relevant_probes)
