@@ -34,11 +34,10 @@ wants a whole core all the time; nobody's priority is changed, the node must cop
 the two figures are printed side by side. ``--load quiet`` or ``--load loaded`` makes
 only one of them.
 
-Baseline (``--baseline``): every run is made with three variants of the node, side by
-side: ``executor``, the node as it was before issue 14.4 (an executor round for every
-message not already queued, default time slices); ``waitset``, the block wait set alone;
-``deployed``, the node as it is (block wait set and short time slices). The variants are
-this module run as the node (``_variant_node``).
+Baseline (``--baseline``): every run is made with two variants of the node, side by side:
+``executor``, the node as it was before issue 14.4 (an executor round for every message
+not already queued; this module run as the node, ``_executor_node``), and ``deployed``,
+the node as it is (it waits on its block subscriptions with one reused wait set).
 
 Profile (``--profile FILE``): one more loaded latency run (1 000-sample blocks at 1 MS/s),
 the node under ``cProfile`` (wall time, so the executor's wait counts); the stats go to
@@ -71,12 +70,9 @@ from ._processes import (Competitor, CpuSampler, isolate_ros, NodeProcess, role_
 __all__ = ['main']
 
 _MODULE = 'bench_compensation_node'
-# The environment variable naming the node variant this module runs as (--baseline).
-_VARIANT = 'BENCH_NODE'
 #: ``--baseline``: the node variants run, the one before issue 14.4 first.
-VARIANTS = {'executor': 'an executor round per message, default time slices (before)',
-            'waitset': 'the block wait set, default time slices',
-            'deployed': 'the block wait set and short time slices (the node as it is)'}
+VARIANTS = {'executor': 'an executor round per message (before)',
+            'deployed': 'the block wait set (the node as it is)'}
 #: (block width, block pairs) of the throughput runs: ~1-3 s each.
 FULL = {1000: 6000, 10_000: 1500}
 QUICK = {1000: 1500, 10_000: 300}
@@ -198,7 +194,6 @@ def _run(*, width: int, pairs: int, fs: float, paced: bool, tmp: Path, load: boo
     """Run node, subscriber and publisher once (with the competitor if ``load``)."""
     model = tmp / f'model_{fs:g}.json'
     write_model_file(model, fs)
-    os.environ[_VARIANT] = variant  # read by this module run as the node
     node = NodeProcess('compensation', {'model_file': str(model), 'diagnostics_period': 1.0},
                        log=tmp / 'node.log', profile=profile,
                        module=None if variant == 'deployed' else f'bench.{_MODULE}')
@@ -321,20 +316,19 @@ def _measure_latency(setups, runs, tmp: Path, report: dict, *, repeats: int = 1)
     return lost
 
 
-def _variant_node(argv: list[str]) -> int:
+def _executor_node(argv: list[str]) -> int:
     """
-    Run a variant of the compensation node (``--baseline``), named by ``$BENCH_NODE``.
+    Run the compensation node as it was before issue 14.4 (``--baseline``).
 
-    - ``executor``: the node as it was before :class:`~sensor_comp.nodes.transport.
-      BlockWaitSet` and :func:`~sensor_comp.nodes.lifecycle.request_short_slices`:
-      ``spin_once`` for every message not already queued, the default time slices;
-    - ``waitset``: the node as deployed but with the default time slices.
+    ``spin_once`` for every message not already queued (the executor rebuilds its wait set
+    from all of the node's entities each time), instead of the node's own
+    :class:`~sensor_comp.nodes.transport.BlockWaitSet` loop.
     """
     from rclpy.executors import SingleThreadedExecutor
-    from sensor_comp.nodes import compensation
+    from sensor_comp.nodes.compensation import Compensation
     from sensor_comp.nodes.lifecycle import run_main, spin_until
 
-    def run(node: compensation.Compensation, stop) -> None:
+    def run(node: Compensation, stop) -> None:
         with SingleThreadedExecutor(context=node.context) as executor:
             executor.add_node(node)
             try:
@@ -343,13 +337,7 @@ def _variant_node(argv: list[str]) -> int:
                 executor.remove_node(node)
         node.finish()
 
-    variant = os.environ.get(_VARIANT)
-    if variant == 'executor':
-        return run_main(argv, compensation.Compensation, run)
-    if variant == 'waitset':
-        compensation.request_short_slices = lambda: 0
-        return run_main(argv, compensation.Compensation, compensation.Compensation.run)
-    raise SystemExit(f'{_VARIANT}={variant!r}: no such variant of the node')
+    return run_main(argv, Compensation, run)
 
 
 #: Stages of the node's hot path in a cProfile: (name, [(file suffix, function)], cumulative?)
@@ -424,8 +412,8 @@ def main(argv=None) -> int:
                         help='make every run N times, every second time in reverse order of '
                              'the setups (the machine\'s other load drifts)')
     parser.add_argument('--baseline', action='store_true',
-                        help='also run the node with an executor round per message and the '
-                             'default time slices (as before), side by side')
+                        help='also run the node with an executor round per message (as '
+                             'before), side by side')
     args = parser.parse_args(argv)
     if args.role:
         print(json.dumps(_publish(args) if args.role == 'publisher' else _subscribe(args)))
@@ -454,5 +442,5 @@ def main(argv=None) -> int:
 
 if __name__ == '__main__':
     if '--ros-args' in sys.argv:  # the executor-per-message variant, run as a node process
-        sys.exit(_variant_node(sys.argv))
+        sys.exit(_executor_node(sys.argv))
     sys.exit(main())

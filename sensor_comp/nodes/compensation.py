@@ -79,9 +79,7 @@ subscriptions alone (:class:`~.transport.BlockWaitSet`, one wait set reused) and
 their messages itself; the executor runs one round every 10 ms for the timer, the
 ``stream_info`` and ``model`` subscriptions and the parameter services (an executor round
 per message, which rebuilds its wait set from all of them, was half of the node's busy
-time at 1 000 block pairs/s). It also asks the scheduler for short time slices
-(:func:`~.lifecycle.request_short_slices`; Linux 6.12+, no privilege, the same CPU share):
-a block that arrives while a CPU-bound process runs is taken sooner.
+time at 1 000 block pairs/s).
 """
 
 from __future__ import annotations
@@ -108,7 +106,7 @@ from ..streams import (ACCELERATION, COMPENSATED, INDUCED, PRESSURE_RAW, STREAM_
                        StreamInfo)
 from .diagnostics import DIAGNOSTICS, diagnostics, DIAGNOSTICS_QOS
 from .errors import NodeError
-from .lifecycle import request_short_slices, run_main, spin_until
+from .lifecycle import run_main, spin_until
 from .parameters import check, declare, warn_unknown_parameters
 from .qos import BLOCK_QOS, LATCHED_QOS, latched_qos
 from .transport import (BlockWaitSet, DEFAULT_NAMESPACE, finish_publishing, merge_stream_infos,
@@ -432,7 +430,6 @@ class Compensation(Node):
 
         """
         blocks = BlockWaitSet(self, list(self._inputs.values()))
-        request_short_slices()  # a block preempts a CPU-bound neighbour sooner
         with SingleThreadedExecutor(context=self.context) as executor:
             executor.add_node(self)
             try:

@@ -22,13 +22,10 @@ A second signal interrupts that with ``KeyboardInterrupt``.
 
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import os
-import platform
 from pathlib import Path
 import signal
-import struct
 import tempfile
 import threading
 import time
@@ -43,7 +40,6 @@ from ..errors import SensorCompError
 
 __all__ = [
     'join_callbacks',
-    'request_short_slices',
     'run_main',
     'spin_until',
     'use_fastdds_profile',
@@ -136,51 +132,6 @@ def join_callbacks(executor: Executor) -> None:
     pool = getattr(executor, '_executor', None)  # MultiThreadedExecutor's ThreadPoolExecutor
     if pool is not None:
         pool.shutdown(wait=True)
-
-
-# sched_setattr(2): its system call number, and struct sched_attr up to sched_period.
-_SCHED_SETATTR = {'x86_64': 314, 'aarch64': 274}
-_SCHED_ATTR = '=IIQiIQQQ'
-
-
-def request_short_slices(slice_s: float = 0.0003) -> int:
-    """
-    Ask the scheduler for short time slices for every thread of this process.
-
-    Linux's EEVDF scheduler (6.6+; custom slices since 6.12) gives a task that asks for a
-    shorter slice an earlier virtual deadline: when its message arrives it preempts a
-    CPU-bound process sooner, with the same share of the CPU (fairness is kept, no
-    privilege needed, unlike a higher priority). The DDS threads that receive the
-    messages count as much as the Python thread, so call it once they exist (after the
-    node is created); threads started later inherit it. Elsewhere (another kernel or
-    architecture) it does nothing.
-
-    Args:
-        slice_s: The slice in seconds (the kernel accepts 0.1 ms to 100 ms).
-
-    Returns:
-        The number of threads whose slice was set.
-
-    """
-    number = _SCHED_SETATTR.get(platform.machine())
-    if number is None or not hasattr(os, 'sched_getscheduler'):
-        return 0
-    libc = ctypes.CDLL(None, use_errno=True)
-    done = 0
-    for task in Path('/proc/self/task').iterdir():
-        tid = int(task.name)
-        try:
-            if os.sched_getscheduler(tid) != os.SCHED_OTHER:
-                continue  # a real-time or batch thread keeps what it was given
-            attr = struct.pack(_SCHED_ATTR, struct.calcsize(_SCHED_ATTR), os.SCHED_OTHER, 0,
-                               os.getpriority(os.PRIO_PROCESS, tid), 0, int(slice_s * 1e9),
-                               0, 0)
-        except OSError:
-            continue  # the thread has ended
-        buffer = ctypes.create_string_buffer(attr, len(attr))
-        if libc.syscall(number, tid, buffer, 0) == 0:
-            done += 1
-    return done
 
 
 def use_fastdds_profile() -> None:
