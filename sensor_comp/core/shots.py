@@ -242,7 +242,14 @@ def _polarity(s: np.ndarray, polarity: int | None, where: str) -> int:
         return polarity
     if not np.any(np.isfinite(s)):
         raise ShotError(f'{where}: the axial acceleration holds no finite sample')
-    return 1 if s[np.nanargmax(np.abs(s))] >= 0 else -1
+    magnitude = np.abs(s)  # np.nanargmax, with one temporary instead of two
+    magnitude[np.isnan(magnitude)] = -np.inf
+    return 1 if s[np.argmax(magnitude)] >= 0 else -1
+
+
+def _nanmedian_of_copy(x: np.ndarray) -> float:
+    """Return ``np.nanmedian(x)``, partitioning one copy of ``x`` in place (no second)."""
+    return np.nanmedian(np.array(x, dtype=np.float64), overwrite_input=True)
 
 
 def _pulse_timing(s: np.ndarray, peak: int) -> tuple[float, float, list[str]]:
@@ -458,15 +465,21 @@ def _trigger(recording: Recording, threshold_g: float | None,
              polarity: int | None) -> _Trigger:
     if threshold_g is not None and not threshold_g > 0:
         raise ShotError(f'threshold must be a positive number of g, got {threshold_g!r}')
+    # In place, one channel-sized temporary at a time (the recording's channel may be
+    # hundreds of MB): the values of the plain expressions, bit for bit.
     s = recording.axial / G0
-    s = np.where(np.isfinite(s), s, np.nan)  # an Inf is bad data, not a shock
+    s[~np.isfinite(s)] = np.nan  # an Inf is bad data, not a shock
     dead = dead_channel(recording, pressure=False)
     if dead is not None:
         raise ShotError(dead)
-    s = s - np.nanmedian(s) if np.isfinite(s).any() else s
-    s = s * _polarity(s, polarity, 'recording')
+    if np.isfinite(s).any():
+        s -= _nanmedian_of_copy(s)
+    s *= _polarity(s, polarity, 'recording')
     largest = float(np.nanmax(s))
-    sigma = mad_sigma(s)
+    deviation = s - _nanmedian_of_copy(s)  # mad_sigma(s)
+    np.abs(deviation, out=deviation)
+    sigma = float(1.4826 * np.nanmedian(deviation, overwrite_input=True))
+    del deviation
     automatic = threshold_g is None
     if automatic:
         threshold_g = max(DEFAULT_THRESHOLD_FRACTION * largest, NOISE_FACTOR * sigma)
