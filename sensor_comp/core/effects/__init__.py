@@ -1,12 +1,8 @@
 """
 The catalogue of physical effects the base model can be extended with, one module each.
 
-Every module of this package is imported here, and subclassing
-:class:`~sensor_comp.core.effects.base.Effect` with an ``id`` registers the effect (as in
-the simulator's catalogue), so adding an effect means adding one module (see
-``doc/effects.md``). :data:`EFFECTS` maps each id to its (stateless) instance;
-:data:`PROBES` maps each residual probe the effects declare to its spec;
-:func:`get_effect` looks one up with an error that lists the known ids.
+Every module here is imported and each ``Effect`` subclass with an ``id`` registers itself,
+so adding an effect means adding one module (``doc/effects.md``).
 """
 
 from __future__ import annotations
@@ -79,12 +75,7 @@ def ordered(effect_ids: Iterable[str]) -> tuple[Effect, ...]:
 
 
 def disturbance_trackers(entries: Iterable[Mapping], *, fs: float) -> list:
-    """
-    Return the streaming disturbance estimators of a model's effect entries.
-
-    Entries of unknown or acceleration-driven effects give none (their channels are in the
-    model's input names).
-    """
+    """Return the streaming disturbance estimators of a model's effect entries (if any)."""
     out = []
     for entry in entries:
         effect = EFFECTS.get(entry.get('id'))

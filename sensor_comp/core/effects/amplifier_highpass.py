@@ -1,11 +1,7 @@
 """
 Amplifier high-pass: the charge amplifier's discharge time constant.
 
-Identification model: every input channel passes the first-order high-pass
-``tau s/(tau s + 1)`` (matched pole ``exp(−1/(tau fs))``, zero at ``z = 1``) before the
-sensor dynamics, which is the same as filtering the whole pressure channel: one extra pole
-near 1 and a zero at 1, with ``tau`` found by a bounded scalar search on the output-error
-loss (log scale, 1 ms to 10 s). The sensor polynomials keep their static sensitivity.
+Every input passes ``tau s/(tau s + 1)``, ``tau`` searched (``doc/effects.md``).
 """
 
 from __future__ import annotations

@@ -1,31 +1,8 @@
 """
 The interface of a catalogued physical effect, and what an extended model fit needs.
 
-An effect is a small, self-contained description of something the base model (a 2nd-order
-response to the axial acceleration) leaves out, written for two readers: a test engineer
-(``title``, ``explanation``, ``signature``: the residual it predicts, ``parameters`` with
-units) and the extended fit (:meth:`Effect.extend`: how the model structure changes).
-
-The fit works on a :class:`ModelSpec`. Its input channels are names understood by
-:mod:`sensor_comp.core.inputs` (``'a_z'``, ``'a_x'``, ``'da_z'``, ``'a_z_abs_a_z'``,
-``'peak_a_z(tau_ms={zero_shift.tau_ms})'``...), where ``{key}`` stands for a 1-D nonlinear
-parameter found by a bounded scalar search (:class:`Search`); modifiers (a delay, the
-amplifier's high-pass) apply to every channel, because they act on the whole pressure
-channel. Orders change for extra modes; additive disturbances (not caused by the
-acceleration) bring regressors of their own (:meth:`Effect.columns`), fitted jointly with
-the output-error model.
-
-The physical parameters come back from a fitted model in physical units
-(:meth:`Effect.physical`): those read from the polynomials carry a standard deviation by
-the delta method when the parameter covariance is known (at fit time; the model file
-keeps the numbers in its ``effects`` entry), those found by a scalar search carry the
-curvature of the loss.
-
-Subclassing :class:`Effect` with a class attribute ``id`` registers the effect
-(:func:`registry`), as in the simulator's catalogue (:mod:`sensor_comp.sim.effects`). What
-an effect reads from a fitted model, a fit or a residual analysis is stated by the
-protocols here (:class:`FittedModel`, :class:`FitView`, :class:`ResidualView`), so the
-catalogue imports none of them.
+What an effect reads from a model, a fit or a residual analysis is a protocol here, so the
+catalogue imports none of them. Design notes: ``doc/effects.md``.
 """
 
 from __future__ import annotations
@@ -77,12 +54,7 @@ class EffectError(SensorCompError, ValueError):
 
 
 class FittedModel(Protocol):
-    """
-    What an effect reads from a fitted model (:class:`sensor_comp.core.model.Model`).
-
-    A protocol, not an import: the model file validates effect ids against the catalogue,
-    so the catalogue must not import the model back.
-    """
+    """What an effect reads from a fitted model (a protocol: the model imports the catalogue)."""
 
     fs: float
     inputs: tuple[str, ...]
@@ -168,12 +140,7 @@ class TrendView(Protocol):
 
 @runtime_checkable
 class ResidualView(Protocol):
-    """
-    What an effect's evidence reads from a residual analysis.
-
-    A protocol of :class:`~sensor_comp.core.residual.ResidualAnalysis`: the analysis runs
-    the catalogue's probes, so the catalogue must not import it back.
-    """
+    """What an effect's evidence reads from a residual analysis (which imports the catalogue)."""
 
     @property
     def probes(self) -> Mapping[str, ProbeView]:
@@ -207,8 +174,7 @@ class Search:
         high: Upper bound.
         log: Search the logarithm (time constants spanning decades).
         grid: Points of the coarse grid before the bounded refinement.
-        start: Value used before the first search (to fit a first denominator); default
-            ``low``.
+        start: Value used before the first search; default ``low``.
         exclude: A band ``(low, high)`` of values not to try.
 
     """
@@ -242,19 +208,15 @@ class ModelSpec:
 
     Args:
         bases: Input channel bases; ``{key}`` placeholders are filled by searches.
-        modifiers: ``(modifier, value)`` pairs applied to every channel (see
-            :mod:`sensor_comp.core.inputs`); ``{key}`` placeholders in the value are
-            filled by searches.
+        modifiers: ``(modifier, value)`` pairs applied to every channel (placeholders too).
         nf: Order of the common denominator.
         nb: Numerator coefficients per input.
         nk: Input delay in samples.
         searches: The 1-D nonlinear parameters.
         disturbances: Ids of effects adding regressors that bypass the dynamics.
         fs: Sample rate in Hz (search ranges may depend on it).
-        ringing_khz: Frequency of the strongest ringing after the pulses in the data, kHz
-            (the sensor's own mode, as a rule), or None.
-        slowest_pole_s: Slowest time constant the model's own poles may have, s, or None
-            (besides the bound the effects' searched time constants set).
+        ringing_khz: Strongest ringing after the pulses in the data, kHz, or None.
+        slowest_pole_s: Slowest time constant the model's own poles may have, s, or None.
 
     """
 
@@ -304,11 +266,10 @@ class Outcome:
 
 class Effect:
     """
-    A physical effect the base model leaves out (subclass per module; see the module docs).
+    A physical effect the base model leaves out (the recipe: ``doc/effects.md``).
 
-    Subclasses set the class attributes (``id`` registers the class) and override
-    :meth:`extend` and :meth:`physical`; disturbances (``acceleration_driven = False``)
-    override :meth:`columns` too.
+    Subclasses set the class attributes (``id`` registers) and override :meth:`extend` and
+    :meth:`physical`; disturbances also :meth:`columns`.
     """
 
     #: Canonical id, e.g. ``'channel_delay'``.
@@ -349,8 +310,7 @@ class Effect:
 
         Args:
             model: A model fitted with this effect.
-            covariance: Covariance of ``(a1..ana, b row by row)`` when known (at fit time);
-                otherwise the standard deviations stored in the model's entry are used.
+            covariance: Covariance of ``(a1..ana, b row by row)``; None: the stored stds.
 
         Raises:
             EffectError: When the model lacks this effect's channels or entry.
@@ -376,14 +336,7 @@ class Effect:
         return None
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
-        """
-        Return one human sentence with numbers saying why the data point at this effect.
-
-        Args:
-            analysis: The base model's residual analysis on the validation shots or None.
-            outcome: What the diagnosis measured for this effect.
-
-        """
+        """Return one sentence with numbers saying why the data point at this effect."""
         return sentence([f'{self.title}: the extended model removes '
                          f'{100 * outcome.score:.1f} % of the validation residual energy'
                          f'{parameters_text(self, outcome.parameters)}'])
@@ -392,16 +345,8 @@ class Effect:
         """
         Return why a fit of this effect is no physical reading of it, or None when it is one.
 
-        The improvement a fit brings is evidence of the effect only when the fitted model
-        carries it as the effect: without physical parameters (the fitted model lacks this
-        effect's parts, e.g. a second mode that took over the main one) or with a value
-        searched on a log scale at an end of its range (the data do not tell it, or
-        something else pulls it there: a "resonance" damped as much as allowed, a time
-        constant as short as allowed), the extension fits something else.
-
-        Args:
-            fit: The extended fit with this effect.
-
+        Unreadable parameters or a log-searched value at an end of its range mean the
+        extension fits something else (``doc/effects.md``).
         """
         if self.parameters and not fit.parameters(self.id):
             return 'its physical parameters cannot be read from the fitted model'
@@ -493,24 +438,13 @@ def modifier_value(model: FittedModel, modifier: str) -> float:
 
 
 def dc_delay_s(a: np.ndarray, num: np.ndarray, fs: float) -> float:
-    """
-    Return the group delay at DC of ``num(q)/a(q)`` in s (the lag of its ramp response).
-
-    For polynomials in ``q⁻¹`` it is ``centroid(num) − centroid(a)`` samples, with
-    ``centroid(p) = Σ j p_j / Σ p_j``.
-    """
+    """Return the group delay at DC of ``num(q)/a(q)`` in s: the centroids' difference."""
     j_num, j_den = np.arange(num.size), np.arange(a.size)
     return float((j_num @ num / num.sum() - j_den @ a / a.sum()) / fs)
 
 
 def mechanics_delay_s(a: np.ndarray, fs: float) -> float:
-    """
-    Return the DC group delay of the continuous all-pole system with ``a``'s poles, in s.
-
-    ``Σ −1/s_k`` over the poles ``s_k = fs·ln z_k`` (``2ζ/ω_n`` for one mode). A sampled
-    all-pole system driven by a linearly interpolated input has exactly this delay; what a
-    fitted model has beyond it is a channel delay, what it lacks is a derivative term.
-    """
+    """Return the DC group delay of the continuous all-pole system with ``a``'s poles, s."""
     poles = np.roots(a) if a.size > 1 else np.empty(0)
     return float(sum((-1.0 / (fs * np.log(complex(z)))).real for z in poles))
 
@@ -519,10 +453,7 @@ def excess_delay_s(model: FittedModel, a: np.ndarray, b: np.ndarray, row: int) -
     """
     Return how far the input ``row``'s path lags its mechanics at DC, in s.
 
-    The DC group delay of the path (its ``@delay_us`` included) minus
-    :func:`mechanics_delay_s` of the denominator: a channel delay makes it positive, a
-    derivative (base-strain) term makes it negative, ``−c/S`` for ``p = S·H a + c·da/dt``.
-    An ``@mode`` belongs to the mechanics; an amplifier high-pass is not counted.
+    Positive for a channel delay, ``−c/S`` for a base-strain term (``doc/effects.md``).
     """
     lag = 0.0
     num = np.concatenate([np.zeros(model.nk), b[row]])
@@ -546,9 +477,9 @@ def delta_std(func: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b:
     Return the standard deviation of ``func(a, b)`` by the delta method, or None.
 
     Args:
-        func: A smooth function of the denominator and numerators.
-        a: ``[1, a1, ...]``.
-        b: ``(n_inputs, nb)``.
+        func: A smooth function of ``a = [1, a1, ...]`` and ``b`` ``(n_inputs, nb)``.
+        a: The denominator.
+        b: The numerators.
         covariance: Covariance of ``(a1..ana, b row by row)``, or None.
 
     """

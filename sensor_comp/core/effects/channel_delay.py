@@ -1,20 +1,8 @@
 """
 Channel delay: the pressure channel lags the accelerometer.
 
-Identification model: every input channel is delayed by a fractional number of samples (an
-8-tap Lagrange fractional delay, ``@delay_us`` in :mod:`sensor_comp.core.inputs`), found
-by a coarse grid (10 µs steps, 0 to 200 µs) and a bounded scalar search on the
-output-error loss. The integer delay ``nk`` is set to 0 and the numerator gets ``nf + 1``
-coefficients (lags 0 … nf, the exact structure of a sampled ``nf``-th order system driven
-by a linearly interpolated input).
-
-A free numerator can shift the response by about a sample itself, so the delay is read
-from the whole fitted model rather than from the interpolator alone: the lag of its ramp
-response (DC group delay) beyond that of the continuous mechanics with the same poles
-(:func:`~sensor_comp.core.effects.base.excess_delay_s`), which is exactly the channel
-delay for a sampled delayed all-pole sensor. A lead (negative delay) of more than about a
-sample is not modelled (the interpolator stops at 0). At low frequencies a small delay
-and a base-strain term (a lead of ``c/S``) look alike; they differ at the pulse corners.
+Every input gets a fractional delay, searched; the delay is read from the whole fitted
+path beyond its mechanics (``doc/effects.md``).
 """
 
 from __future__ import annotations

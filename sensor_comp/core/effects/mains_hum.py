@@ -1,25 +1,8 @@
 """
 Mains hum: 50 or 60 Hz pickup and its odd harmonics, not caused by the acceleration.
 
-Identification model: additive regressors, ``sin`` and ``cos`` of ``(2k + 1)·f`` for
-``k = 0 … HARMONICS`` in *recording time* (the sample index from the recording start, so
-the phase runs on across shots), each window's pre-trigger mean removed as from the
-pressure. Every recording gets its own amplitudes and phases (the mains phase is not
-shared between recordings); the frequency, 50 or 60 Hz, is the one that fits the
-calibration shots better. The coefficients are fitted jointly with the output-error model
-(Levenberg–Marquardt on all parameters from the output-error start).
-
-Compensation: the hum is not caused by the acceleration, and its phase in another recording
-(or live) cannot be known from the calibration, so the fitted amplitudes are *not* replayed.
-:class:`LineTracker` estimates the lines from the compensated pressure itself: a lock-in
-per line (quadrature demodulation at the known frequency, two cascaded first-order low
-passes of ``averaging_s``) whose estimate is subtracted. This is sound for stationary
-pickup at a known mains frequency once the tracker has settled (about five averaging times,
-0.5 s by default, after the start of a stream or a gap: until then part of the hum
-remains). It is *not* sound when the mains frequency drifts by more than about
-``1/(2π·averaging_s)`` (1.6 Hz), when the pickup switches on and off within the averaging
-time, or when the model leaves a large residual at the line frequencies (it then leaks
-into the estimate).
+Fitted as a disturbance; compensated by a lock-in :class:`LineTracker`, not by replaying
+the fitted phases (limits in ``doc/effects.md``).
 """
 
 from __future__ import annotations
@@ -55,8 +38,7 @@ def line_columns(freq_hz: float, *, start: int, n: int, fs: float, baseline: int
         start: Recording sample index of the first sample.
         n: Samples.
         fs: Sample rate in Hz.
-        baseline: Leading samples whose mean is removed (the window's pre-trigger); 0
-            removes nothing.
+        baseline: Leading samples whose mean is removed (0: none).
         harmonics: Odd harmonics above the fundamental.
 
     """
@@ -100,7 +82,7 @@ HUM_PROBES = {mains: _hum_probe(mains) for mains in MAINS_HZ}
 
 class LineTracker:
     """
-    Streaming estimate of stationary lines at known frequencies (see the module docs).
+    Streaming lock-in estimate of stationary lines at known frequencies.
 
     Args:
         freqs_hz: Line frequencies in Hz.
@@ -127,10 +109,8 @@ class LineTracker:
         """
         Return the lines' estimate over this block, continuing from the previous blocks.
 
-        Args:
-            residual: ``(w,)`` pressure with the induced part removed, Pa. A non-finite
-                sample gives a non-finite estimate and restarts the averages after it.
-
+        A non-finite sample of ``residual`` (Pa, induced part removed) gives a non-finite
+        estimate and restarts the averages after it.
         """
         x = np.asarray(residual, dtype=np.float64)
         index = self._n + np.arange(x.size, dtype=np.float64)

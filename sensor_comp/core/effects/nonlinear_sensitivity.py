@@ -1,11 +1,7 @@
 """
 Nonlinear sensitivity: the sensitivity changes with the load, ``a (1 + beta |a|/g)``.
 
-Identification model: one more input channel ``a_z·|a_z|`` through the same mechanics (the
-common denominator), so the drive becomes ``a + (beta/g) a|a|`` and ``beta`` is the ratio
-of the two paths' static gains times g. A soft saturation ``a_sat tanh(a/a_sat)`` looks the
-same to first order (``beta ≈ −(a/a_sat)²/3·g/|a|`` near a given level); it is not fitted
-separately.
+One more input ``a_z·|a_z|`` through the common dynamics (``doc/effects.md``).
 """
 
 from __future__ import annotations

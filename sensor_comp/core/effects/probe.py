@@ -1,11 +1,8 @@
 """
 Residual probes: the regressors whose fit to a base model's residual points at one effect.
 
-An effect declares its probes (:attr:`~sensor_comp.core.effects.base.Effect.probes`);
-:mod:`sensor_comp.core.residual` runs every declared probe, plus a few generic ones, on
-the residual of the validation windows. A probe builds its regressors from
-:class:`ProbeData` (the windows' model output and acceleration, the shots' timing) and
-reads physical parameters from the fitted coefficients.
+Effects declare them; :mod:`sensor_comp.core.residual.probes` runs them
+(``doc/residual.md``).
 """
 
 from __future__ import annotations
@@ -60,15 +57,12 @@ class ProbeSpec:
 
     Args:
         name: Key in the residual analysis's ``probes``.
-        tests: The regressor and what it tests (the :data:`~sensor_comp.core.residual.
-            PROBES` table).
+        tests: The regressor and what it tests (the ``PROBES`` table).
         words: The phrase naming it in the analysis's sentences.
         regressors: ``(data, grid value or None) -> one (k, n) block per window``.
         reading: ``(coefficients, grid value or None) -> physical parameters``.
-        grid: Values searched (the one explaining most wins; the p-value is multiplied
-            by their number); empty for none.
-        with_output: Fit it together with ŷ (a gain correction, as re-identification
-            would); only the generic ``gain`` probe stands alone.
+        grid: Values searched (the best wins; the p-value pays for their number).
+        with_output: Fit it together with ŷ; only the generic ``gain`` probe stands alone.
 
     """
 

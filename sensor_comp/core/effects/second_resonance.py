@@ -1,19 +1,8 @@
 """
 Second resonance: a mount or housing mode in parallel with the sensor's own.
 
-Identification model: two more poles and two more numerator coefficients per input. The
-extra pole pair is a *resonance* by construction: every input passes the mode filter
-``@mode=F,Z`` (:mod:`sensor_comp.core.inputs`), whose frequency ``F`` (log grid from 1 kHz
-to ``0.4 fs``) and damping ``Z`` (0.003 to 0.2) are found by bounded scalar searches;
-the numerators (two more coefficients) then set how strongly each input drives it.
-Free extra poles would be too flexible: they also imitate a slow tail (amplifier
-high-pass, zero shift) or a derivative term; and the searched mode stays ±20 % away from
-the sensor's own mode, which it could otherwise take over while the base denominator
-imitates a tail: the base model's lightly damped mode when the diagnosis knows it
-(:data:`~sensor_comp.core.effects.base.BASE_CONTEXT`), else the strongest ringing of the
-data (which may be the second mode itself when the sensor's own lies above the shocks'
-band or the anti-alias filter). The static gain of the second mode relative to
-the main one comes from partial fractions of the ``a_z`` path.
+Every input passes a searched mode filter kept ±20 % away from the sensor's own mode
+(``doc/effects.md``).
 """
 
 from __future__ import annotations
@@ -42,12 +31,7 @@ MAIN_BAND = 0.2
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
-    """
-    Return the complex modes of ``num/a`` as ``(fn_hz, zeta, static_gain)``, largest first.
-
-    ``static_gain`` is the pair's share of the DC gain, ``2 Re(r/(1 − p))`` for the
-    partial fraction ``r/(1 − p q⁻¹)`` and its conjugate.
-    """
+    """Return the complex modes of ``num/a`` as ``(fn_hz, zeta, DC gain share)``, largest first."""
     r, p, _ = signal.residuez(num, a)
     out = []
     for residue, pole in zip(r, p):

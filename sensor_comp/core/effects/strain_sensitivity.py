@@ -1,25 +1,8 @@
 """
 Base-strain sensitivity: pressure read from the housing strain, which follows the jerk.
 
-The pressure is ``p = S·H(s)·a + c·da/dt``. Identification model: one more input, the rate
-of change of the axial acceleration ``da_z`` (m/s³) smoothed by a 2nd-order low pass
-(``@mode=F,0.7`` at ``F = fs/10``, unit gain at DC), with numerators on lags 0 … nf
-(``nk = 0``, ``nb = nf + 1``), so that the strain term can act directly (``B_j = c·F``)
-rather than through the sensor's mechanics. The derivative amplifies the accelerometer
-noise (``√2·σ_a·fs`` per sample): unsmoothed, that noise would make the fit trade the
-strain term for a quieter prediction (errors in the variables, ``c`` too small); the
-low pass (its corner a fifth of the Nyquist frequency) keeps about ``(1/5)³`` of that
-noise's power and delays the jerk by ``2ζ/ω``, 2.2 samples. The corner is fixed, not
-searched: a tunable low pass on a derivative would be a tunable lag, able to imitate a
-channel delay. The strain coefficient is the slope at DC of the whole response to
-``a_z``: the static gain of the ``da_z`` path plus the ``a_z`` path's own lead over its
-mechanics, ``−S·τ_excess`` (:func:`~sensor_comp.core.effects.base.excess_delay_s`: its
-free numerator can take a share of a derivative term), in Pa per (g/ms)
-(1 g/ms = 9806.65 m/s³), the unit hammer pulses are described in.
-
-At the pulse corners the jerk jumps: a sampled model cannot follow a step at a fractional
-sample instant, so the first sample after each corner keeps an error of up to ``c`` times
-the jump. At low frequencies a small channel delay looks like a negative ``c``.
+``p = S·H(s)·a + c·da/dt``: one more input, the smoothed ``da_z`` with a fixed corner at
+``fs/10`` (``doc/effects.md``).
 """
 
 from __future__ import annotations
@@ -54,13 +37,7 @@ JERK_CUTOFF_HZ = 10e3
 
 
 def jerk(a: np.ndarray, fs: float, resonances_hz: tuple[float, ...]) -> np.ndarray:
-    """
-    Return da/dt, low-passed without phase shift at twice the model's highest resonance.
-
-    Differentiating the accelerometer's white noise gives a spectrum rising as f² up to
-    fs/2; the pulse's jerk lies far below the sensor's resonance. The cut keeps it and
-    removes most of the noise (whose energy falls as the cube of the cut-off).
-    """
+    """Return da/dt, low-passed without phase shift at twice the model's highest resonance."""
     if a.size < 2:
         return np.zeros_like(a)
     cutoff = min(JERK_CUTOFF_FACTOR * max(resonances_hz,

@@ -1,10 +1,7 @@
 """
 Transverse sensitivity: the sensor also responds to lateral acceleration.
 
-Identification model: the lateral channels ``a_x`` and ``a_y`` as two more inputs through
-the common dynamics. The ratio of transverse to axial sensitivity is the length of the
-lateral static-gain vector over the axial static gain; its direction in the x-y plane is
-the angle of greatest transverse sensitivity. Needs recordings with lateral channels.
+``a_x`` and ``a_y`` as two more inputs through the common dynamics (``doc/effects.md``).
 """
 
 from __future__ import annotations

@@ -1,14 +1,8 @@
 """
 Zero shift: an offset left behind by each shock, decaying slowly.
 
-Identification model: one more input channel, a leaky peak detector of ``|a_z|``
-(``peak_a_z(tau_ms=T)`` in :mod:`sensor_comp.core.inputs`): it rises with the pulse and
-then decays from the shot's peak with the time constant ``T``, found by a bounded scalar
-search (log scale, 1 ms to 2 s). Its static gain through the common dynamics is the offset
-per unit of peak acceleration, reported in Pa per g. The offset is not a linear response to
-the acceleration, but it is triggered by it and predictable from it causally, so the
-compensation removes it like the induced pressure (it is *acceleration driven* in that
-sense); an offset that does not scale with the shot's peak is not captured.
+One more input, a leaky peak detector of ``|a_z|`` with a searched decay time
+(``doc/effects.md``).
 """
 
 from __future__ import annotations
