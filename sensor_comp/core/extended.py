@@ -729,14 +729,24 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
     scores ``J_t e_t`` summed over Bartlett windows of :func:`_lag_window` samples, per
     shot window) and the between-window estimate ``M_shot`` (``G/(G−1) Σ g_w g_wᵀ``, ``g_w``
     a window's summed score; ``(·)₊`` keeps the positive eigenvalues). So every parameter's
-    variance is at least either. The physical parameters are read again with it; an
-    over-parameterised fit (``A`` singular) keeps infinite deviations.
+    variance is at least either. The physical parameters are read again with it. When
+    ``A`` is singular only because of a searched value (one the polynomials imitate), that
+    value gets no deviation and a note, and the others are given with it held fixed; an
+    over-parameterised fit otherwise keeps infinite deviations.
     """
     windows = list(windows)
     e, jac, offsets, keys = _joint_jacobian(fit, windows)
     covariance = _sandwich(e, jac, offsets)
     io = fit.estimate.covariance.shape[0]
     nd = 0 if fit.disturbance is None else fit.disturbance.coefficients.size
+    notes = []
+    if keys and not np.all(np.isfinite(covariance)):
+        # A searched value the polynomials can imitate: the others with it held fixed.
+        covariance = _sandwich(e, jac[:, :io + nd], offsets)
+        notes = [f'{key} = {fit.values[key]:.4g} cannot be told apart from the base '
+                 f'polynomials by these data (their joint covariance is singular): no '
+                 f'deviation stated; the others are given with it held fixed' for key in keys]
+        covariance = np.pad(covariance, (0, len(keys)), constant_values=np.inf)
     variance = float(e @ e) / max(e.size - jac.shape[1], 1)
     estimate = replace(fit.estimate, covariance=covariance[:io, :io],
                        noise_variance=variance)
@@ -749,7 +759,7 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
     again = _finish([get_effect(e) for e in fit.effects], fit.spec, fit.inputs, estimate,
                     fit.values, value_std, disturbance, fit.fs, fit.denominators)
     return replace(fit, estimate=estimate, value_std=value_std, disturbance=disturbance,
-                   entries=again.entries, notes=again.notes)
+                   entries=again.entries, notes=again.notes + tuple(notes))
 
 
 def _joint_jacobian(fit: ExtendedFit, windows: Sequence[Window]
@@ -822,7 +832,6 @@ def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray) -> np.ndarray
     if singular:
         return np.full((p, p), np.inf)
     rinv = np.linalg.solve(r, np.eye(p))
-    bread = rinv @ rinv.T
     lags = _lag_window(e, offsets)
     within, between = np.zeros((p, p)), np.zeros((p, p))
     for start, stop in zip(offsets[:-1], offsets[1:]):
@@ -839,4 +848,8 @@ def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray) -> np.ndarray
     excess = (between - within + (between - within).T) / 2
     eigenvalues, vectors = np.linalg.eigh(excess)
     meat = within + (vectors * np.maximum(eigenvalues, 0.0)) @ vectors.T
-    return bread @ meat @ bread / np.outer(scale, scale)
+    # As K Kᵀ with K = A⁻¹ M^½: symmetric and positive semi-definite whatever A's condition
+    # (the product A⁻¹ M A⁻¹ loses both when A is poorly conditioned).
+    eigenvalues, vectors = np.linalg.eigh((meat + meat.T) / 2)
+    factor = rinv @ (rinv.T @ (vectors * np.sqrt(np.maximum(eigenvalues, 0.0))))
+    return factor @ factor.T / np.outer(scale, scale)

@@ -229,3 +229,23 @@ def test_the_robust_covariance_of_a_line_in_ar1_noise_is_the_analytic_one():
                       / analytic)
     assert 0.9 < np.median(ratios) < 1.8 and min(ratios) > 0.6, ratios
     assert np.median(whites) < 0.2, whites
+
+
+def test_a_searched_value_the_polynomials_imitate_gets_no_deviation_and_a_note(monkeypatch):
+    # When the joint covariance is singular only through a searched value's column, that
+    # value is not resolved: no deviation and a note; the polynomial-derived parameters keep
+    # their (robust) deviation with it held fixed.
+    from sensor_comp.core import extended as module
+    real = module._sandwich
+    windows = shot_windows([_coloured_rig('zero_shift:pa_per_g=4', 0)])
+    fit = fit_extended(windows, effects=['zero_shift'], fs=FS, nf=2, nb=3, nk=0)
+    columns = fit.estimate.covariance.shape[0]
+    monkeypatch.setattr(module, '_sandwich', lambda e, jac, offsets: (
+        np.full((jac.shape[1],) * 2, np.inf) if jac.shape[1] > columns
+        else real(e, jac, offsets)))
+    again = module.robust_uncertainty(fit, windows)
+    assert again.parameters('zero_shift')['tau_ms'][1] is None
+    assert 0 < again.parameters('zero_shift')['pa_per_g'][1] < math.inf
+    assert any('zero_shift.tau_ms' in note and 'no deviation' in note for note in again.notes)
+    assert again.parameters('zero_shift')['pa_per_g'][0] == fit.parameters('zero_shift')[
+        'pa_per_g'][0]
