@@ -301,27 +301,71 @@ def play(make_player):
 
 
 class NodeLog:
-    """The log lines written so far by the nodes of this process (captured from fd 2)."""
+    """
+    The log lines the nodes of this process write during the test's call phase (fds 1, 2).
 
-    def __init__(self, capfd):
-        self._capfd = capfd
-        self._text = ''
+    Both fds go to a file opened for appending, read through a second descriptor with its
+    own offset: nothing is ever truncated, so a line written while the test reads is kept
+    (pytest's ``capfd.readouterr()`` truncates, and lost such lines at random). pytest
+    re-points the fds at its own capture at each phase, so :func:`pytest_runtest_call`
+    starts this inside the call phase.
+    """
+
+    def __init__(self, path: Path):
+        self._path = path
+        self._saved: dict[int, int] = {}
+        self._source = None
+        self._data = b''
+
+    def start(self) -> None:
+        """Send fds 1 and 2 to the log file."""
+        self._saved = {fd: os.dup(fd) for fd in (1, 2)}
+        sink = os.open(self._path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+        for fd in self._saved:
+            os.dup2(sink, fd)
+        os.close(sink)
+        self._source = os.open(self._path, os.O_RDONLY)
 
     def lines(self) -> list[str]:
         """Return every line logged so far."""
-        out, err = self._capfd.readouterr()
-        self._text += out + err
-        return self._text.splitlines()
+        while self._source is not None and (chunk := os.read(self._source, 1 << 16)):
+            self._data += chunk
+        return self._data.decode(errors='replace').splitlines()
 
     def matching(self, *fragments: str) -> list[str]:
         """Return the lines holding every fragment."""
         return [line for line in self.lines() if all(f in line for f in fragments)]
 
+    def stop(self) -> None:
+        """Give fds 1 and 2 back; copy the log to fd 2 (pytest shows it on failure)."""
+        self.lines()
+        for fd, saved in self._saved.items():
+            os.dup2(saved, fd)
+            os.close(saved)
+        self._saved = {}
+        if self._source is not None:
+            os.close(self._source)
+            self._source = None
+        os.write(2, self._data)
+
+
+@pytest.hookimpl(hookwrapper=True, trylast=True)
+def pytest_runtest_call(item):
+    """Capture the node log inside the call phase (after pytest's capture resumed)."""
+    log = getattr(item, 'funcargs', {}).get('node_log')
+    if log is not None:
+        log.start()
+    try:
+        yield
+    finally:
+        if log is not None:
+            log.stop()
+
 
 @pytest.fixture
-def node_log(capfd):
+def node_log(tmp_path):
     """Return the :class:`NodeLog` of this test (rclpy logs to the process's stderr)."""
-    return NodeLog(capfd)
+    return NodeLog(tmp_path / 'node.log')
 
 
 @dataclass
