@@ -18,6 +18,7 @@ __all__ = [
     'ACCELERATION',
     'COMPENSATED',
     'G0',
+    'G_PER_MS',
     'INDUCED',
     'PRESSURE_RAW',
     'STREAM_INFO',
@@ -30,6 +31,8 @@ __all__ = [
 
 #: Standard gravity in m/s² (reports show g, topics carry m/s²).
 G0 = 9.80665
+#: One g per millisecond in m/s³: the unit of jerk in strain sensitivities (Pa per g/ms).
+G_PER_MS = G0 * 1e3
 
 #: Topic names relative to the rig namespace.
 ACCELERATION = 'acceleration'

@@ -8,13 +8,11 @@ import pytest
 from sensor_comp.core.effects import EFFECTS, PROBES, probe_owner
 from sensor_comp.core.effects import base
 from sensor_comp.core.effects.mains_hum import HARMONICS
-from sensor_comp.core.effects.strain_sensitivity import G_PER_MS
 from sensor_comp.core.extended import ExtendedFit
 from sensor_comp.core.model import Model
 from sensor_comp.core import residual
 from sensor_comp.sim.effects import base as sim_base
 from sensor_comp.sim.effects import EFFECTS as SIM_EFFECTS
-from sensor_comp.sim.effects.strain_sensitivity import G_PER_MS as SIM_G_PER_MS
 
 
 def identified(cls) -> dict[str, str]:
@@ -85,7 +83,3 @@ def test_the_mains_settings_agree():
     assert tuple(c['freq_hz'] for c in EFFECTS['mains_hum'].choices()) == \
         sim['freq_hz'].metadata['choices']
     assert HARMONICS == sim['harmonics'].default
-
-
-def test_the_strain_unit_is_the_same_g_per_ms():
-    assert G_PER_MS == SIM_G_PER_MS

@@ -17,12 +17,10 @@ from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, Mode
                    parameters_text, Physical, probe_of, ResidualView, row_of, sentence,
                    static_gain, stored_std)
 from .probe import ProbeSpec
-from ...streams import G0
+from ...streams import G0, G_PER_MS
 
 __all__ = ['JERK_PROBE', 'StrainSensitivity', 'jerk']
 
-#: One g per millisecond in m/s³.
-G_PER_MS = G0 * 1e3
 #: Corner of the derivative's smoothing low pass, fraction of the sample rate.
 SMOOTHING_CORNER = 0.1
 #: Damping of the derivative's smoothing low pass (a Butterworth-like corner).

@@ -22,15 +22,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .base import Effect, param
-from ...streams import G0
+from ...streams import G_PER_MS
 
 if TYPE_CHECKING:
     from ..hammer import Motion
 
 __all__ = ['StrainSensitivity']
 
-#: One g per millisecond in m/s³.
-G_PER_MS = G0 * 1e3
 
 
 @dataclass(frozen=True, kw_only=True)
