@@ -30,7 +30,6 @@ if TYPE_CHECKING:
 __all__ = ['StrainSensitivity']
 
 
-
 @dataclass(frozen=True, kw_only=True)
 class StrainSensitivity(Effect):
     """Pressure proportional to the rate of change of the axial acceleration."""
