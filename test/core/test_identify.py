@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from sensor_comp.bundled import bundled_bag
 from sensor_comp.core.ident import fit_percent, IdentError
 from sensor_comp.core.identify import identify, ShotSource
 from sensor_comp.core.shots import ShotError
@@ -276,3 +277,18 @@ def test_provenance_holds_the_sha256_of_each_bag(tmp_path):
         assert {shot['role'] for shot in entry.shots} == {role}
         assert [shot['index'] for shot in entry.shots] == shot_indices([sources[role]])
     check_against_truth(ident, runs['calibration'], [runs['validation'].induced])
+
+
+def test_the_delay_search_is_not_led_off_by_a_misleading_start():
+    """
+    The search keeps the lower of its own start and the base fit's start (bundled case f).
+
+    Case f's base lacks the amplifier high-pass, so its fit at nk = 1 is an overdamped
+    pair; started from it, the search fell into nk = 18 (validation fit 83 %, worst peak
+    residual 27 %) where its own start finds nk = 0 (95.4 %, 7.1 %).
+    """
+    sources = [ShotSource.detect(read_recording(bundled_bag(f'case_f_{role}.mcap')))
+               for role in ('calib', 'valid')]
+    ident = identify(sources[:1], validation=sources[1:], structure='oe', orders=(2, 2))
+    assert ident.delay.nk <= 2
+    assert ident.comparisons[0].fit_percent > 94.0
