@@ -351,7 +351,7 @@ def write_model_file(path: Path, fs: float) -> None:
     fn = 5 kHz, ζ = 0.05, 1.4e-4 MPa/g (:class:`~sensor_comp.sim.sensor.SensorConfig`'s
     defaults), discretised by matching its poles, unit delay, static gain kept.
     """
-    from sensor_comp.core.model import Model
+    from sensor_comp.core.identification.model import Model
     from sensor_comp.streams import G0
     wn, zeta = 2 * np.pi * 5e3, 0.05
     radius = np.exp(-zeta * wn / fs)

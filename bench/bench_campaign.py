@@ -47,9 +47,9 @@ import pyarrow.csv as pa_csv
 
 from sensor_comp.campaign import read_models, run_campaign
 from sensor_comp.io.recording_file import load_recording
-from sensor_comp.core.compare import compare
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.model import load
+from sensor_comp.core.compensation.compare import compare
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.identification.model import load
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.sim import RigConfig, SensorConfig, simulate, TABLE2
 

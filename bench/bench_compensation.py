@@ -36,7 +36,7 @@ import time
 import numpy as np
 from scipy import signal
 
-from sensor_comp.core.compensation import CompensationFilter
+from sensor_comp.core.compensation.filter import CompensationFilter
 from sensor_comp.core.effects import disturbance_trackers, get_effect
 from sensor_comp.core.effects.base import effect_entry
 from sensor_comp.sim import RigConfig, simulate, TABLE2

@@ -5,13 +5,14 @@ Data: the rig simulator's ten Table-2 shots at 1 MS/s, for ``--recordings`` seed
 1 M samples of shot windows of ~26 k samples each), shots detected as ``identify`` does,
 each window's pre-trigger baseline removed. The benchmark measures
 
-1. the cost of the earlier denoising (:data:`~sensor_comp.core.denoise.REFERENCE_SIFTING`,
-   the whole decomposition, one process; on the first ``--reference-windows`` windows, it
-   takes ~1 s each) and of the current one (:data:`~sensor_comp.core.denoise.SIFTING`,
-   stopped at the first signal IMF) in one process and shared by
-   :data:`~sensor_comp.core.denoise.PROCESSES` processes (:func:`denoise_windows`), as wall
-   and CPU seconds per 1 M samples, with the load average (other work on the machine
-   slows the wall times);
+1. the cost of the earlier denoising
+   (:data:`~sensor_comp.core.identification.denoise.REFERENCE_SIFTING`, the whole decomposition,
+   one process; on the first ``--reference-windows`` windows, it takes ~1 s each) and of the
+   current one (:data:`~sensor_comp.core.identification.denoise.SIFTING`, stopped at the first
+   signal IMF) in one process and shared by
+   :data:`~sensor_comp.core.identification.denoise.PROCESSES` processes (:func:`denoise_windows`),
+   as wall and CPU seconds per 1 M samples, with the load average (other work on the machine slows
+   the wall times);
 2. that the output is unchanged within the tolerance of the method: the RMS difference of
    the denoised windows (current against earlier) relative to the noise σ and to the
    windows' RMS, next to how far each is from the simulator's clean pressure, and the
@@ -21,7 +22,7 @@ each window's pre-trigger baseline removed. The benchmark measures
 
 ``--calibrate`` re-derives the white-noise IMF energy constants of the current sifting
 (white Gaussian noise, 10k–20k samples, 24 runs), as given in the module documentation of
-:mod:`sensor_comp.core.denoise`.
+:mod:`sensor_comp.core.identification.denoise`.
 """
 
 from __future__ import annotations
@@ -36,11 +37,12 @@ import time
 
 import numpy as np
 
-from sensor_comp.core import identify as identify_module
-from sensor_comp.core.denoise import (denoise_windows, emd_denoise, EmdDenoiser, PROCESSES,
-                                      REFERENCE_SIFTING, SIFTING, Sifting)
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.shots import mad_sigma
+from sensor_comp.core.identification import identify as identify_module
+from sensor_comp.core.identification.denoise import (denoise_windows, emd_denoise, EmdDenoiser,
+                                                     PROCESSES, REFERENCE_SIFTING, SIFTING,
+                                                     Sifting)
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.shots.detection import mad_sigma
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 
 __all__ = ['calibrate', 'compare_outputs', 'main', 'shot_windows', 'time_denoising',

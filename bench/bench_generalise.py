@@ -7,9 +7,10 @@ shots are cut into two recordings, as a user would record a calibration and a va
 bag (the first half of the shots and the rest), and the loop runs as the CLI runs it with
 its defaults:
 
-1. ``sensor-comp identify A --validate B`` (:func:`~sensor_comp.core.identify.identify`,
-   structure ``auto``, EMD, BIC): the base model and its worst validation peak residual;
-2. ``sensor-comp diagnose base.json B`` (:func:`~sensor_comp.core.diagnose.diagnose` with
+1. ``sensor-comp identify A --validate B``
+   (:func:`~sensor_comp.core.identification.identify.identify`, structure ``auto``, EMD, BIC): the
+   base model and its worst validation peak residual;
+2. ``sensor-comp diagnose base.json B`` (:func:`~sensor_comp.core.diagnosis.diagnose.diagnose` with
    the model as base and A as calibration): verdict and ranking;
 3. ``identify A --validate B --effect TOP`` with the top-ranked effect when it is
    significant (the effect the verdict names), and with the TRUE effect when the rig hides
@@ -116,7 +117,7 @@ def plan(count: int, seed: int) -> list[dict]:
 def _split(case, *, via_csv: bool, folder: str | None):
     """Return the calibration and validation sources: the shots' first half and the rest."""
     from sensor_comp.cli.sources import load_shots
-    from sensor_comp.core.identify import ShotSource
+    from sensor_comp.core.identification.identify import ShotSource
     windows = case.truth['windows']
     half = len(windows) // 2
     cut = (windows[half - 1][1] + windows[half][0]) // 2
@@ -168,7 +169,7 @@ def _parameter_check(entry: dict | None, truth: dict) -> dict:
 
 def _with_effect(row: dict, key: str, calibration, validation, effect: str) -> None:
     """Identify again with ``effect`` added; record time, peak residual and parameters."""
-    from sensor_comp.core.identify import identify
+    from sensor_comp.core.identification.identify import identify
     began, cpu = time.perf_counter(), time.process_time()
     result = identify(calibration, validation=validation, effects=(effect,))
     entry = next((e for e in result.model.effects if e.get('id') == effect), None)
@@ -190,8 +191,8 @@ def _ranking(diagnosis) -> list[dict]:
 
 def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str]) -> None:
     """Run identify, diagnose and the re-identifications, filling ``row``."""
-    from sensor_comp.core.diagnose import diagnose
-    from sensor_comp.core.identify import identify
+    from sensor_comp.core.diagnosis.diagnose import diagnose
+    from sensor_comp.core.identification.identify import identify
     stage[0] = 'detect'
     (calib, valid), cut = _split(case, via_csv=via_csv, folder=folder)
     row['shots_detected'] = [len(calib.shots), len(valid.shots)]

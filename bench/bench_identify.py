@@ -3,7 +3,7 @@ Identification benchmark (issue 3): identify and EMD cost, compensation speed, o
 
 Data: the rig simulator's defaults (the seed paper's ten Table-2 shots at 1 MS/s, seed 0).
 Shots are detected on the acceleration and every second one is held out for validation, as
-:func:`~sensor_comp.core.identify.identify` does. The benchmark measures
+:func:`~sensor_comp.core.identification.identify.identify` does. The benchmark measures
 
 1. :func:`identify` wall time for ``structure='oe'`` (with the delay search) and ``'auto'``
    (order and delay grid), without and with EMD denoising of the calibration windows, and
@@ -18,7 +18,7 @@ Shots are detected on the acceleration and every second one is held out for vali
    calibration windows) by sensor_comp's estimators, by SIPPY (``sippy_unipi``) and by
    sysidentpy. Every model is scored alike: converted to ``b``/``a`` polynomials in q⁻¹,
    simulated from rest on each validation window with ``scipy.signal.lfilter`` and compared
-   with the measured pressure by :func:`~sensor_comp.core.ident.fit_percent`.
+   with the measured pressure by :func:`~sensor_comp.core.estimators.fit_percent`.
 
 SIPPY and sysidentpy are not dependencies of sensor_comp (sysidentpy pins an older numpy):
 install them with ``pip install -r bench/requirements-compare.txt`` in a separate
@@ -51,14 +51,13 @@ import warnings
 import numpy as np
 from scipy import signal
 
-from sensor_comp.core.compensation import CompensationFilter
-from sensor_comp.core.denoise import emd_denoise
-from sensor_comp.core.ident import (fit_armax_els, fit_armax_gls, fit_arx, fit_oe,
-                                    fit_percent)
-from sensor_comp.core.ident.least_squares import delayed_numerator
-from sensor_comp.core.identify import BASE_INPUTS, identify, ShotSource
-from sensor_comp.core.model import Model
-from sensor_comp.core.shots import segments, split_calibration
+from sensor_comp.core.compensation.filter import CompensationFilter
+from sensor_comp.core.identification.denoise import emd_denoise
+from sensor_comp.core.estimators import fit_armax_els, fit_armax_gls, fit_arx, fit_oe, fit_percent
+from sensor_comp.core.estimators.least_squares import delayed_numerator
+from sensor_comp.core.identification.identify import BASE_INPUTS, identify, ShotSource
+from sensor_comp.core.identification.model import Model
+from sensor_comp.core.shots.detection import segments, split_calibration
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import Recording
 
@@ -197,7 +196,7 @@ def bench_identify(source: ShotSource, *, structures: Sequence[str]) -> list[dic
 #: Estimators whose outermost calls part 1b clocks, and the modules ``identify`` calls
 #: them through.
 _ESTIMATORS = {'oe': fit_oe, 'arx': fit_arx, 'gls': fit_armax_gls, 'armax': fit_armax_els}
-_CALLERS = ('sensor_comp.core.identify', 'sensor_comp.core.ident.selection')
+_CALLERS = ('sensor_comp.core.identification.identify', 'sensor_comp.core.estimators.selection')
 
 
 @contextlib.contextmanager

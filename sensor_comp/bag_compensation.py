@@ -12,8 +12,8 @@ from collections import deque
 import numpy as np
 
 from .blocks import BlockSequence
-from .core.compensation import CompensationFilter
-from .core.streaming import BlockCompensator, fit_recording_disturbances
+from .core.compensation.filter import CompensationFilter
+from .core.compensation.streaming import BlockCompensator, fit_recording_disturbances
 from .errors import SensorCompError
 from .files import check_output
 from .io.bag_reader import (BagReader, block_topics, find_namespace, read_stream_infos,
@@ -34,7 +34,7 @@ def compensate_bag(model, input_path: str, output_path: str, *,
 
     The model's disturbances (mains hum) are fitted on the whole bag in a first pass over
     its raw blocks and removed from the first sample on
-    (:func:`~sensor_comp.core.streaming.fit_recording_disturbances`), as the diagnosis
+    (:func:`~sensor_comp.core.compensation.streaming.fit_recording_disturbances`), as the diagnosis
     credits them; no tracker has to settle.
 
     The output is checked first (:func:`~sensor_comp.files.check_output`) and written
@@ -51,10 +51,11 @@ def compensate_bag(model, input_path: str, output_path: str, *,
         force: Replace an existing output file of another kind (never the input).
 
     Returns:
-        The sample accounting (see :class:`~sensor_comp.core.streaming.StreamCounters`)
-        plus ``copied_messages``, ``first_unpaired`` (per topic, the first block that
-        found no partner, or None) and ``disturbance_warnings`` (the model's disturbances
-        the recording is too short to remove, as sentences).
+        The sample accounting (see
+        :class:`~sensor_comp.core.compensation.streaming.StreamCounters`) plus ``copied_messages``,
+        ``first_unpaired`` (per topic, the first block that found no partner, or None) and
+        ``disturbance_warnings`` (the model's disturbances the recording is too short to remove, as
+        sentences).
 
     Raises:
         SensorCompError: On a bag cut short, without both raw streams or their

@@ -16,8 +16,8 @@ EMD), and diagnose it with the validation bag. Then:
 
 The ceiling is the fit of the simulator's own clean pressure (induced plus disturbance, run
 again from the case's settings) to the measured pressure over the same validation windows,
-baselines removed as :func:`~sensor_comp.core.shots.segments` removes them: what a perfect
-model scores given the noise.
+baselines removed as :func:`~sensor_comp.core.shots.detection.segments` removes them: what a
+perfect model scores given the noise.
 """
 
 from dataclasses import dataclass
@@ -31,10 +31,10 @@ import pytest
 
 from sensor_comp.cli.main import build_parser
 from sensor_comp.cli.simulate import build_config
-from sensor_comp.core.diagnose import Diagnosis, diagnose
-from sensor_comp.core.ident import fit_percent
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.shots import segments
+from sensor_comp.core.diagnosis.diagnose import Diagnosis, diagnose
+from sensor_comp.core.estimators import fit_percent
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.shots.detection import segments
 from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.sim import simulate
 

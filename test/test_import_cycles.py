@@ -65,3 +65,44 @@ def test_no_import_cycle():
 
 def test_the_check_finds_a_cycle():
     assert _cycles({'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}) == [['a', 'b', 'c']]
+
+
+#: The core's packages in data-flow order: a stage imports only itself and earlier stages.
+STAGES = ('shots', 'estimators', 'effects', 'compensation', 'identification', 'diagnosis',
+          'report')
+#: What the core may import from the rest of the package (no ROS, no I/O formats).
+CORE_MAY_USE = {'sensor_comp', 'sensor_comp.errors', 'sensor_comp.files', 'sensor_comp.lazy',
+                'sensor_comp.streams', 'sensor_comp.worker'}
+
+
+def _all_imports(path: Path, name: str) -> set[str]:
+    """Return every ``sensor_comp`` module ``path`` imports, function-level imports included."""
+    package = name.split('.') if path.name == '__init__.py' else name.split('.')[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        if isinstance(node, ast.ImportFrom):
+            found.add('.'.join(package[:len(package) - node.level + 1]
+                               + [node.module or '']).strip('.')
+                      if node.level else node.module or '')
+        elif isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+    return {m for m in found if m.split('.')[0] == 'sensor_comp'}
+
+
+def _stage(module: str) -> str | None:
+    parts = module.split('.')
+    return parts[2] if len(parts) > 2 and parts[1] == 'core' and parts[2] in STAGES else None
+
+
+def test_data_flows_one_way_through_the_core():
+    wrong = []
+    for path in (PACKAGE / 'core').rglob('*.py'):
+        name = _module_name(path)
+        for target in _all_imports(path, name):
+            if not target.startswith('sensor_comp.core'):
+                if target not in CORE_MAY_USE:
+                    wrong.append(f'{name} imports {target}')
+            elif _stage(name) and _stage(target) and (
+                    STAGES.index(_stage(target)) > STAGES.index(_stage(name))):
+                wrong.append(f'{name} imports the later stage {target}')
+    assert wrong == []

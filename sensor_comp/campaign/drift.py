@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy import stats
 
-from ..core.shots import mad_sigma
+from ..core.shots.detection import mad_sigma
 
 __all__ = ['CHANGE_ALPHA', 'MAX_CHANGES', 'MIN_SEGMENT', 'MIN_TREND_POINTS', 'TREND_POINTS',
            'ChangePoint', 'Trend', 'change_points', 'trend']

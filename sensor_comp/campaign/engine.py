@@ -23,7 +23,7 @@ from .shots import analyse_bag, BagResult, ShotOptions
 from .store import CachedBag, CampaignFolder
 from .summary import CampaignSummary, summarise, write_summary
 from .table import failure_row, rows_table, TableWriter, write_records
-from ..core.model import Source
+from ..core.identification.model import Source
 from ..core.progress import ProgressFactory, Silent
 
 __all__ = ['run_campaign']

@@ -16,9 +16,9 @@ import os
 import numpy as np
 
 from .discover import CampaignError
-from ..core.identify import identify, ShotSource
-from ..core.model import load, Model, ModelError, Source
-from ..core.shots import Shot
+from ..core.identification.identify import identify, ShotSource
+from ..core.identification.model import load, Model, ModelError, Source
+from ..core.shots.detection import Shot
 from ..io.recording_file import load_recording
 
 __all__ = ['ALL_SENSORS', 'IdentifyOptions', 'ModelFile', 'Pick', 'identify_sensor',
@@ -92,11 +92,11 @@ class IdentifyOptions:
     How a sensor's model is identified from its shots (the ``identify`` command's options).
 
     Args:
-        structure: Model structure (:data:`~sensor_comp.core.identify.STRUCTURES`).
-        orders: ``(na, nb)``, or None for the structure's default.
-        delay: Input delay in samples, or None to estimate it.
-        emd: EMD-denoise the calibration windows (slow; no change for an output-error fit).
-        effects: Catalogued physical effects to add to the model.
+        structure: Model structure
+        (:data:`~sensor_comp.core.identification.identify.STRUCTURE_CHOICES`). orders: ``(na,
+        nb)``, or None for the structure's default. delay: Input delay in samples, or None to
+        estimate it. emd: EMD-denoise the calibration windows (slow; no change for an output-error
+        fit). effects: Catalogued physical effects to add to the model.
         max_shots: Most shots used (half to fit, half to validate).
 
     """

@@ -18,7 +18,7 @@ from .store import CampaignFolder
 from .summary import BASES, CampaignSummary, SensorSummary
 from .table import read_columns
 from .. import __version__
-from ..core.report import embedded_png
+from ..core.report.html import embedded_png
 from ..files import write_text_atomically
 
 __all__ = ['WORST_SHOTS', 'campaign_report', 'write_report']

@@ -19,9 +19,9 @@ from .discover import FRAME_ID, sensor_of
 from .models import model_for, ModelFile
 from .table import failure_row, TABLE_VERSION
 from .. import __version__
-from ..core.compare import compare
-from ..core.identify import ShotSource
-from ..core.shots import Shot
+from ..core.compensation.compare import compare
+from ..core.identification.identify import ShotSource
+from ..core.shots.detection import Shot
 from ..errors import SensorCompError
 from ..io.recording_file import load_recording
 from ..streams import Recording

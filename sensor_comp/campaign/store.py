@@ -19,7 +19,7 @@ from .discover import CampaignError
 from .models import ModelFile
 from .shots import BagResult
 from .table import rows_table
-from ..core.model import Model
+from ..core.identification.model import Model
 from ..errors import SensorCompError
 from ..files import check_output, write_text_atomically
 

@@ -10,7 +10,7 @@ from .sources import progress_factory
 from ..campaign import (IdentifyOptions, read_models, run_campaign, SensorMap, ShotOptions,
                         SYNCHRONOUS)
 from ..campaign.drift import CHANGE_ALPHA
-from ..core.identify import STRUCTURES
+from ..core.identification.identify import STRUCTURE_CHOICES
 from ..errors import SensorCompError
 
 __all__ = ['register', 'run']
@@ -51,7 +51,7 @@ def register(subparsers) -> None:
     parser.add_argument('--identify-shots', type=int, default=24, metavar='N',
                         help='shots per sensor to identify on, spread over the campaign, '
                              'half held out for validation (default: %(default)s)')
-    parser.add_argument('--structure', choices=STRUCTURES, default='oe',
+    parser.add_argument('--structure', choices=STRUCTURE_CHOICES, default='oe',
                         help='structure of identified models (default: %(default)s)')
     parser.add_argument('--orders', nargs=2, type=int, default=[2, 2], metavar=('NA', 'NB'),
                         help='orders of identified models (default: 2 2)')

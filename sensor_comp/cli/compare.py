@@ -8,7 +8,7 @@ import os
 
 from .options import add_threshold
 from .sources import add_force, check_plots, load_model, usable_source
-from ..core.compare import compare, format_table
+from ..core.compensation.compare import compare, format_table
 from ..errors import SensorCompError
 from ..files import save_figure
 
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
                                      windows=args.window, threshold_g=args.threshold)
     comparisons = compare(models, source.recording, list(source.shots), labels=labels)
     if plots:
-        from ..core.plots import comparison_figure, comparison_residual_figure
+        from ..core.report.plots import comparison_figure, comparison_residual_figure
         figures = {'plot': comparison_figure, 'residual_plot': comparison_residual_figure}
         for flag, path in plots.items():
             save_figure(figures[flag](comparisons), path)

@@ -7,7 +7,7 @@ import json
 
 from .sources import add_force, load_model
 from ..bag_compensation import compensate_bag
-from ..core.model import ModelError
+from ..core.identification.model import ModelError
 from ..files import check_output
 
 __all__ = ['register', 'run']

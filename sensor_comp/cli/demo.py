@@ -16,11 +16,11 @@ from .describe import describe_effect, describe_model
 from .sources import add_force, load_shots, progress_factory
 from ..bag_compensation import compensate_bag
 from ..bundled import bundled_bag
-from ..core.compare import compare, format_table
-from ..core.diagnose import diagnose
-from ..core.identify import identify
-from ..core.report import html_report, write_report
-from ..core.residual import analyse
+from ..core.compensation.compare import compare, format_table
+from ..core.diagnosis.diagnose import diagnose
+from ..core.identification.identify import identify
+from ..core.report.html import html_report, write_report
+from ..core.diagnosis.residual import analyse
 from ..files import check_output, OutputError
 
 __all__ = ['next_step', 'register', 'run']
@@ -120,7 +120,7 @@ def next_step(diagnosis) -> tuple[str | None, list[str]]:
     """
     Return the effect the demo adds after ``diagnosis`` (None: it stops) and what it prints.
 
-    Every verdict of :data:`~sensor_comp.core.diagnose.VERDICTS` is handled: with
+    Every verdict of :data:`~sensor_comp.core.diagnosis.diagnose.VERDICTS` is handled: with
     ``missing_effect`` the named effect is added; with ``partly_explained`` too, saying
     that it leaves a residual beyond the noise (so the fall is partial); ``adequate`` and
     ``unexplained`` add nothing, for different reasons.

@@ -7,7 +7,7 @@ import json
 
 from .options import add_threshold
 from .sources import load_model, load_shots, run_diagnosis
-from ..core.noise_floor import PRACTICAL_SHARE
+from ..core.diagnosis.noise_floor import PRACTICAL_SHARE
 
 __all__ = ['register', 'run']
 

@@ -8,8 +8,8 @@ import json
 from .describe import describe_effect, describe_model
 from .options import add_threshold
 from .sources import add_force, load_shots, progress_factory
-from ..core.identify import identify, STRUCTURES
-from ..core.shots import shot_table
+from ..core.identification.identify import identify, STRUCTURE_CHOICES
+from ..core.shots.detection import shot_table
 from ..files import check_output
 
 __all__ = ['register', 'run']
@@ -26,7 +26,7 @@ def register(subparsers) -> None:
                         help='calibration recordings (.mcap bags or .csv exports)')
     parser.add_argument('-o', '--output', required=True, metavar='MODEL.json',
                         help='model file to write')
-    parser.add_argument('--structure', choices=STRUCTURES, default='auto',
+    parser.add_argument('--structure', choices=STRUCTURE_CHOICES, default='auto',
                         help='model structure: auto (output error, orders and delay chosen '
                              'by BIC and validation fit), arx, armax (extended least '
                              'squares), gls (the seed paper\'s generalised least squares), '

@@ -6,9 +6,9 @@ import argparse
 
 from .options import add_threshold
 from .sources import add_force, load_model, run_diagnosis, usable_source
-from ..core.compare import compare
-from ..core.report import html_report, write_report
-from ..core.residual import analyse
+from ..core.compensation.compare import compare
+from ..core.report.html import html_report, write_report
+from ..core.diagnosis.residual import analyse
 from ..files import check_output, OutputError
 
 __all__ = ['register', 'run']

@@ -9,8 +9,8 @@ import numpy as np
 
 from .describe import describe_model
 from .sources import add_force, check_plots, load_model
-from ..core.ident.polynomials import max_root_radius
-from ..core.model import frequency_response, step_response
+from ..core.estimators.polynomials import max_root_radius
+from ..core.identification.model import frequency_response, step_response
 from ..files import save_figure
 
 __all__ = ['register', 'run']
@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     responses = {path: frequency_response(m) for path, m in models.items()}
     steps = {path: step_response(m, duration_s=args.step_ms / 1e3) for path, m in models.items()}
     if plots:
-        from ..core.plots import frequency_response_figure, step_response_figure
+        from ..core.report.plots import frequency_response_figure, step_response_figure
         if 'response_plot' in plots:
             first = next(iter(responses.values()))[0]
             save_figure(frequency_response_figure(

@@ -6,8 +6,8 @@ import argparse
 import os
 import sys
 
-from ..core.identify import ShotSource
-from ..core.model import load, Model, ModelError, Source
+from ..core.identification.identify import ShotSource
+from ..core.identification.model import load, Model, ModelError, Source
 from ..errors import SensorCompError
 from ..files import check_output
 from ..io.recording_file import load_recording
@@ -32,7 +32,7 @@ def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
             used and the largest acceleration seen).
 
     """
-    from ..core.shots import shots_from_windows
+    from ..core.shots.detection import shots_from_windows
     recording = load_recording(path)
     if windows:
         return ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
@@ -127,7 +127,7 @@ def calibration_sources(model: Model, paths: list[str] | None, *,
 
 def run_diagnosis(args: argparse.Namespace, model: Model, validation):
     """Run the diagnosis of ``model`` on ``validation`` with the command's options."""
-    from ..core.diagnose import diagnose
+    from ..core.diagnosis.diagnose import diagnose
     threshold = getattr(args, 'threshold', None)
     calibration = calibration_sources(model, args.calibration, threshold_g=threshold)
     for source in calibration:

@@ -16,16 +16,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 import os
 
-from ..core.denoise import PROCESSES_ENV
-from ..core.diagnose import diagnose
-from ..core.identify import identify, ShotSource
-from ..core.model import Model
-from ..core.shots import Shot
+from ..core.identification.denoise import PROCESSES_ENV
+from ..core.diagnosis.diagnose import diagnose
+from ..core.identification.identify import identify, ShotSource
+from ..core.identification.model import Model
+from ..core.shots.detection import Shot
 from ..errors import SensorCompError
 from ..streams import Recording
 from ..worker import Worker
 
-__all__ = ['Diagnosis', 'Fitted', 'diagnose_fit', 'fit_shots', 'start_worker']
+__all__ = ['DiagnosisStatus', 'Fitted', 'diagnose_fit', 'fit_shots', 'start_worker']
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ class Fitted:
 
 
 @dataclass(frozen=True)
-class Diagnosis:
+class DiagnosisStatus:
     """
     The diagnosis of a fitted model, as ``/diagnostics`` shows it.
 
@@ -88,7 +88,7 @@ def fit_shots(recording: Recording, shots: tuple[Shot, ...], options: dict) -> F
     Args:
         recording: The kept shot windows joined into one recording.
         shots: The shots in it.
-        options: Keyword arguments of :func:`~sensor_comp.core.identify.identify`.
+        options: Keyword arguments of :func:`~sensor_comp.core.identification.identify.identify`.
 
     Returns:
         The model and the shots' roles, or the error of the core.
@@ -106,12 +106,12 @@ def fit_shots(recording: Recording, shots: tuple[Shot, ...], options: dict) -> F
 
 
 def diagnose_fit(calibration: tuple[ShotSource, ...], validation: tuple[ShotSource, ...],
-                 model: Model) -> Diagnosis:
+                 model: Model) -> DiagnosisStatus:
     """Diagnose ``model`` on the shots it was fitted and validated on."""
     try:
         found = diagnose(calibration, validation, base=model)
     except SensorCompError as exc:
-        return Diagnosis({'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)})
+        return DiagnosisStatus({'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)})
     verdict = {'diagnosis_verdict': found.verdict, 'diagnosis_next_step': found.next_step}
     if found.named:
         verdict['diagnosis_named'] = ' + '.join(found.named)
@@ -122,4 +122,4 @@ def diagnose_fit(calibration: tuple[ShotSource, ...], validation: tuple[ShotSour
         verdict.update({'diagnosis_top_effect': top.effect,
                         'diagnosis_top_score': top.score,
                         'diagnosis_top_significant': top.significant})
-    return Diagnosis(verdict, found.explanation)
+    return DiagnosisStatus(verdict, found.explanation)

@@ -5,7 +5,7 @@ Run it as ``compensation --ros-args -p model_file:=sensor.json`` (or
 ``python -m sensor_comp.nodes.compensation``), or without a file: it then waits for the
 model the ``identification`` node publishes. It is the live form of ``sensor-comp
 compensate`` and gives the same samples: both run
-:class:`~sensor_comp.core.streaming.BlockCompensator` (blocks paired by stamp, filter
+:class:`~sensor_comp.core.compensation.streaming.BlockCompensator` (blocks paired by stamp, filter
 state carried from block to block, a stamp gap or non-finite acceleration restarts the
 filter from rest, out-of-order and overlapping pairs are dropped).
 
@@ -50,7 +50,7 @@ parameter it does not have is logged with the closest name it has):
 Models: a model is used from the next block on (``BlockCompensator.set_filter``: no sample
 dropped or repeated), with the filter state it would have had, had it run on the stream
 all along (computed from the recent acceleration, see
-:meth:`~sensor_comp.core.compensation.CompensationFilter.take_over`): the output changes
+:meth:`~sensor_comp.core.compensation.filter.CompensationFilter.take_over`): the output changes
 by the change of the induced estimate only, with no start-up transient. A model is
 refused, with a logged error and the model in use kept, when its sample rate is not the
 stream's, when it is unstable, names an unknown input or effect, or when the message is
@@ -96,9 +96,10 @@ import numpy as np
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from ..core.compensation import CompensationError, CompensationFilter, STATE_TOLERANCE
-from ..core.model import load, Model, ModelError
-from ..core.streaming import BlockCompensator, CompensatedBlock, MAX_WAIT_S, StreamCounters
+from ..core.compensation.filter import CompensationError, CompensationFilter, STATE_TOLERANCE
+from ..core.identification.model import load, Model, ModelError
+from ..core.compensation.streaming import (BlockCompensator, CompensatedBlock, MAX_WAIT_S,
+                                           StreamCounters)
 from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, decode_string, DIAGNOSTIC_ARRAY,
                            encode_block, encode_stream_info, IMAGE, MessageError, STRING)

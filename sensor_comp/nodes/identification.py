@@ -5,7 +5,7 @@ Run it as ``identification --ros-args -p structure:=oe -p min_shots:=4`` (or
 ``python -m sensor_comp.nodes.identification``). It does live what ``sensor-comp identify``
 does on a bag: find the shots on the axial acceleration, keep their windows, fit the model
 on alternate shots and report its fit on the others
-(:func:`~sensor_comp.core.identify.identify`, validation as the core does it).
+(:func:`~sensor_comp.core.identification.identify.identify`, validation as the core does it).
 
 Topics, relative to the node's namespace (default ``/rig``):
 
@@ -44,7 +44,7 @@ parameter it does not have is logged with the closest name it has):
 - ``max_pending_blocks`` (default 1000): blocks per topic held until ``stream_info``
   arrives; older ones are dropped and counted.
 - ``diagnose`` (bool, default true): after each fit, run the diagnosis
-  (:func:`~sensor_comp.core.diagnose.diagnose`) of the new model on the same calibration
+  (:func:`~sensor_comp.core.diagnosis.diagnose.diagnose`) of the new model on the same calibration
   and validation shots, in the worker thread once the model is published, and add its
   verdict, the effects it names, what they leave (in noise energies), the next step and the
   top-ranked effect to ``/diagnostics`` (level WARN for every verdict but ``adequate``:
@@ -56,7 +56,7 @@ parameter it does not have is logged with the closest name it has):
 Memory is bounded: with ``span = pre_ms + max_pulse_ms + post_ms + holdoff`` (1 ms), the
 streams go through a rolling buffer of 2.5 spans (3 spans plus a block just before a
 scan), never the whole stream; each accepted shot keeps a copy of its window only. Shots
-are found by :func:`~sensor_comp.core.shots.detect_shots` on the buffer each time half a
+are found by :func:`~sensor_comp.core.shots.detection.detect_shots` on the buffer each time half a
 span has come in (about 5 ms of work per 80 000 buffered samples) and only when it can find
 something new: a new axial sample reaches 3/4 of the trigger level, or a shot found is due
 to be taken (about two detections per shot; 0.33 s of CPU per 4.54 s of a 1 MS/s stream
@@ -69,14 +69,15 @@ detection on the whole recording finds the same shots; their windows may differ 
 sample where the median of the buffer and of the whole recording round a half-amplitude
 crossing differently, so the model states its windows in ``provenance`` (stream sample
 indices since the first sample received, the stamp of each window start);
-:func:`~sensor_comp.core.live_shots.provenance_shots` rebuilds those shots in a recording
-of the same streams, and :func:`~sensor_comp.core.identify.identify` run offline on them
-gives the same coefficients. The rolling buffer is :class:`~sensor_comp.core.live_shots.LiveShots`
-(no ROS: the node feeds it the paired blocks).
+:func:`~sensor_comp.core.identification.live_shots.provenance_shots` rebuilds those shots in a
+recording of the same streams, and :func:`~sensor_comp.core.identification.identify.identify` run
+offline on them gives the same coefficients. The rolling buffer is
+:class:`~sensor_comp.core.identification.live_shots.LiveShots` (no ROS: the node feeds it the
+paired blocks).
 
 Faults never stop the node; each is one log line naming the topic, the stamp and the
 reason, and is counted on ``/diagnostics``. Blocks are paired by
-:class:`~sensor_comp.core.streaming.BlockPairer`, as in the compensation: a malformed
+:class:`~sensor_comp.core.compensation.streaming.BlockPairer`, as in the compensation: a malformed
 message (not a ``64FC1`` little-endian block, step or data size inconsistent, wrong number
 of rows for the topic, no sample) is skipped (``malformed_messages``); a pair of two
 widths (``mismatched_blocks``) or a block without partner (``unpaired_*_samples``) is
@@ -124,13 +125,13 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from ..core.diagnose import ATTENTION
+from ..core.diagnosis.diagnose import ATTENTION
 from ..core.effects import EFFECTS
-from ..core.identify import STRUCTURES
-from ..core.live_shots import LiveShots, ShotWindow
-from ..core.model import Model, Source
-from ..core.shots import DEFAULT_POST_MS, DEFAULT_PRE_MS, Shot
-from ..core.streaming import BlockError, BlockPairer, NonFiniteRuns, StreamCounters
+from ..core.identification.identify import STRUCTURE_CHOICES
+from ..core.identification.live_shots import LiveShots, ShotWindow
+from ..core.identification.model import Model, Source
+from ..core.shots.detection import DEFAULT_POST_MS, DEFAULT_PRE_MS, Shot
+from ..core.compensation.streaming import BlockError, BlockPairer, NonFiniteRuns, StreamCounters
 from ..errors import SensorCompError
 from ..io.messages import (decode_block, decode_stream_info, DIAGNOSTIC_ARRAY, encode_string,
                            MessageError, STRING)
@@ -242,7 +243,7 @@ class Identification(Node):
 
     def _declare_parameters(self) -> None:
         self.structure = declare(self, 'structure', 'auto',
-                                 f'model structure: {"|".join(STRUCTURES)}')
+                                 f'model structure: {"|".join(STRUCTURE_CHOICES)}')
         orders = declare(self, 'orders', [], '[na, nb]; empty: default or auto grid',
                          item_type=int)
         delay = declare(self, 'delay', -1, 'input delay in samples; -1: estimated')
@@ -267,8 +268,8 @@ class Identification(Node):
         self.fit_timeout = declare(self, 'fit_timeout', 300.0,
                                    'seconds the ~/fit service waits for the fit')
         warn_unknown_parameters(self)
-        check(self, 'structure', self.structure, self.structure in STRUCTURES,
-              f'one of {", ".join(STRUCTURES)}')
+        check(self, 'structure', self.structure, self.structure in STRUCTURE_CHOICES,
+              f'one of {", ".join(STRUCTURE_CHOICES)}')
         check(self, 'orders', orders,
               not orders or (len(orders) == 2 and min(orders) >= 1),
               'empty or two integers [na, nb] >= 1')
@@ -682,7 +683,7 @@ def verdict_status(verdict: dict) -> tuple[bool, str]:
 
     ``verdict``: the ``diagnosis_*`` values (:func:`~sensor_comp.nodes._fit_worker.
     diagnose_fit`); empty before the first diagnosis (no warning). Every verdict of
-    :data:`~sensor_comp.core.diagnose.VERDICTS` is handled by :data:`ATTENTION`, plus
+    :data:`~sensor_comp.core.diagnosis.diagnose.VERDICTS` is handled by :data:`ATTENTION`, plus
     ``'failed'`` (the diagnosis could not run: a warning with the reason).
 
     Raises:

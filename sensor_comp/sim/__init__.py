@@ -12,13 +12,13 @@ from .effects import describe_effects, EFFECTS, make_effect, parse_effect
 from .errors import SimConfigError, UnknownEffectError
 from .rig import Simulation, simulate
 from .sensor import SensorConfig
-from .shots import random_shots, Shot, TABLE2, TABLE2_PEAK_PRESSURE_MPA
+from .shots import random_shots, Impact, TABLE2, TABLE2_PEAK_PRESSURE_MPA
 
 __all__ = [
     'EFFECTS',
     'RigConfig',
     'SensorConfig',
-    'Shot',
+    'Impact',
     'SimConfigError',
     'Simulation',
     'TABLE2',

@@ -10,7 +10,7 @@ from typing import Sequence
 from .effects import Effect, parse_effect
 from .errors import SimConfigError
 from .sensor import SensorConfig
-from .shots import Shot, TABLE2
+from .shots import Impact, TABLE2
 
 __all__ = ['MIN_POST_SHOT_S', 'RigConfig']
 
@@ -64,7 +64,7 @@ class RigConfig:
 
     """
 
-    shots: tuple[Shot, ...] = TABLE2
+    shots: tuple[Impact, ...] = TABLE2
     fs: float = 1e6
     sensor: SensorConfig = SensorConfig()
     effects: tuple[Effect, ...] = ()
@@ -82,8 +82,8 @@ class RigConfig:
 
     def __post_init__(self):
         shots = tuple(self.shots) if isinstance(self.shots, Sequence) else ()
-        if not shots or not all(isinstance(s, Shot) for s in shots):
-            raise SimConfigError(f'rig shots must be a non-empty sequence of Shot, got '
+        if not shots or not all(isinstance(s, Impact) for s in shots):
+            raise SimConfigError(f'rig shots must be a non-empty sequence of Impact, got '
                                  f'{self.shots!r}')
         object.__setattr__(self, 'shots', shots)
         set_ = object.__setattr__

@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .shots import Shot
+from .shots import Impact
 from ..streams import G0
 
 __all__ = ['LateralMotion', 'Motion', 'Touch', 'acceleration', 'draw_touches']
@@ -44,7 +44,7 @@ class Touch:
     """One hammer touch: a shot at ``onset_s`` (s after the first sample) and lateral motion."""
 
     onset_s: float
-    shot: Shot
+    shot: Impact
     lateral: tuple[LateralMotion, LateralMotion]
 
     @property
@@ -58,7 +58,7 @@ class Touch:
         return self.shot.peak_g * G0
 
 
-def draw_touches(shots: Sequence[Shot], onsets_s: Sequence[float], *, lateral_ratio: float,
+def draw_touches(shots: Sequence[Impact], onsets_s: Sequence[float], *, lateral_ratio: float,
                  rng: np.random.Generator) -> tuple[Touch, ...]:
     """Give each shot a random lateral motion of 30–100 % of ``lateral_ratio``."""
     touches = []

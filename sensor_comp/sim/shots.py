@@ -11,7 +11,7 @@ from .errors import SimConfigError
 
 __all__ = [
     'PEAK_G_RANGE',
-    'Shot',
+    'Impact',
     'TABLE2',
     'TABLE2_PEAK_PRESSURE_MPA',
     'WIDTH_S_RANGE',
@@ -25,7 +25,7 @@ WIDTH_S_RANGE = (0.9e-3, 3.0e-3)
 
 
 @dataclass(frozen=True, kw_only=True)
-class Shot:
+class Impact:
     """
     One hammer blow: an axial half-sine ``peak_g * sin(pi t / width_s)``, ``0 <= t <= width_s``.
 
@@ -46,7 +46,7 @@ class Shot:
 
 #: The ten shots of the seed paper's Table 2 (peak acceleration, pulse width): shots 1–5 with
 #: one felt pad, 6–10 with two.
-TABLE2 = tuple(Shot(peak_g=g, width_s=ms * 1e-3) for g, ms in (
+TABLE2 = tuple(Impact(peak_g=g, width_s=ms * 1e-3) for g, ms in (
     (380.9, 1.504), (500.6, 1.423), (699.3, 1.275), (1080.0, 1.044), (1963.0, 0.989),
     (180.4, 2.936), (519.7, 1.525), (672.5, 1.327), (1006.0, 1.130), (2185.0, 0.942)))
 
@@ -56,7 +56,7 @@ TABLE2_PEAK_PRESSURE_MPA = (0.07, 0.089, 0.11, 0.167, 0.1932, 0.041, 0.086, 0.10
 
 
 def random_shots(count: int, *, seed: int, peak_g: tuple[float, float] = PEAK_G_RANGE,
-                 width_s: tuple[float, float] = WIDTH_S_RANGE) -> tuple[Shot, ...]:
+                 width_s: tuple[float, float] = WIDTH_S_RANGE) -> tuple[Impact, ...]:
     """
     Draw ``count`` shots as an operator varies drop height on one felt (harder is shorter).
 
@@ -79,4 +79,4 @@ def random_shots(count: int, *, seed: int, peak_g: tuple[float, float] = PEAK_G_
     peaks = peak_g[0] * (peak_g[1] / peak_g[0]) ** position
     widths = np.clip(width_s[1] * (width_s[0] / width_s[1]) ** position * (1.0 + scatter),
                      width_s[0], width_s[1])
-    return tuple(Shot(peak_g=float(p), width_s=float(w)) for p, w in zip(peaks, widths))
+    return tuple(Impact(peak_g=float(p), width_s=float(w)) for p, w in zip(peaks, widths))

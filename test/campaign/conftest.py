@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sensor_comp.core.identify import identify, ShotSource
+from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import Recording

@@ -20,9 +20,9 @@ from sensor_comp.campaign import (CampaignError, IdentifyOptions, read_models, r
                                   SCHEMA, SensorMap, SYNCHRONOUS)
 from sensor_comp.io.recording_file import load_recording
 from sensor_comp.cli.main import main
-from sensor_comp.core.compare import compare
-from sensor_comp.core.identify import ShotSource
-from sensor_comp.core.model import load
+from sensor_comp.core.compensation.compare import compare
+from sensor_comp.core.identification.identify import ShotSource
+from sensor_comp.core.identification.model import load
 
 #: Columns that must equal the single-recording core functions' numbers.
 _SHOT_COLUMNS = ('peak_g', 'width_ms', 'peak_pressure_mpa', 'mpa_per_g')

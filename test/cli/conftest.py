@@ -21,8 +21,8 @@ import pytest
 from scipy import signal
 
 from sensor_comp.cli.main import main
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.model import Model
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.identification.model import Model
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from sensor_comp.cli.main import main
-from sensor_comp.core.identify import ShotSource
-from sensor_comp.core.model import Model
+from sensor_comp.core.identification.identify import ShotSource
+from sensor_comp.core.identification.model import Model
 from sensor_comp.io import bag_reader
 from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.bag_writer import BagWriter, write_streams

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 from sensor_comp.cli.main import main
-from sensor_comp.core import identify as identify_module
+from sensor_comp.core.identification import identify as identify_module
 from sensor_comp.core.effects import EFFECTS
-from sensor_comp.core.ident import fit_oe
+from sensor_comp.core.estimators import fit_oe
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from sensor_comp.cli.main import main
-from sensor_comp.core.model import load
-from sensor_comp.core.shots import detect_shots
+from sensor_comp.core.identification.model import load
+from sensor_comp.core.shots.detection import detect_shots
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.streams import Recording
 
@@ -162,7 +162,7 @@ def test_no_shot_has_no_traceback_in_a_real_process(calibration, tmp_path):
 
 def test_diagnose_prints_the_verdict_why_and_the_next_step(model_files, validation, capsys):
     import json
-    from sensor_comp.core.diagnose import NEXT_STEP, VERDICTS
+    from sensor_comp.core.diagnosis.diagnose import NEXT_STEP, VERDICTS
     argv = ['diagnose', model_files['oe'], validation.path, '--effect', 'zero_shift']
     assert main(argv) == 0
     lines = capsys.readouterr().out.splitlines()

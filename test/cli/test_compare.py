@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from sensor_comp.cli.main import main
-from sensor_comp.core.ident import fit_percent
-from sensor_comp.core.shots import detect_shots
+from sensor_comp.core.estimators import fit_percent
+from sensor_comp.core.shots.detection import detect_shots
 
 #: Largest distance of the unbiased fit from the ceiling, percentage points.
 TOLERANCE_PP = 0.5

@@ -19,9 +19,9 @@ import pytest
 from scipy import signal
 
 from sensor_comp.cli.main import main
-from sensor_comp.core.compensation import CompensationFilter
-from sensor_comp.core.model import load
-from sensor_comp.core.shots import detect_shots
+from sensor_comp.core.compensation.filter import CompensationFilter
+from sensor_comp.core.identification.model import load
+from sensor_comp.core.shots.detection import detect_shots
 from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.bag_writer import BagWriter, write_recording, write_streams
 from sensor_comp.io.messages import decode_block

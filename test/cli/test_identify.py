@@ -4,8 +4,8 @@
 Calibration and validation are two seeds of the simulated rig (see ``conftest.py``); its
 sensor is known, so the identified static sensitivity is checked against it within 2 %
 (what an unbiased output-error fit achieves at 0.5 % pressure noise, see
-``test/core/test_identify.py``). Output error with the delay given and without EMD keeps the
-runs short; the structure search and EMD are tested on the workflow itself.
+``test/core/identification/test_identify.py``). Output error with the delay given and without EMD
+keeps the runs short; the structure search and EMD are tested on the workflow itself.
 """
 
 import json
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from sensor_comp.cli.main import main
-from sensor_comp.core.ident import fit_percent
-from sensor_comp.core.model import load
-from sensor_comp.core.shots import detect_shots
+from sensor_comp.core.estimators import fit_percent
+from sensor_comp.core.identification.model import load
+from sensor_comp.core.shots.detection import detect_shots
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.streams import Recording
 

@@ -9,10 +9,10 @@ import pytest
 
 from sensor_comp.bag_compensation import compensate_bag
 from sensor_comp.blocks import iter_blocks
-from sensor_comp.core.compensation import CompensationFilter
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.live_shots import provenance_shots
-from sensor_comp.core.model import Model
+from sensor_comp.core.compensation.filter import CompensationFilter
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.identification.live_shots import provenance_shots
+from sensor_comp.core.identification.model import Model
 from sensor_comp.io.bag_reader import BagReader, read_streams
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import (decode_block, decode_stream_info, decode_string,

@@ -13,12 +13,12 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from sensor_comp.blocks import iter_blocks
-from sensor_comp.core import live_shots as live_shots_module
-from sensor_comp.core.diagnose import diagnose
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.live_shots import provenance_shots
-from sensor_comp.core.model import load
-from sensor_comp.core.shots import detect_shots, ShotError
+from sensor_comp.core.identification import live_shots as live_shots_module
+from sensor_comp.core.diagnosis.diagnose import diagnose
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.identification.live_shots import provenance_shots
+from sensor_comp.core.identification.model import load
+from sensor_comp.core.shots.detection import detect_shots, ShotError
 from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.io.messages import encode_block, encode_stream_info
@@ -519,7 +519,7 @@ def test_every_fault_is_logged_and_skipped_and_the_model_is_the_offline_fit(
     ('failed', True, 'diagnosis failed: no shots'),
 ])
 def test_every_verdict_has_its_level_and_text_on_diagnostics(verdict, warn, words):
-    from sensor_comp.core.diagnose import VERDICTS
+    from sensor_comp.core.diagnosis.diagnose import VERDICTS
     from sensor_comp.nodes.identification import verdict_status
     assert verdict in VERDICTS or verdict == 'failed'
     values = {'diagnosis_verdict': verdict, 'diagnosis_error': 'no shots'}
@@ -530,7 +530,7 @@ def test_every_verdict_has_its_level_and_text_on_diagnostics(verdict, warn, word
 
 
 def test_every_verdict_of_the_core_is_handled_on_diagnostics():
-    from sensor_comp.core.diagnose import VERDICTS
+    from sensor_comp.core.diagnosis.diagnose import VERDICTS
     from sensor_comp.nodes.identification import verdict_status
     assert verdict_status({}) == (False, '')
     for verdict in VERDICTS:

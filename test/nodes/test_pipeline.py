@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import sensor_comp
-from sensor_comp.core.compensation import compensate_recording
-from sensor_comp.core.identify import identify, ShotSource
-from sensor_comp.core.live_shots import provenance_shots
-from sensor_comp.core.model import load
+from sensor_comp.core.compensation.filter import compensate_recording
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.core.identification.live_shots import provenance_shots
+from sensor_comp.core.identification.model import load
 from sensor_comp.io.bag_reader import BagReader, read_recording, read_streams
 from sensor_comp.io.messages import decode_string
 from sensor_comp.nodes.compensation import model_from_text
@@ -122,7 +122,7 @@ def test_a_timeout_says_where_the_identification_stands(context):
 
 
 def test_core_import_does_not_load_ros():
-    code = ('import sys, sensor_comp, sensor_comp.core.identify; '
+    code = ('import sys, sensor_comp, sensor_comp.core.identification.identify; '
             'assert "rclpy" not in sys.modules; '
             'assert callable(sensor_comp.pipeline); assert "rclpy" in sys.modules')
     subprocess.run([sys.executable, '-c', code], check=True, cwd=ROOT)

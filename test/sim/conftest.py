@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from sensor_comp.sim import RigConfig, Shot
+from sensor_comp.sim import RigConfig, Impact
 from sensor_comp.streams import G0
 
 
@@ -50,8 +50,8 @@ def half_sine_response():
 def short_rig():
     """Return a factory of quick rigs: two Table-2-like shots and short quiet times."""
     def make(**overrides):
-        settings = dict(shots=(Shot(peak_g=2185.0, width_s=0.942e-3),
-                               Shot(peak_g=180.4, width_s=2.936e-3)),
+        settings = dict(shots=(Impact(peak_g=2185.0, width_s=0.942e-3),
+                               Impact(peak_g=180.4, width_s=2.936e-3)),
                         pre_trigger_s=0.002, post_shot_s=0.008)
         settings.update(overrides)
         return RigConfig(**settings)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from sensor_comp.sim import (describe_effects, EFFECTS, make_effect, parse_effect, RigConfig,
-                             SensorConfig, Shot, SimConfigError, simulate, UnknownEffectError)
+                             SensorConfig, Impact, SimConfigError, simulate, UnknownEffectError)
 from sensor_comp.sim.lti import second_order_lowpass
 from sensor_comp.streams import G0
 
-ONE_SHOT = (Shot(peak_g=1000.0, width_s=1e-3),)
+ONE_SHOT = (Impact(peak_g=1000.0, width_s=1e-3),)
 
 
 def _rig(**overrides):
@@ -167,7 +167,7 @@ def test_hum_passes_the_amplifier_response():
 
 def _peak_ratios(effect):
     """Return peak induced pressure / (S * peak) of a 200 g and a 2000 g shot (2 ms)."""
-    shots = (Shot(peak_g=200.0, width_s=2e-3), Shot(peak_g=2000.0, width_s=2e-3))
+    shots = (Impact(peak_g=200.0, width_s=2e-3), Impact(peak_g=2000.0, width_s=2e-3))
     sensor = SensorConfig(fn_hz=20e3)  # quasi-static: (1/(2 fn T))**2 = 1.6e-4
     sim = simulate(_rig(shots=shots, sensor=sensor, effects=(effect,)))
     peaks = [np.max(sim.induced[o:o + 3000]) for o in sim.onsets]
@@ -192,7 +192,7 @@ def test_nonlinear_saturation():
 
 def test_nonlinearity_that_reverses_the_sensitivity_is_refused():
     with pytest.raises(SimConfigError, match='beta_per_g'):
-        simulate(_rig(shots=(Shot(peak_g=2185.0, width_s=1e-3),),
+        simulate(_rig(shots=(Impact(peak_g=2185.0, width_s=1e-3),),
                       effects=('nonlinear_sensitivity:beta_per_g=-5e-4',)))
 
 
@@ -209,7 +209,7 @@ def test_second_mode_rings_at_its_frequency_and_damping():
 
 
 def test_second_mode_static_gain():
-    shots = (Shot(peak_g=1000.0, width_s=3e-3),)
+    shots = (Impact(peak_g=1000.0, width_s=3e-3),)
     plain, both = _pair('second_resonance:freq_khz=40,zeta=0.05,gain=0.4', shots=shots)
     mode = both.induced - plain.induced
     # Quasi-static within (1/(2 fn T))**2 = 1.7e-5; 1e-4 leaves room for the corner ringing.

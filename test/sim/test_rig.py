@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sensor_comp.sim import (parse_effect, RigConfig, SensorConfig, Shot, SimConfigError,
+from sensor_comp.sim import (parse_effect, RigConfig, SensorConfig, Impact, SimConfigError,
                              simulate, TABLE2)
 from sensor_comp.sim.lti import second_order_lowpass, StateSpace
 from sensor_comp.streams import G0
@@ -52,7 +52,7 @@ def test_discretisation_error_far_below_noise_against_finer_grid(
 def test_static_sensitivity_of_a_long_pulse(sign):
     fn, zeta, width, peak_g, s_mpa = 20e3, 0.05, 3e-3, 1000.0, 1.4e-4
     sensor = SensorConfig(fn_hz=fn, zeta=zeta, sensitivity_mpa_per_g=s_mpa, sign=sign)
-    sim = simulate(RigConfig(shots=(Shot(peak_g=peak_g, width_s=width),), sensor=sensor,
+    sim = simulate(RigConfig(shots=(Impact(peak_g=peak_g, width_s=width),), sensor=sensor,
                              pre_trigger_s=0.001, post_shot_s=0.002))
     # Quasi-statically y = u - (2 zeta / wn) u' + ((4 zeta**2 - 1) / wn**2) u'' + ..., so a
     # half-sine peaks at A (1 + (1 - 4 zeta**2) r**2), r = 1 / (2 fn T). Left over: the
@@ -130,7 +130,7 @@ def test_accelerometer_sees_the_shots_and_some_lateral_motion(short_rig):
 
 
 def test_acceleration_on_topics_is_in_m_per_s2():
-    sim = simulate(RigConfig(shots=(Shot(peak_g=500.0, width_s=1e-3),), fs=2e5,
+    sim = simulate(RigConfig(shots=(Impact(peak_g=500.0, width_s=1e-3),), fs=2e5,
                              accel_noise=0.0, lateral_ratio=0.0))
     assert sim.recording.acceleration[2].max() == pytest.approx(500.0 * G0, rel=1e-3)
 
@@ -191,7 +191,7 @@ def test_table2_default_shots():
 @pytest.mark.parametrize('settings, words', [
     (dict(fs=-1.0), ['fs']),
     (dict(fs=2e3), ['samples', 'sample rate']),
-    (dict(fs=8e3, shots=(Shot(peak_g=100.0, width_s=0.01),)), ['fn_hz', 'Nyquist']),
+    (dict(fs=8e3, shots=(Impact(peak_g=100.0, width_s=0.01),)), ['fn_hz', 'Nyquist']),
     (dict(shots=()), ['shots']),
     (dict(pressure_noise=2.0), ['pressure_noise']),
     (dict(seed=-1), ['seed']),

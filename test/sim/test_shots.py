@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from sensor_comp.sim import random_shots, Shot, SimConfigError, TABLE2, TABLE2_PEAK_PRESSURE_MPA
+from sensor_comp.sim import random_shots, Impact, SimConfigError, TABLE2, TABLE2_PEAK_PRESSURE_MPA
 
 
 def test_table2_is_the_papers_table():
@@ -47,4 +47,4 @@ def test_random_shot_errors(kwargs, word):
                                     dict(peak_g=100.0, width_s=float('nan'))])
 def test_shot_validation(kwargs):
     with pytest.raises(SimConfigError):
-        Shot(**kwargs)
+        Impact(**kwargs)

@@ -17,11 +17,11 @@ from typing import ClassVar, Protocol, runtime_checkable, TYPE_CHECKING
 import numpy as np
 
 from .probe import ProbeSpec
-from ..inputs import AXES, mode_pair, parse_channel
+from ..shots.inputs import AXES, mode_pair, parse_channel
 from ...errors import SensorCompError
 
 if TYPE_CHECKING:
-    from ..windows import Window
+    from ..shots.windows import Window
 
 __all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FitView', 'FittedModel',
            'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView',
@@ -83,7 +83,7 @@ class FitView(Protocol):
 
 
 class ProbeView(Protocol):
-    """What an effect reads from a probe result (:class:`~sensor_comp.core.residual.Probe`)."""
+    """What an effect reads from a probe result (:class:`~..diagnosis.residual.Probe`)."""
 
     @property
     def fraction(self) -> float:
@@ -91,7 +91,7 @@ class ProbeView(Protocol):
 
 
 class SegmentView(Protocol):
-    """A segment's energy (:class:`~sensor_comp.core.residual.SegmentEnergy`)."""
+    """A segment's energy (:class:`~sensor_comp.core.diagnosis.residual.SegmentEnergy`)."""
 
     @property
     def name(self) -> str:
@@ -107,7 +107,7 @@ class SegmentView(Protocol):
 
 
 class PeakView(Protocol):
-    """A residual spectral peak (:class:`~sensor_comp.core.residual.SpectralPeak`)."""
+    """A residual spectral peak (:class:`~sensor_comp.core.diagnosis.residual.SpectralPeak`)."""
 
     @property
     def frequency_hz(self) -> float:
@@ -123,7 +123,7 @@ class PeakView(Protocol):
 
 
 class SpectrumView(Protocol):
-    """The residual spectrum (:class:`~sensor_comp.core.residual.ResidualSpectrum`)."""
+    """The residual spectrum (:class:`~sensor_comp.core.diagnosis.residual.ResidualSpectrum`)."""
 
     @property
     def peaks(self) -> Sequence[PeakView]:
@@ -131,7 +131,7 @@ class SpectrumView(Protocol):
 
 
 class TrendView(Protocol):
-    """The amplitude trend (:class:`~sensor_comp.core.residual.AmplitudeTrend`)."""
+    """The amplitude trend (:class:`~sensor_comp.core.diagnosis.residual.AmplitudeTrend`)."""
 
     @property
     def exponent(self) -> float | None:

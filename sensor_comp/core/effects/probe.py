@@ -1,7 +1,7 @@
 """
 Residual probes: the regressors whose fit to a base model's residual points at one effect.
 
-Effects declare them; :mod:`sensor_comp.core.residual.probes` runs them
+Effects declare them; :mod:`sensor_comp.core.diagnosis.residual.probes` runs them
 (``doc/residual.md``).
 """
 

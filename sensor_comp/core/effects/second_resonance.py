@@ -16,8 +16,8 @@ from scipy import signal
 from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FittedModel, ModelSpec,
                    modifier_value, Outcome, parameters_text, Physical, ResidualView, row_of,
                    Search, segment_of, sentence, stored_std)
-from ..ident.least_squares import delayed_numerator
-from ..inputs import mode_pair
+from ..estimators.least_squares import delayed_numerator
+from ..shots.inputs import mode_pair
 
 __all__ = ['SecondResonance', 'modes']
 

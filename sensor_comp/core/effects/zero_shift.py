@@ -16,7 +16,7 @@ from .base import (delta_std, Effect, FittedModel, ModelSpec, Outcome, parameter
                    probe_of, ResidualView, row_of, Search, sentence, static_gain, stored_std,
                    tail_share)
 from .probe import PROBE_TIME_CONSTANTS_MS, ProbeData, ProbeSpec
-from ..inputs import parse_channel
+from ..shots.inputs import parse_channel
 from ...streams import G0
 
 __all__ = ['OFFSET_PROBE', 'ZeroShift']

@@ -1,0 +1,858 @@
+"""
+Diagnosis: which catalogued effect the base model misses, ranked on validation shots.
+
+For every candidate effect of :mod:`sensor_comp.core.effects` the base model plus that
+effect is fitted on the CALIBRATION shots
+(:func:`~sensor_comp.core.identification.extended.fit_extended`)
+and scored on the VALIDATION shots, which it has never seen:
+
+- **base**: a given model's effects on a sensor base of at most one mode, sampled exactly
+  (``nf ≤ 2``, numerator on lags ``nk..nf``, ``nk ≤ 1``), refitted on the calibration
+  shots: the orders and delay a free structure search chose are not used, because extra
+  poles or a delay of many samples stand in for the effects the diagnosis is to name; and
+  no pole of any fit may be slower than :data:`SLOWEST_POLE_S` (a slow real pole with a
+  zero at 1 imitates an amplifier high-pass or a zero shift exactly).
+- **score**: the fraction of the base model's validation residual energy the extension
+  removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
+- **noise**: the base residual before the triggers (a straight line per window and the
+  50/60 Hz mains lines removed, so that slow pickup and hum are not taken for noise),
+  modelled as an AR process (:func:`~sensor_comp.core.diagnosis.noise_floor.noise_model`): the
+  pressure noise plus the accelerometer noise through the model plus any anti-alias
+  colouring, as measured.
+- **significance**: whether that improvement can come from noise. The validation residual
+  of an adequate base model is the measurement noise ``e`` (its window baseline, the
+  pre-trigger mean, removed); an extension changes the prediction by ``δ`` (fitted
+  elsewhere, so independent of ``e``), and ``SSE_base − SSE_ext = 2 r_baseᵀδ − ‖δ‖²``.
+  The statistic is ``z = r_baseᵀδ / √Var(eᵀδ)`` with ``Var(eᵀδ) = Σ_k R_e(k) R_δ̃(k)``
+  over the noise model's lags (coloured noise counts with its effective number of
+  samples, a slow ``δ`` with the noise's low-frequency density), ``δ̃`` being ``δ`` with
+  its sum moved onto the pre-trigger (the baseline the noise shares). Under the null
+  hypothesis ``z`` is standard normal. Disturbances not driven by the acceleration (mains
+  hum) have their coefficients estimated on the validation windows themselves (their
+  phase belongs to the recording); for them the statistic is the energy the regressors
+  take from the residual over the noise's long-run variance, χ² with as many degrees of
+  freedom as coefficients. An effect is significant when its p-value is below ``alpha``
+  divided by the number of candidates (Bonferroni) AND it matters: its score is at least
+  :data:`MIN_SCORE` and the energy it removes is at least
+  :data:`~sensor_comp.core.diagnosis.noise_floor.PRACTICAL_SHARE` of the noise energy of the
+  windows (with hundreds of thousands of samples far smaller structure is significant, e.g. the
+  bias accelerometer noise gives an output-error fit) AND the fit reads as the effect
+  (:meth:`~sensor_comp.core.effects.Effect.implausible`: physical parameters readable, no
+  searched value at an end of its range, a delay that lags; a disturbance must also
+  remove before the triggers what it predicts there) AND it removes at least
+  :data:`NAME_SHARE` of the base residual's energy beyond the noise (an effect that
+  follows a small part of something else is no answer; such an effect is ``relevant``
+  but not named).
+- **leftover**: what each model leaves against its own noise floor
+  (:func:`~sensor_comp.core.diagnosis.noise_floor.leftover`): its energy in noise units, overall
+  and before the trigger, during the pulse, in the ringing and in the tail, and what the
+  excess looks like. A model with a named effect may leave :data:`FORM_SHARE` of the
+  base residual's excess besides the practical allowance (a catalogue form close to, not
+  exactly, the physics of a large effect).
+
+The verdict:
+
+- ``'missing_effect'``: the best significant effect (significant ones ranked first, each
+  group by score) leaves a residual consistent with the noise, or it and a second one do
+  together (their changes added, as fitted on the calibration shots; the second is
+  significant when it removes :data:`NAME_SHARE` of what the first leaves);
+- ``'partly_explained'``: the best significant effect removes part of the residual but
+  leaves one the noise does not account for (a second effect, or one outside the
+  catalogue): the explanation gives the explained share, the leftover in noise units and
+  where it lies;
+- ``'adequate'``: no effect is significant and the base residual is consistent with the
+  noise (and the residual analysis of :mod:`sensor_comp.core.diagnosis.residual` agrees when it
+  runs);
+- ``'unexplained'``: the base residual is not noise but no catalogued effect explains a
+  relevant part of it.
+
+A candidate whose fit fails (any error: too little data, no stable model, a numerical
+failure) is one line in the notes, ``<effect>: not fitted: <why>``; the others go on. Shots
+with a defect (:attr:`~sensor_comp.core.shots.detection.Shot.defects`: clipped, NaN/Inf in the
+window, no shock) are left out of both sets, each with a note.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+import math
+
+import numpy as np
+from scipy import stats
+
+from ..effects import Effect, EffectError, EFFECTS, get_effect, Outcome, Physical
+from ..effects.base import BASE_CONTEXT
+from ..effects.mains_hum import line_columns
+from ..identification.extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
+from ..estimators import estimate_delay, fit_percent, IdentError
+from ..identification.identify import ShotSource
+from ..identification.model import Model
+from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseModel,
+                          PRACTICAL_SHARE, segment_bounds)
+from ..progress import ProgressFactory, Silent
+from .residual import analyse, model_resonances, ringing_time_s
+from ..shots.detection import split_calibration
+from ...errors import SensorCompError
+
+__all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
+           'Ranked', 'Skipped', 'diagnose']
+
+#: Base structure ``(nf, nb)`` and delay: a sampled 2nd-order sensor, exactly.
+BASE_ORDERS, BASE_DELAY = (2, 3), 0
+#: Family-wise false-alarm probability over all candidates.
+ALPHA = 1e-3
+#: Possible verdicts.
+VERDICTS = ('missing_effect', 'partly_explained', 'adequate', 'unexplained')
+#: What each verdict asks of the user next, by verdict: every consumer (command line, demo,
+#: report, node) shows it, so a new verdict must come with one.
+NEXT_STEP = {
+    'missing_effect': 'add the named effect (identify --effect ID) and compare again',
+    'partly_explained': 'add the named effect, then diagnose again: what it leaves is beyond '
+                        'the noise (a second effect, or one outside the catalogue: see where '
+                        'the leftover lies)',
+    'adequate': 'nothing to add: the model is as good as this data can tell',
+    'unexplained': 'no catalogued effect explains the residual: see where the leftover lies '
+                   '(before the trigger, pulse, ringing, tail) and check the rig',
+}
+#: Verdicts that call for the user's attention (a warning on ``/diagnostics``, not green in
+#: the report): every verdict but ``'adequate'``.
+ATTENTION = {'missing_effect': True, 'partly_explained': True, 'adequate': False,
+             'unexplained': True}
+#: Lag range of the noise model, s (its autocovariance runs over four times as many lags).
+NOISE_LAG_S = 0.5e-3
+#: Share of the base residual's energy beyond the noise that a model with the right effect
+#: may still leave (its catalogue form is close to, not exactly, the physics), besides
+#: the practical allowance, at most :data:`FORM_CAP` noise energies (RMS about 1.2 σ): a few
+#: per cent of a large effect is no second effect.
+FORM_SHARE, FORM_CAP = 0.05, 0.4
+#: Least share of the base residual's energy beyond the noise an effect must remove to be
+#: named (a second effect: of what the first leaves): a catalogue effect that follows a
+#: small part of something else is no answer, however significant.
+NAME_SHARE = 0.5
+#: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
+#: a searched second mode keeps away from.
+MODE_ZETA = 0.2
+#: A disturbance that removes before the triggers less than this share of the energy it
+#: predicts there, by :data:`BEFORE_Z` standard deviations, is no pickup present before the
+#: shocks.
+BEFORE_SHARE, BEFORE_Z = 0.5, 4.0
+#: Mains frequencies whose lines are removed from the noise before the triggers, Hz.
+MAINS_HZ = (50.0, 60.0)
+#: Slowest time constant the sensor's own poles may take in every fit of the diagnosis, s:
+#: a sensor mode is fast (kHz); a slower pole imitates a tail (an amplifier high-pass, a
+#: zero shift), which the base must not absorb while the extensions for it may not.
+SLOWEST_POLE_S = 1e-3
+#: Least score (fraction of the base residual energy removed) a significant effect needs:
+#: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
+MIN_SCORE = 0.005
+
+
+class DiagnosisError(SensorCompError, ValueError):
+    """The diagnosis cannot run on the data given."""
+
+
+@dataclass(frozen=True)
+class Ranked:
+    """
+    One candidate effect, fitted on calibration shots and scored on validation shots.
+
+    Attributes:
+        effect: Effect id.
+        title: Its human name.
+        score: Fraction of the base model's validation residual energy removed.
+        parameters: Physical parameters ``name -> (value, std or None)``.
+        evidence: One human sentence with numbers.
+        significant: The improvement is beyond noise, matters, reads as the effect and is
+            large enough to name it (see the module docs).
+        statistic: ``z`` (acceleration-driven) or χ² (disturbance).
+        test: ``'z'`` or ``'chi2'``.
+        p_value: Probability of the statistic or more from noise alone.
+        fit_percent: Validation fit of the extended model.
+        peak_residual_percent: Worst validation shot's peak residual, % of its peak.
+        units: Unit of each parameter.
+        explained: Energy removed, in noise energies of the validation windows.
+        excess_share: Share of the residual's energy beyond the noise it removes: of the
+            removed energy plus what the extended model leaves beyond its own noise floor
+            (for a second effect: of what the first leaves, added to it).
+        relevant: Beyond noise, matters and reads as the effect, named or not.
+        leftover: What the extended model leaves against the noise.
+        doubt: Why the fit is no physical reading of the effect (then it is not
+            significant), or None (:meth:`~sensor_comp.core.effects.Effect.implausible`).
+        fit: The extended fit (not in :meth:`to_dict`).
+
+    """
+
+    effect: str
+    title: str
+    score: float
+    parameters: Physical
+    evidence: str
+    significant: bool
+    statistic: float
+    test: str
+    p_value: float
+    fit_percent: float
+    peak_residual_percent: float
+    units: dict = field(default_factory=dict)
+    explained: float = 0.0
+    excess_share: float = 0.0
+    relevant: bool = False
+    leftover: Leftover | None = field(default=None, repr=False, compare=False)
+    doubt: str | None = None
+    fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
+
+    def to_dict(self) -> dict:
+        """Return the JSON-ready entry."""
+        return {'effect': self.effect, 'title': self.title, 'score': self.score,
+                'parameters': {k: {'value': json_number(v), 'std': json_number(s),
+                                   'unit': self.units.get(k, '')}
+                               for k, (v, s) in self.parameters.items()},
+                'evidence': self.evidence, 'significant': self.significant,
+                'statistic': json_number(self.statistic), 'test': self.test,
+                'p_value': json_number(self.p_value), 'fit_percent': json_number(self.fit_percent),
+                'peak_residual_percent': json_number(self.peak_residual_percent),
+                'explained_noise_energy': json_number(self.explained),
+                'excess_share': json_number(self.excess_share), 'relevant': self.relevant,
+                'doubt': self.doubt,
+                'leftover': None if self.leftover is None else self.leftover.to_dict()}
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A candidate the data cannot support, and why."""
+
+    effect: str
+    reason: str
+
+    def to_dict(self) -> dict:
+        """Return the JSON-ready entry."""
+        return {'effect': self.effect, 'reason': self.reason}
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """
+    Result of :func:`diagnose`.
+
+    Attributes:
+        verdict: One of :data:`VERDICTS`.
+        ranking: Candidates, significant ones first, each group by score.
+        skipped: Candidates not tried, with the reason.
+        base: The base fit on the calibration shots.
+        base_effects: Effects already in the base model.
+        fit_percent: Base model's validation fit.
+        peak_residual_percent: Base model's worst validation peak residual, %.
+        noise_sigma_pa: Noise σ before the triggers (base residual, trend removed), Pa.
+        energy_ratio: Base residual mean square over the noise variance.
+        energy_tolerance: Largest ``energy_ratio`` noise alone gives (statistical, plus
+            the practical allowance).
+        consistent_with_noise: The base residual is noise (leftover, and the residual
+            analysis when it ran).
+        analyses: Residual analyses of the base model per validation recording (empty
+            when not run or not available).
+        alpha: Family-wise false-alarm probability.
+        explanation: The verdict in words.
+        notes: What the user should know (candidates not fitted, shots left out, ...).
+        named: The effects the verdict names (one, two for a pair, none).
+        leftover: What the verdict's model leaves against the noise: the named effect(s)
+            added, or the base model when none is named.
+        base_leftover: What the base model leaves.
+        explained_share: Share of the base residual's energy beyond the noise that the
+            named effect(s) remove (None when none is named).
+
+    """
+
+    verdict: str
+    ranking: tuple[Ranked, ...]
+    skipped: tuple[Skipped, ...]
+    base: ExtendedFit
+    base_effects: tuple[str, ...]
+    fit_percent: float
+    peak_residual_percent: float
+    noise_sigma_pa: float
+    energy_ratio: float
+    energy_tolerance: float
+    consistent_with_noise: bool
+    analyses: tuple = ()
+    alpha: float = ALPHA
+    explanation: str = ''
+    notes: tuple[str, ...] = ()
+    named: tuple[str, ...] = ()
+    leftover: Leftover | None = field(default=None, repr=False)
+    base_leftover: Leftover | None = field(default=None, repr=False)
+    explained_share: float | None = None
+
+    @property
+    def next_step(self) -> str:
+        """Return what the verdict asks of the user next (:data:`NEXT_STEP`)."""
+        return NEXT_STEP[self.verdict]
+
+    @property
+    def significant(self) -> list[str]:
+        """Return the ids of the significant effects, best first."""
+        return [r.effect for r in self.ranking if r.significant]
+
+    def entry(self, effect_id: str) -> Ranked:
+        """
+        Return the ranking entry of ``effect_id``.
+
+        Raises:
+            DiagnosisError: When the effect was not ranked.
+
+        """
+        for ranked in self.ranking:
+            if ranked.effect == effect_id:
+                return ranked
+        raise DiagnosisError(f'effect {effect_id!r} is not in the ranking (ranked: '
+                             f'{", ".join(r.effect for r in self.ranking)})')
+
+    def summary(self) -> list[str]:
+        """Return the verdict and the significant effects' evidence as sentences."""
+        lines = [self.explanation]
+        lines += [f'{r.effect}: {r.evidence}' for r in self.ranking if r.significant]
+        lines += [f'{s.effect} not tried: {s.reason}' for s in self.skipped]
+        return lines + list(self.notes)
+
+    def to_dict(self) -> dict:
+        """Return the JSON-ready diagnosis (``verdict``, ``ranking``, ``leftover``, ...)."""
+        return {'verdict': self.verdict, 'named': list(self.named),
+                'explained_share': json_number(self.explained_share),
+                'leftover': None if self.leftover is None else self.leftover.to_dict(),
+                'ranking': [r.to_dict() for r in self.ranking],
+                'skipped': [s.to_dict() for s in self.skipped],
+                'base': {'effects': list(self.base_effects), 'inputs': list(self.base.inputs),
+                         'orders': {'nf': self.base.spec.nf, 'nb': self.base.spec.nb,
+                                    'nk': self.base.spec.nk},
+                         'fit_percent': json_number(self.fit_percent),
+                         'peak_residual_percent': json_number(self.peak_residual_percent),
+                         'leftover': (None if self.base_leftover is None
+                                      else self.base_leftover.to_dict())},
+                'noise_sigma_pa': json_number(self.noise_sigma_pa),
+                'energy_ratio': json_number(self.energy_ratio),
+                'energy_tolerance': json_number(self.energy_tolerance),
+                'consistent_with_noise': self.consistent_with_noise, 'alpha': self.alpha,
+                'explanation': self.explanation, 'next_step': self.next_step,
+                'notes': list(self.notes),
+                'residual': [a.to_dict() for a in self.analyses]}
+
+
+@dataclass(frozen=True, eq=False)
+class _Context:
+    """What every candidate is fitted with and scored against."""
+
+    fs: float
+    calibration: list[Window]
+    validation: list[Window]
+    orders: tuple[int, int, int]
+    base_effects: tuple[str, ...]
+    base: ExtendedFit
+    prediction: Prediction
+    residual: list[np.ndarray]
+    noise: NoiseModel
+    bounds: list[tuple[int, int, int, int, int]]
+    analyses: tuple
+    alpha: float
+
+    @property
+    def samples(self) -> int:
+        return sum(r.size for r in self.residual)
+
+    @property
+    def noise_lag(self) -> int:
+        return max(1, round(NOISE_LAG_S * self.fs))
+
+    @property
+    def sse(self) -> float:
+        return sum(float(r @ r) for r in self.residual)
+
+    @property
+    def excess(self) -> float:
+        """Return the base residual's energy beyond the noise, in noise energies."""
+        if not self.noise.variance > 0:
+            return math.inf
+        return max(self.sse / (self.samples * self.noise.variance) - 1.0, 0.0)
+
+    def leftover(self, residual: Sequence[np.ndarray], *, named: bool = True) -> Leftover:
+        """
+        Return what ``residual`` (over the validation windows) holds beyond the noise.
+
+        A model with a named effect is measured against its own noise floor (before the
+        triggers: the pressure noise plus the accelerometer noise through that model) and
+        may miss :data:`FORM_SHARE` of the base residual's excess besides the practical
+        allowance (see the module docs).
+        """
+        allowance = PRACTICAL_SHARE + (min(FORM_SHARE * self.excess, FORM_CAP)
+                                       if named else 0.0)
+        noise = self.noise
+        if named:  # its own noise floor: the accelerometer noise through this model
+            quiet = _quiet(residual, self.validation, self.fs)
+            if quiet:
+                noise = noise_model(quiet, self.noise_lag)
+        return leftover(residual, self.bounds, noise, self.fs, allowance=min(allowance, 1e6))
+
+
+def _peak_percent(windows: Sequence[Window], residuals: Sequence[np.ndarray]) -> float:
+    return float(max(100 * np.max(np.abs(r)) / np.max(np.abs(w.y))
+                     for w, r in zip(windows, residuals)))
+
+
+def _sources(calibration, validation, notes: list[str]):
+    calibration, validation = list(calibration), list(validation)
+    if not calibration:
+        raise DiagnosisError('no calibration recording given')
+    calibration = [_usable(s, notes) for s in calibration]
+    validation = [_usable(s, notes) for s in validation]
+    if validation:
+        return calibration, validation
+    calib, valid = [], []
+    for source in calibration:
+        if len(source.shots) < 2:
+            raise DiagnosisError(f'{source.name}: {len(source.shots)} usable shot(s); without '
+                                 f'a validation recording the diagnosis needs 2 per recording '
+                                 f'(one to fit, one to score on)')
+        fit_on, report_on = split_calibration(source.shots)
+        calib.append(type(source)(source.recording, tuple(fit_on), source.path))
+        valid.append(type(source)(source.recording, tuple(report_on), source.path))
+    return calib, valid
+
+
+def _usable(source, notes: list[str]):
+    """Return ``source`` without its defective shots; note each one left out."""
+    kept, left_out = ShotSource(source.recording, tuple(source.shots), source.path).usable()
+    notes.extend(left_out)
+    return kept
+
+
+def _analyses(model: Model, validation, notes: list[str]) -> tuple:
+    """Return the residual analysis of ``model`` per validation recording (none on failure)."""
+    try:
+        return tuple(analyse(model, s.recording, s.shots) for s in validation if s.shots)
+    except (SensorCompError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        notes.append(f'residual analysis: not run: {exc}')
+        return ()
+
+
+def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Window],
+                    notes: list[str]) -> tuple[tuple[int, int, int], tuple[str, ...]]:
+    """
+    Return the base orders ``(nf, nb, nk)`` and effects the candidates are compared with.
+
+    Without ``base``: ``orders`` and ``delay``. With it: its effects on a sensor base of at
+    most one mode (``nf`` at most that of :data:`BASE_ORDERS`; fewer when the model was
+    identified with fewer, as the data support) with the numerator on lags ``nk .. nf``,
+    ``nk`` at most 1 (the exact structure of a sampled ``nf``-th order sensor): poles beyond
+    the sensor's mode or an input delay of many samples stand in for an effect (a second
+    mode, a slow tail, a channel delay), which the diagnosis is there to name.
+    """
+    if base is None:
+        nf, nb = orders
+        if delay is None:
+            delay = estimate_delay([(w.acceleration[2:3], w.y) for w in calibration]).nk
+        return (nf, nb, delay), ()
+    base_effects = tuple(e['id'] for e in base.effects if e.get('id') in EFFECTS)
+    given = tuple(int(base.fit.get(f'base_{key}', value)) for key, value in (
+        ('nf', base.a.size - 1), ('nb', base.b.shape[1]), ('nk', base.nk)))
+    nf, nk = min(given[0], BASE_ORDERS[0]), min(given[2], 1)
+    physical = (nf, max(nf + 1 - nk, 1), nk)
+    text = (f'base: nf={physical[0]}, nb={physical[1]}, nk={physical[2]} with the given '
+            f'model\'s effects ({", ".join(base_effects) or "none"}), refitted on the '
+            f'calibration shots')
+    if given != physical:
+        text += (f'; the model\'s own structure (nf={given[0]}, nb={given[1]}, nk={given[2]}) '
+                 f'is not used: its extra poles or input delay may stand in for a missing '
+                 f'effect, which the candidates test')
+    notes.append(text)
+    return physical, base_effects
+
+
+def _context(calib, valid, fs: float, orders: tuple[int, int, int],
+             base_effects: tuple[str, ...], alpha: float, residual_analysis: bool,
+             progress, notes: list[str]) -> _Context:
+    """Fit the base model and measure its validation residual and the noise."""
+    cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
+        [s for s in valid if s.shots])
+    nf, nb, nk = orders
+    with progress('base model', 1) as bar:
+        try:
+            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                                slowest_pole_s=SLOWEST_POLE_S)
+        except (IdentError, EffectError) as exc:  # as free as the given model, then
+            notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:g} ms '
+                         f'({exc}); fitted without that bound')
+            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk)
+        bar.advance()
+    prediction = base.predict(vw)
+    residual = [w.y - p for w, p in zip(vw, prediction.total)]
+    quiet = _quiet(residual, vw, fs)
+    if not quiet:
+        raise DiagnosisError('no validation window has a pre-trigger of 8 samples or more: '
+                             'the noise cannot be measured; detect shots with a longer '
+                             'pre-trigger')
+    noise = noise_model(quiet, max(1, round(NOISE_LAG_S * fs)))
+    model = base.model()
+    ringing = max(1, round(ringing_time_s(model) * fs))
+    shots = [shot for s in valid if s.shots for shot in s.shots]
+    bounds = [segment_bounds(shot, w.y.size, ringing) for shot, w in zip(shots, vw)]
+    analyses = ()
+    if residual_analysis:
+        with progress('residual analysis', 1) as bar:
+            analyses = _analyses(model, valid, notes)
+            bar.advance()
+    return _Context(fs, cw, vw, orders, base_effects, base, prediction, residual, noise,
+                    bounds, analyses, alpha)
+
+
+def _quiet(residual: Sequence[np.ndarray], windows: Sequence[Window],
+           fs: float) -> list[np.ndarray]:
+    """
+    Return the pre-trigger residual of every window, pickup removed: the noise to measure.
+
+    Per recording, a straight line per window and the mains lines (50 and 60 Hz with their
+    odd harmonics, in recording time) are fitted by least squares and removed, and the rest
+    scaled by ``√(n/(n − k))`` for the ``k`` coefficients: slow pickup and hum are not
+    taken for noise (the residual before the trigger then shows them as excess).
+    """
+    out = []
+    for source in sorted({w.source for w in windows}):
+        chosen = [(r, w) for r, w in zip(residual, windows)
+                  if w.source == source and w.baseline >= 8]
+        if not chosen:
+            continue
+        n = sum(w.baseline for _, w in chosen)
+        rows = []
+        offset = 0
+        for _, w in chosen:
+            for power in (0, 1):
+                row = np.zeros(n)
+                row[offset:offset + w.baseline] = np.linspace(-1, 1, w.baseline) ** power
+                rows.append(row)
+            offset += w.baseline
+        lines = np.vstack([np.hstack([line_columns(mains, start=w.start, n=w.baseline, fs=fs,
+                                                   baseline=0) for _, w in chosen])
+                           for mains in MAINS_HZ])
+        if n >= 8 * (len(rows) + lines.shape[0]):
+            rows += list(lines)
+        x = np.array(rows).T
+        y = np.concatenate([r[:w.baseline] for r, w in chosen])
+        coef, _, rank, _ = np.linalg.lstsq(x, y, rcond=1e-8)
+        rest = (y - x @ coef) * math.sqrt(n / max(n - rank, 1))
+        out += np.split(rest, np.cumsum([w.baseline for _, w in chosen])[:-1])
+    return out
+
+
+def _candidates(ids: Sequence[str], ctx: _Context, progress,
+                notes: list[str]) -> tuple[list[Ranked], list[Skipped]]:
+    """Fit and score every candidate; a failing one is a note, the others go on."""
+    ranked, skipped = [], []
+    modes = sorted((m for m in model_resonances(ctx.base.model()) if m[1] < MODE_ZETA),
+                   key=lambda m: m[1])
+    token = BASE_CONTEXT.set({'modes_khz': tuple(fn / 1e3 for fn, _ in modes)})
+    try:
+        _fit_each(ids, ctx, progress, notes, ranked, skipped)
+    finally:
+        BASE_CONTEXT.reset(token)
+    ranked.sort(key=lambda r: (not r.significant, -r.score))
+    return ranked, skipped
+
+
+def _fit_each(ids: Sequence[str], ctx: _Context, progress, notes: list[str],
+              ranked: list[Ranked], skipped: list[Skipped]) -> None:
+    """Fit and score each candidate into ``ranked`` (or ``skipped``, or a note)."""
+    nf, nb, nk = ctx.orders
+    with progress('effects', len(ids)) as bar:
+        for effect_id in ids:
+            effect = get_effect(effect_id)
+            reason = ('already in the base model' if effect_id in ctx.base_effects
+                      else effect.applicable(ctx.calibration))
+            if reason is not None:
+                skipped.append(Skipped(effect_id, reason))
+            else:
+                try:
+                    fit = fit_extended(ctx.calibration, effects=ctx.base_effects + (effect_id,),
+                                       fs=ctx.fs, nf=nf, nb=nb, nk=nk,
+                                       starts=ctx.base.denominators,
+                                       slowest_pole_s=SLOWEST_POLE_S)
+                    ranked.append(_score(effect_id, fit, ctx))
+                except Exception as exc:  # noqa: B902 - one candidate must not stop the others
+                    why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
+                    notes.append(f'{effect_id}: not fitted: {type(exc).__name__}'
+                                 f'{": " + why if why else ""}')
+            bar.advance()
+
+
+def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.ndarray],
+               ctx: _Context) -> tuple[float, str, float]:
+    """Return ``(statistic, test, p-value)`` of an extension's improvement over the base."""
+    extra = prediction.disturbance_parameters - ctx.prediction.disturbance_parameters
+    if effect.acceleration_driven or extra <= 0:
+        delta = [p - b for p, b in zip(prediction.total, ctx.prediction.total)]
+        # The noise in each window is e − mean(e over the pre-trigger): its product with δ
+        # is that of e with δ̃, δ with its sum taken back over the pre-trigger.
+        shifted = []
+        for d, w in zip(delta, ctx.validation):
+            d = d.copy()
+            if w.baseline > 0:
+                d[:w.baseline] -= d.sum() / w.baseline
+            shifted.append(d)
+        variance = ctx.noise.variance_of(shifted)
+        product = sum(float(r @ d) for r, d in zip(ctx.residual, delta))
+        statistic = product / math.sqrt(variance) if variance > 0 else 0.0
+        return statistic, 'z', float(stats.norm.sf(statistic))
+    # Energy the validation-fitted regressors take from the residual (a projection).
+    before = [w.y - i for w, i in zip(ctx.validation, prediction.induced)]
+    taken = sum(float(b @ b - r @ r) for b, r in zip(before, residual))
+    statistic = taken / ctx.noise.long_run_variance
+    return statistic, 'chi2', float(stats.chi2.sf(statistic, extra))
+
+
+def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
+    """Score one extended fit on the validation windows."""
+    effect = get_effect(effect_id)
+    prediction = fit.predict(ctx.validation)
+    residual = [w.y - p for w, p in zip(ctx.validation, prediction.total)]
+    sse = sum(float(r @ r) for r in residual)
+    score = 1.0 - sse / ctx.sse
+    explained = (ctx.sse - sse) / (ctx.samples * ctx.noise.variance) \
+        if ctx.noise.variance > 0 else math.inf
+    statistic, test, p_value = _statistic(effect, prediction, residual, ctx)
+    parameters = fit.parameters(effect_id)
+    outcome = Outcome(score=score, parameters=parameters, statistic=statistic,
+                      p_value=p_value)
+    analysis = ctx.analyses[0] if ctx.analyses else None
+    try:
+        evidence = effect.evidence(analysis, outcome)
+    except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
+        evidence = Effect.evidence(effect, None, outcome)
+    units = {k: effect.parameters.get(k, '') for k in parameters}
+    doubt = effect.implausible(fit)
+    if doubt is None and not effect.acceleration_driven:
+        doubt = _after_triggers(prediction, residual, ctx)
+    if doubt is not None:
+        evidence = f'{evidence} Not counted: {doubt}.'
+    relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
+                and doubt is None)
+    left = ctx.leftover(residual)
+    # Against the extended model's own noise floor: the accelerometer noise through a
+    # wrong base can raise the base's floor above the residual's own mean square.
+    share = _share(ctx, left) or 0.0
+    return Ranked(effect=effect_id, title=effect.title, score=float(score),
+                  parameters=parameters, evidence=evidence,
+                  significant=bool(relevant and share >= NAME_SHARE),
+                  statistic=float(statistic), test=test, p_value=p_value,
+                  fit_percent=float(fit_percent([w.y for w in ctx.validation],
+                                                prediction.total)),
+                  peak_residual_percent=_peak_percent(ctx.validation, residual), units=units,
+                  explained=float(explained), excess_share=float(share),
+                  relevant=bool(relevant), leftover=left, doubt=doubt,
+                  fit=fit)
+
+
+def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
+                    ctx: _Context) -> str | None:
+    """
+    Return why a disturbance's improvement is no pickup present before the shocks, or None.
+
+    Pickup such as mains hum is there before the triggers as after them. Before the onsets
+    the fitted disturbance ``d`` predicts the energy it removes, ``D = Σ d²`` (the residual
+    there being ``d`` plus noise); what it removes there is ``A = Σ (r_base² − r²)``, with
+    standard deviation ``2 √Var(eᵀd)`` under that hypothesis. ``A`` more than
+    :data:`BEFORE_Z` deviations below :data:`BEFORE_SHARE` of ``D`` (regressors that only
+    follow something the shocks bring give ``A ≈ −D``; a hum fitted beside another effect
+    a little less than ``D``) rejects it.
+    """
+    removed = expected = 0.0
+    parts = []
+    for r, b, w, d in zip(residual, ctx.bounds, ctx.residual, prediction.disturbance):
+        onset = b[1]
+        removed += float(w[:onset] @ w[:onset] - r[:onset] @ r[:onset])
+        expected += float(d[:onset] @ d[:onset])
+        parts.append(d[:onset])
+    spread = 2.0 * math.sqrt(ctx.noise.variance_of(parts))
+    if expected <= 0 or removed >= BEFORE_SHARE * expected - BEFORE_Z * spread:
+        return None
+    return (f'before the triggers it removes {removed / expected:.2f} of the energy it '
+            f'predicts there: what it follows comes with the shocks')
+
+
+def _second(best: Ranked, others: Sequence[Ranked], ctx: _Context
+            ) -> tuple[Ranked, Leftover] | None:
+    """
+    Return the relevant effect that, added to ``best``, removes most of what it leaves.
+
+    The two changes of the prediction (each fitted on the calibration shots) are added: for
+    effects that explain different parts of the residual this is what fitting both gives;
+    for two that explain the same part it removes that part twice and leaves more. The
+    effect comes back with its :attr:`Ranked.excess_share` of what ``best`` leaves beyond
+    the noise, significant when that reaches :data:`NAME_SHARE`; with the pair's leftover.
+    """
+    mine = best.fit.predict(ctx.validation).total
+    rest = best.leftover.energy_ratio - 1.0
+    found = None
+    for other in others:
+        theirs = other.fit.predict(ctx.validation).total
+        residual = [w.y - a - b + c for w, a, b, c in zip(
+            ctx.validation, mine, theirs, ctx.prediction.total)]
+        left = ctx.leftover(residual)
+        if found is None or left.energy_ratio < found[1].energy_ratio:
+            found = (other, left)
+    if found is None or not rest > 0:
+        return None
+    other, left = found
+    share = (best.leftover.energy_ratio - left.energy_ratio) / rest
+    return replace(other, excess_share=float(share), significant=share >= NAME_SHARE), left
+
+
+def _share(ctx: _Context, left: Leftover) -> float | None:
+    """
+    Return the share of what lies beyond the noise that a model leaving ``left`` removes.
+
+    The energy it removes from the base residual over that plus what it leaves beyond its
+    own noise floor; None when it removes nothing.
+    """
+    energy = ctx.samples * left.noise_variance
+    removed = ctx.sse - left.energy_ratio * energy
+    if not removed > 0:
+        return None
+    return float(removed / (removed + max(left.energy_ratio - 1.0, 0.0) * energy))
+
+
+def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
+             ) -> tuple[str, str, tuple[str, ...], Leftover, float | None, list[Ranked]]:
+    """Return the verdict, its explanation, the named effects, their leftover and share."""
+    ranked = list(ranked)
+    significant = [r for r in ranked if r.significant]
+    if not significant:
+        return (*_no_effect(ctx, base_left, ranked), ranked)
+    best = significant[0]
+    if best.leftover.consistent:
+        return ('missing_effect',
+                f'missing effect: {best.title} ({best.effect}) removes '
+                f'{100 * best.score:.1f} % of the validation residual energy '
+                f'(p = {best.p_value:.2g}); it leaves {best.leftover.describe()}, consistent '
+                f'with the noise', (best.effect,), best.leftover,
+                _share(ctx, best.leftover), ranked)
+    second = _second(best, [r for r in ranked if r.relevant and r is not best], ctx)
+    if second is not None and second[0].significant:
+        other, left = second
+        ranked = sorted((other if r.effect == other.effect else r for r in ranked),
+                        key=lambda r: (not r.significant, -r.score))
+        if left.consistent:
+            return ('missing_effect',
+                    f'missing effects: {best.title} ({best.effect}) and {other.title} '
+                    f'({other.effect}) remove {100 * best.score:.1f} % and '
+                    f'{100 * other.score:.1f} % of the validation residual energy; together '
+                    f'they leave {left.describe()}, consistent with the noise (add the '
+                    f'first, then diagnose again)', (best.effect, other.effect), left,
+                    _share(ctx, left), ranked)
+    share = _share(ctx, best.leftover)
+    part = '' if share is None else f' ({100 * share:.0f} % of what lies beyond the noise)'
+    return ('partly_explained',
+            f'partly explained: {best.title} ({best.effect}) removes {100 * best.score:.1f} % '
+            f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
+            f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
+            f'outside the catalogue remains', (best.effect,), best.leftover, share, ranked)
+
+
+def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
+               ) -> tuple[str, str, tuple[str, ...], Leftover, None]:
+    """Return the verdict when no effect is significant: adequate or unexplained."""
+    failing = [a for a in ctx.analyses if not a.consistent_with_noise]
+    if base_left.consistent and not failing:
+        return ('adequate',
+                f'adequate: the base residual is consistent with noise ('
+                f'{base_left.describe()}, tolerance {base_left.tolerance:.3f}) and no effect '
+                f'improves it beyond noise', (), base_left, None)
+    why = (base_left.describe() if not base_left.consistent else
+           f'the residual analysis finds structure: {failing[0].summary()[0]}')
+    aside = ''
+    small = [r for r in ranked if r.relevant]
+    doubted = [r for r in ranked if r.doubt and r.explained >= PRACTICAL_SHARE
+               and r.p_value < ctx.alpha]
+    if small:
+        aside = (f'; the most, {small[0].title} ({small[0].effect}), removes '
+                 f'{100 * small[0].excess_share:.0f} % of what lies beyond the noise: too '
+                 f'little to name it')
+    elif doubted:
+        aside = (f'; {doubted[0].title} ({doubted[0].effect}) removes '
+                 f'{100 * doubted[0].score:.1f} % but is not counted: {doubted[0].doubt}')
+    return ('unexplained',
+            f'unexplained: the base residual is not noise ({why}) but no catalogued effect '
+            f'explains a relevant part of it beyond noise{aside}', (), base_left, None)
+
+
+def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | None = None,
+             orders: tuple[int, int] = BASE_ORDERS, delay: int | None = BASE_DELAY,
+             candidates: Sequence[str] | None = None, alpha: float = ALPHA,
+             residual_analysis: bool = True,
+             progress: ProgressFactory | None = None) -> Diagnosis:
+    """
+    Rank the catalogued effects by how much of the validation residual each explains.
+
+    Args:
+        calibration: Recordings with shots to fit on (``ShotSource``-like: ``recording``,
+            ``shots``, ``path``).
+        validation: Recordings with shots to score on; when empty, every second shot of
+            each calibration recording.
+        base: The base model: its orders, delay and effects define the base structure,
+            refitted here on the calibration shots like every extension (so that base
+            and extensions are fitted alike). None: output error with ``orders`` and
+            ``delay``.
+        orders: ``(nf, nb)`` of the base model without ``base``.
+        delay: Input delay of the base model without ``base``; estimated when None. The
+            default base, ``nf = 2``, ``nb = 3``, ``nk = 0``, is the exact structure of a
+            sampled 2nd-order sensor driven by a linearly interpolated input: a base with
+            one numerator coefficient less leaves a small systematic misfit that delay-like
+            extensions would be credited with.
+        candidates: Effect ids to try; default every catalogued effect not in the base.
+        alpha: Family-wise false-alarm probability of the significance tests.
+        residual_analysis: Run the residual analysis of the base model (evidence and the
+            adequacy check).
+        progress: Progress bar factory ``progress(label, total)``.
+
+    Returns:
+        The diagnosis.
+
+    Raises:
+        DiagnosisError: On mixed sample rates, no shots or no pre-trigger.
+        ModelError: When ``base`` belongs to another sample rate than the recordings.
+        ShotError: On a recording whose pressure is constant (a dead channel).
+        EffectError: On an unknown candidate id.
+        IdentError: When the base model cannot be fitted.
+
+    """
+    progress = progress or Silent
+    notes: list[str] = []
+    calib, valid = _sources(calibration, validation, notes)
+    rates = {s.recording.fs for s in calib + valid}
+    if len(rates) != 1:
+        raise DiagnosisError(f'recordings have different sample rates '
+                             f'({", ".join(f"{r:g} Hz" for r in sorted(rates))}); diagnose '
+                             f'one rate at a time')
+    fs = rates.pop()
+    if base is not None:
+        base.check_rate(fs, model_name='the base model', data_name='every recording given')
+    if not any(s.shots for s in calib) or not any(s.shots for s in valid):
+        raise DiagnosisError('the diagnosis needs calibration and validation shots'
+                             + (f' ({"; ".join(notes)})' if notes else ''))
+    orders3, base_effects = _base_structure(
+        base, orders, delay, shot_windows([s for s in calib if s.shots]), notes)
+    ids = list(candidates) if candidates is not None else [
+        e for e in EFFECTS if e not in base_effects]
+    for effect_id in ids:
+        get_effect(effect_id)
+    ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
+                   residual_analysis, progress, notes)
+    ranked, skipped = _candidates(ids, ctx, progress, notes)
+    base_left = ctx.leftover(ctx.residual, named=False)
+    verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
+    consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
+    return Diagnosis(
+        verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.base,
+        base_effects=tuple(base_effects),
+        fit_percent=float(fit_percent([w.y for w in ctx.validation], ctx.prediction.total)),
+        peak_residual_percent=_peak_percent(ctx.validation, ctx.residual),
+        noise_sigma_pa=math.sqrt(ctx.noise.variance), energy_ratio=base_left.energy_ratio,
+        energy_tolerance=base_left.tolerance, consistent_with_noise=bool(consistent),
+        analyses=ctx.analyses, alpha=alpha, explanation=explanation, notes=tuple(notes),
+        named=named, leftover=left, base_leftover=base_left, explained_share=share)

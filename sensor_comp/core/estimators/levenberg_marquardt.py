@@ -1,0 +1,147 @@
+"""
+Levenberg–Marquardt for the output-error fits, with a stable-denominator constraint.
+
+Output-error fits (:func:`~sensor_comp.core.estimators.fit_oe` and the extended fits of
+:mod:`sensor_comp.core.identification.extended`) minimise a sum of squared simulation errors whose
+Jacobian is exact. The steps are taken in column-scaled coordinates (every Jacobian column
+of unit norm, so that coefficients of very different size are damped alike), and a trial
+that is not finite or that puts a pole on or outside the unit circle is rejected: the
+damping grows instead, so the denominator stays stable throughout.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ['STALL', 'LevenbergMarquardt', 'levenberg_marquardt', 'predicted_decrease',
+           'scaled_normal_equations']
+
+#: Largest damping tried before a point counts as a minimum to working precision.
+_MAX_DAMPING = 1e12
+#: Steps in a row that each gain less than the tolerance before the iteration stops.
+STALL = 3
+
+
+class LevenbergMarquardt(NamedTuple):
+    """
+    The result of :func:`levenberg_marquardt`.
+
+    Args:
+        theta: The parameters at the minimum found.
+        cost: The sum of squared errors there.
+        e: The errors there.
+        jac: Their Jacobian there.
+        iterations: Steps taken.
+        evaluations: Error evaluations, the first included.
+        converged: Whether the relative decrease fell below the tolerance (or no step
+            improved the cost) before the iteration limit.
+
+    """
+
+    theta: np.ndarray
+    cost: float
+    e: np.ndarray
+    jac: np.ndarray
+    iterations: int
+    evaluations: int
+    converged: bool
+
+
+def scaled_normal_equations(jac: np.ndarray,
+                            e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return ``(JsᵀJs, Jsᵀe, scale)`` for the Jacobian scaled to unit column norms.
+
+    One product ``JᵀJ`` (the column norms are the square roots of its diagonal) and one
+    ``Jᵀe``, then scaled: two passes over ``J`` instead of a scaled copy.
+    """
+    gram = jac.T @ jac
+    scale = np.sqrt(np.diag(gram))
+    scale[~(scale > 0)] = 1.0
+    return gram / np.outer(scale, scale), (jac.T @ e) / scale, scale
+
+
+def predicted_decrease(gram: np.ndarray, grad: np.ndarray) -> float:
+    """
+    Return ``gᵀG⁺g``: how much the Gauss-Newton model says a full step lowers the cost.
+
+    Scale-invariant and zero exactly at a stationary point; unlike the decrease of one
+    damped step, it does not vanish where the damping only holds the steps back (an
+    ill-conditioned valley, which over-parameterised output-error models have).
+    """
+    step = np.linalg.lstsq(gram, grad, rcond=1e-14)[0]
+    return max(float(step @ grad), 0.0)
+
+
+def _damped_step(residual: Callable, theta: np.ndarray, cost: float, gram: np.ndarray,
+                 grad: np.ndarray, scale: np.ndarray, damping: float,
+                 stable: Callable[[np.ndarray], bool]):
+    """Return ``(trial, cost, damping, evaluations)``: the least damping that lowers cost."""
+    evaluations = 0
+    while damping <= _MAX_DAMPING:
+        try:
+            trial = theta + np.linalg.solve(gram + damping * np.eye(theta.size),
+                                            grad) / scale
+        except np.linalg.LinAlgError:  # singular at this damping: damp more
+            trial = None
+        if trial is not None and np.all(np.isfinite(trial)) and stable(trial):
+            e_trial = residual(trial, False)
+            evaluations += 1
+            cost_trial = float(e_trial @ e_trial)
+            if cost_trial <= cost:
+                return trial, cost_trial, damping, evaluations
+        damping *= 10.0
+    return None, cost, damping, evaluations
+
+
+def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
+                        stable: Callable[[np.ndarray], bool], max_iter: int,
+                        tol: float) -> LevenbergMarquardt:
+    """
+    Minimise ``‖e(θ)‖²`` from ``theta``, rejecting steps to unstable parameters.
+
+    The iteration stops when the Gauss-Newton model predicts less than ``tol`` of the cost
+    to gain (:func:`predicted_decrease`), when no damping improves the cost, or after
+    :data:`STALL` steps in a row that each gained less than ``tol`` (a minimum on the
+    stability boundary).
+
+    Args:
+        residual: ``residual(theta, jacobian)``: the errors ``e = y − ŷ(θ)`` (1-D), and
+            with ``jacobian=True`` the pair ``(e, ∂ŷ/∂θ)`` (the model output's Jacobian).
+        theta: The start (stable).
+        stable: Whether a trial's denominator has every pole inside the unit circle.
+        max_iter: Most steps.
+        tol: Relative decrease of the cost below which the iteration stops.
+
+    Returns:
+        The minimum found, with the errors and Jacobian there.
+
+    """
+    e, jac = residual(theta, True)
+    cost = float(e @ e)
+    damping, converged, iterations, evaluations, stalled = 1e-4, False, 0, 1, 0
+    while True:
+        gram, grad, scale = scaled_normal_equations(jac, e)
+        if cost == 0.0 or predicted_decrease(gram, grad) <= tol * cost:
+            converged = True
+            break
+        if iterations == max_iter:
+            break
+        iterations += 1
+        trial, cost_trial, damping, count = _damped_step(residual, theta, cost, gram, grad,
+                                                         scale, damping, stable)
+        evaluations += count
+        if trial is None:
+            converged = True  # no step improves the cost: a minimum to working precision
+            break
+        stalled = stalled + 1 if cost - cost_trial <= tol * cost_trial else 0
+        theta, cost = trial, cost_trial
+        damping = max(damping / 10.0, 1e-12)
+        e, jac = residual(theta, True)
+        if stalled == STALL:
+            converged = True
+            break
+    return LevenbergMarquardt(theta, cost, e, jac, iterations, evaluations, converged)

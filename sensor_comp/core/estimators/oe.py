@@ -1,0 +1,384 @@
+"""
+Output-error estimation: minimise the simulation error ``y − B/F q^-nk u``.
+
+Output error is the structure of a sensor whose measurement noise is added after the
+mechanics: it is consistent where ARX is biased. The minimisation is not linear in ``F``, so
+:func:`fit_oe` starts from the Steiglitz–McBride iteration (:func:`steiglitz_mcbride`:
+least squares on ``u/F̂`` and ``y/F̂``, repeated) and then runs Levenberg–Marquardt on the
+simulation error with exact gradients::
+
+    ∂ŷ/∂b_ij = q^-(nk+j) u_i / F        ∂ŷ/∂f_j = −q^-j ŷ / F
+
+Steps that would put a pole on or outside the unit circle are rejected (the damping grows
+instead), so the denominator stays stable. Every segment is simulated from rest.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from scipy import signal
+
+from .arx import fit_arx
+from .data import as_segments, IdentError, Segment
+from .estimate import Estimate
+from .least_squares import (check_orders, filter_each, lagged_regression, minimum_norm,
+                            normal_equations, solve_least_squares)
+from .levenberg_marquardt import levenberg_marquardt, scaled_normal_equations
+from .polynomials import is_stable, reflect_unstable
+
+__all__ = ['ARX_MARGIN', 'OutputErrorProblem', 'SteiglitzMcBride', 'fit_oe',
+           'steiglitz_mcbride']
+
+#: The ARX start is also descended from when its simulation error is below this factor
+#: plus one times the minimum found from Steiglitz-McBride (0: only when it is already
+#: better; a start just above it ends in the same minimum, as every rig tried did).
+ARX_MARGIN = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class SteiglitzMcBride:
+    """
+    Result of :func:`steiglitz_mcbride`.
+
+    Attributes:
+        a: Stable denominator ``[1, f1, ...]``.
+        b: Numerators ``(n_inputs, nb)``.
+        covariance: ``σ² (Φ̃ᵀΦ̃)⁻¹`` of the last prefiltered regression.
+        noise_variance: ``σ²`` of that regression.
+        iterations: Prefilter passes run.
+        converged: Whether the relative parameter change fell below the tolerance.
+
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    covariance: np.ndarray
+    noise_variance: float
+    iterations: int
+    converged: bool
+
+
+def _relative_change(old: np.ndarray, new: np.ndarray) -> float:
+    return float(np.linalg.norm(new - old) / max(np.linalg.norm(new), 1e-300))
+
+
+def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
+                      a0: np.ndarray | None = None, max_iter: int = 30,
+                      tol: float = 1e-7, exact: bool = True) -> SteiglitzMcBride:
+    """
+    Iterate least squares on the data prefiltered by ``1/F̂`` (Steiglitz–McBride).
+
+    Each pass filters inputs and output of every segment by the current ``1/F̂`` (from
+    rest), solves ``F ỹ = Σ B_i ũ_i`` by least squares and reflects unstable roots of the
+    new ``F̂``. At the fixed point the equation error of the filtered data equals the
+    simulation error, so the estimate approaches the output-error one.
+
+    Args:
+        segments: Checked segments.
+        nf: Order of ``F``.
+        nb: Coefficients per numerator.
+        nk: Input delay.
+        a0: Start denominator; an ARX estimate when None.
+        max_iter: Most prefilter passes.
+        tol: Relative parameter change that ends the iteration.
+        exact: Solve each pass by QR (the estimate is the result, as in the seed paper's
+            generalised least squares); False solves the normal equations (QR only where
+            they are singular), three times cheaper, for a start value that a
+            Levenberg–Marquardt fit refines; the covariance is then NaN.
+
+    Returns:
+        The last estimate.
+
+    Raises:
+        IdentError: On too little data or regressors without excitation.
+
+    """
+    ys, us = [s.y for s in segments], [s.u for s in segments]
+    a = reflect_unstable(fit_arx(segments, na=nf, nb=nb, nk=nk).a if a0 is None else a0)
+    b = np.zeros((segments[0].n_inputs, nb))
+    converged = False
+    iterations = 0
+    for iterations in range(1, max_iter + 1):
+        phi, target, names = lagged_regression(filter_each([1.0], a, ys),
+                                               filter_each([1.0], a, us),
+                                               na=nf, nb=nb, nk=nk)
+        ls = None
+        try:
+            theta = None if exact else normal_equations(phi, target)
+        except IdentError:
+            theta = None
+        if theta is None:
+            ls = solve_least_squares(phi, target, names=names)
+            theta = ls.theta
+        a_new = reflect_unstable(np.concatenate([[1.0], theta[:nf]]))
+        b_new = theta[nf:].reshape(b.shape)
+        change = max(_relative_change(a, a_new), _relative_change(b, b_new))
+        a, b = a_new, b_new
+        if change < tol:
+            converged = True
+            break
+    if ls is None:
+        e = target - phi @ theta
+        variance = float(e @ e) / max(e.size - theta.size, 1)
+        return SteiglitzMcBride(a, b, np.full((theta.size,) * 2, np.nan), variance,
+                                iterations, converged)
+    return SteiglitzMcBride(a, b, ls.noise_variance * ls.unit_covariance, ls.noise_variance,
+                            iterations, converged)
+
+
+class OutputErrorProblem:
+    """
+    The simulation error of ``y = Σ B_i/F q^-nk u_i + D d`` over segments, and its Jacobian.
+
+    One object per set of windows and orders, shared by :func:`fit_oe` and the extended
+    fits (:mod:`sensor_comp.core.identification.extended`). The parameters are ``θ = (f1..fnf, b
+    row by row, d)``; ``d`` multiplies optional additive regressors (disturbances) that bypass the
+    dynamics. Every segment is simulated from rest. The Jacobian is built column by column
+    into one Fortran-ordered array and the normal equations come from one product, so an
+    evaluation costs a few passes over the samples.
+
+    Args:
+        us: Inputs per segment, ``(n_inputs, n)``.
+        ys: Outputs per segment, ``(n,)``.
+        nf: Order of ``F``.
+        nb: Coefficients per numerator.
+        nk: Input delay in samples.
+        extra: Additive regressors per segment, ``(k, n)``, or None.
+
+    """
+
+    def __init__(self, us: Sequence[np.ndarray], ys: Sequence[np.ndarray], nf: int, nb: int,
+                 nk: int, extra: Sequence[np.ndarray] | None = None):
+        self.us = [np.atleast_2d(np.asarray(u, dtype=np.float64)) for u in us]
+        self.ys = [np.asarray(y, dtype=np.float64) for y in ys]
+        self.nf, self.nb, self.nk = nf, nb, nk
+        self.n_inputs = self.us[0].shape[0]
+        self.y = np.concatenate(self.ys)
+        self.offsets = np.concatenate([[0], np.cumsum([y.size for y in self.ys])])
+        self.extra = None if extra is None else np.concatenate(
+            [np.asarray(c, dtype=np.float64).T for c in extra])
+        self.n_extra = 0 if self.extra is None else self.extra.shape[1]
+        self.n_parameters = nf + self.n_inputs * nb + self.n_extra
+        self._last: tuple[bytes, list[np.ndarray]] | None = None
+
+    def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return ``(F, B (n_inputs, nb), d)`` of the parameters ``theta``."""
+        nbt = self.n_inputs * self.nb
+        return (np.concatenate([[1.0], theta[:self.nf]]),
+                np.asarray(theta[self.nf:self.nf + nbt]).reshape(self.n_inputs, self.nb),
+                np.asarray(theta[self.nf + nbt:]))
+
+    def _fill_lags(self, out: np.ndarray, column: int, x: Sequence[np.ndarray], first: int,
+                   count: int) -> None:
+        """Write each row of ``x`` (per segment) delayed by ``first … first+count−1``."""
+        for s, xs in enumerate(x):
+            start, stop = self.offsets[s], self.offsets[s + 1]
+            n = stop - start
+            for i in range(xs.shape[0]):
+                for j in range(count):
+                    lag, col = first + j, column + i * count + j
+                    if lag < n:
+                        out[start:start + lag, col] = 0.0
+                        out[start + lag:stop, col] = xs[i, :n - lag]
+                    else:
+                        out[start:stop, col] = 0.0
+
+    def regression(self, f: np.ndarray) -> np.ndarray:
+        """
+        Return the regressors at a fixed ``F``: ``q^-(nk+j) u_i/F``, then the extra ones.
+
+        An ``(n, n_inputs·nb + k)`` Fortran-ordered array over all segments; the outputs
+        are :attr:`y`.
+        """
+        q = self.n_inputs * self.nb
+        out = np.empty((self.y.size, q + self.n_extra), order='F')
+        self._fill_lags(out, 0, self.filtered(f), self.nk, self.nb)
+        if self.extra is not None:
+            out[:, q:] = self.extra
+        return out
+
+    def linear(self, f: np.ndarray) -> np.ndarray:
+        """
+        Return the least-squares numerators and extra coefficients at a fixed ``F``.
+
+        Dependent regressors (an effect channel that is a filtered copy of another, more
+        lags than the data excite) get the minimum-norm solution instead of an error.
+        """
+        phi = self.regression(f)
+        try:
+            return solve_least_squares(phi, self.y).theta
+        except IdentError:
+            return minimum_norm(phi, self.y)
+
+    def profile_sse(self, f: np.ndarray) -> float:
+        """
+        Return the least sum of squares over numerators (and extra coefficients) at ``F``.
+
+        The coefficients come from the column-scaled normal equations (Cholesky: the
+        cheapest for the many evaluations of a search), regularised by a ridge of 1e-10
+        where they are singular; the residual is then computed, so round-off and the ridge
+        can only raise the loss, never fake a low one.
+        """
+        phi = self.regression(f)
+        try:
+            theta = normal_equations(phi, self.y)
+        except IdentError:
+            try:
+                theta = normal_equations(phi, self.y, ridge=1e-10)
+            except IdentError:  # not finite
+                return math.inf
+        e = self.y - phi @ theta
+        return float(e @ e)
+
+    def filtered(self, f: np.ndarray) -> list[np.ndarray]:
+        """
+        Return the inputs of every segment filtered by ``1/F`` (from rest).
+
+        The last result is kept: Levenberg–Marquardt asks for the Jacobian at the trial it
+        has just simulated, and this filter pass is most of an evaluation's cost.
+        """
+        key = f.tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us])
+        return self._last[1]
+
+    def simulate(self, theta: np.ndarray) -> np.ndarray:
+        """Return the model output over all segments (concatenated), from rest."""
+        f, b, d = self.unpack(theta)
+        out = np.zeros(self.y.size)
+        for s, x in enumerate(self.filtered(f)):
+            part = out[self.offsets[s]:self.offsets[s + 1]]
+            n = part.size
+            for i in range(self.n_inputs):
+                for j in range(self.nb):
+                    lag = self.nk + j
+                    if lag < n:
+                        part[lag:] += b[i, j] * x[i, :n - lag]
+        if self.extra is not None:
+            out += self.extra @ d
+        return out
+
+    def residual(self, theta: np.ndarray, jacobian: bool = False):
+        """
+        Return the simulation error ``e = y − ŷ``; with ``jacobian``, ``(e, ∂ŷ/∂θ)``.
+
+        ``∂ŷ/∂f_j = −q^-j ŷ_u/F`` (``ŷ_u`` the input-driven part), ``∂ŷ/∂b_ij =
+        q^-(nk+j) u_i/F``, ``∂ŷ/∂d = extra``.
+        """
+        if not jacobian:
+            return self.y - self.simulate(theta)
+        f, b, d = self.unpack(theta)
+        nf, q = self.nf, self.n_inputs * self.nb
+        jac = np.empty((self.y.size, self.n_parameters), order='F')
+        self._fill_lags(jac, nf, self.filtered(f), self.nk, self.nb)
+        induced = jac[:, nf:nf + q] @ b.ravel()
+        z = [-signal.lfilter([1.0], f, induced[self.offsets[s]:self.offsets[s + 1]])[None]
+             for s in range(len(self.us))]
+        self._fill_lags(jac, 0, z, 1, nf)
+        e = self.y - induced
+        if self.extra is not None:
+            jac[:, nf + q:] = self.extra
+            e -= self.extra @ d
+        return e, jac
+
+
+def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, nk: int = 1,
+           max_iter: int = 100, tol: float = 1e-8, start: np.ndarray | None = None) -> Estimate:
+    """
+    Estimate a MISO output-error model ``y = Σ B_i/F q^-nk u_i + e``.
+
+    Steiglitz–McBride gives the start value; Levenberg–Marquardt then minimises the sum of
+    squared simulation errors over all segments (each simulated from rest), rejecting any
+    step that makes ``F`` unstable. The covariance is ``σ² (JᵀJ)⁻¹`` from the Jacobian at
+    the optimum, valid for white output noise (infinite when the structure is
+    over-parameterised so that ``JᵀJ`` is singular).
+
+    Args:
+        segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
+        nf: Order of the common denominator ``F``.
+        nb: Coefficients of each numerator ``B_i`` (lags ``nk`` … ``nk+nb−1``).
+        nk: Input delay in samples.
+        max_iter: Most Levenberg–Marquardt iterations.
+        tol: Relative decrease of the squared error below which the iteration stops.
+        start: A stable start denominator ``[1, f1..fnf]`` (e.g. the fit of a neighbouring
+            delay): Levenberg–Marquardt from it alone, numerators solved at it, without the
+            Steiglitz–McBride and ARX starts (a local refinement, several times cheaper).
+
+    Returns:
+        The ``'oe'`` estimate; ``loss`` is the mean squared simulation error.
+
+    Raises:
+        IdentError: On bad orders, too little data or inputs that do not excite the model.
+
+    """
+    check_orders(nf=nf, nb=nb, nk=nk, max_iter=max_iter)
+    segs = as_segments(segments)
+    problem = OutputErrorProblem([s.u for s in segs], [s.y for s in segs], nf, nb, nk)
+
+    def descend(theta):
+        return levenberg_marquardt(problem.residual, theta, max_iter=max_iter, tol=tol,
+                                   stable=lambda th: is_stable(problem.unpack(th)[0]))
+
+    if start is not None:
+        f0 = reflect_unstable(np.asarray(start, dtype=np.float64))
+        if f0.size != nf + 1:
+            raise IdentError(f'start denominator of order {f0.size - 1} for nf={nf}')
+        return _estimate(problem, descend(np.concatenate([f0[1:], problem.linear(f0)])), 0,
+                         'a given start denominator')
+
+    f0 = reflect_unstable(fit_arx(segs, na=nf, nb=nb, nk=nk).a)
+    try:
+        sm = steiglitz_mcbride(segs, nf=nf, nb=nb, nk=nk, a0=f0, max_iter=15, tol=1e-6,
+                               exact=False)
+    except IdentError as exc:  # e.g. prefiltered regressors that lost their rank
+        sm, failed = None, str(exc)
+    # Steiglitz-McBride can drift to a degenerate minimum (a pole on 1 with a differentiating
+    # numerator) when the data are far from linear or carry a slow tail, or to a poor basin
+    # of a first-order model; the ARX poles, biased but in the right place, then start
+    # better. The ARX start is descended from when Steiglitz-McBride ended worse than it
+    # began (it drifted) or when it is already below the minimum found (ARX_MARGIN);
+    # otherwise its bias puts it above the same minimum and it is skipped.
+    arx = np.concatenate([f0[1:], problem.linear(f0)])
+    arx_cost = _cost(problem, arx)
+    best = drifted = None
+    if sm is not None:
+        theta = np.concatenate([sm.a[1:], sm.b.ravel()])
+        drifted = _cost(problem, theta) > arx_cost
+        best = descend(theta)
+    if best is None or drifted or arx_cost < (1 + ARX_MARGIN) * best.cost:
+        other = descend(arx)
+        start = ('an ARX start (Steiglitz-McBride failed: ' + failed + ')' if best is None
+                 else 'the better of a Steiglitz-McBride and an ARX start')
+        best = other if best is None or other.cost < best.cost else best
+    else:
+        start = 'a Steiglitz-McBride start'
+    return _estimate(problem, best, 0 if sm is None else sm.iterations, start)
+
+
+def _cost(problem: OutputErrorProblem, theta: np.ndarray) -> float:
+    """Return the sum of squared simulation errors at ``theta``."""
+    e = problem.residual(theta)
+    return float(e @ e)
+
+
+def _estimate(problem: OutputErrorProblem, best, passes: int, start: str) -> Estimate:
+    """Return the ``'oe'`` estimate at a Levenberg-Marquardt minimum, with its covariance."""
+    theta, cost, e, jac, iterations, converged = (best.theta, best.cost, best.e, best.jac,
+                                                  best.iterations, best.converged)
+    f, b, _ = problem.unpack(theta)
+    n, p = e.size, theta.size
+    variance = cost / max(n - p, 1)
+    gram, _, scale = scaled_normal_equations(jac, e)
+    if np.linalg.cond(gram) < 1e12:
+        covariance = variance * np.linalg.inv(gram) / np.outer(scale, scale)
+    else:  # over-parameterised (e.g. a pole cancels a zero): not identifiable
+        covariance = np.full((p, p), np.inf)
+    return Estimate(structure='oe', a=f, b=b, nk=problem.nk, covariance=covariance,
+                    noise_variance=variance, loss=cost / n, n_samples=n,
+                    iterations=passes + iterations, converged=converged,
+                    method=f'Levenberg-Marquardt ({iterations} iterations) from {start} '
+                           f'({passes} Steiglitz-McBride passes)')

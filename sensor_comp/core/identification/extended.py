@@ -1,0 +1,855 @@
+"""
+Fitting a base model plus catalogued effects (:mod:`sensor_comp.core.effects`).
+
+The base model is the output-error model ``y = B(q)/F(q) q^-nk a_z`` fitted per shot window
+from rest. Each effect extends its :class:`~sensor_comp.core.effects.base.ModelSpec`: more
+input channels through the common denominator, more poles, a delay or high-pass applied to
+every channel, additive disturbance regressors, and 1-D nonlinear parameters (a delay, a
+time constant). :func:`fit_extended` fits it all:
+
+1. The input channels are computed with the current values of the 1-D parameters (their
+   start values at first) and an output-error model is fitted (:func:`fit_oe`:
+   Steiglitz–McBride, then Levenberg–Marquardt, stable poles).
+2. With disturbance regressors (mains hum), the output-error estimate is the start of a
+   joint Levenberg–Marquardt fit of ``F``, ``B`` and the disturbance coefficients
+   (``y = B/F u + D d``, exact Jacobian); each discrete choice (50 or 60 Hz) is fitted and
+   the better one kept.
+3. Each 1-D parameter is found by a coarse grid and a bounded scalar search
+   (:func:`scipy.optimize.minimize_scalar`) on the output-error loss with the denominator
+   held at its last estimate (the numerators and disturbance coefficients are linear and
+   solved exactly at every trial value); then step 1–2 refit everything. Two rounds.
+4. Physical parameters come from the fitted polynomials (delta-method standard deviations
+   from the covariance), the searched values or the disturbance coefficients.
+5. Their covariance is robust (:func:`robust_uncertainty`): a sandwich
+   ``A⁻¹ M A⁻¹`` over all of them jointly (``A = JᵀJ``, the searched values' columns of
+   ``J`` by central differences), whose "meat" ``M`` bounds two estimates of the score's
+   covariance: one with the residual's own autocorrelation (Bartlett lag window as long as
+   three times the largest lag at which the residual's autocorrelation exceeds 0.1, per
+   shot window: coloured noise and a misfit that lasts a few samples count with their
+   effective number of samples), and the scatter of the scores between shot windows (a
+   misfit that differs from shot to shot, whatever its duration). The white-noise formula
+   ``σ² (JᵀJ)⁻¹`` assumed white residuals and a correct model, and gave deviations 2–8
+   times too small on coloured noise.
+
+Windows are shot windows with the pre-trigger baseline removed, as
+:func:`~sensor_comp.core.shots.detection.segments` cuts them; each keeps its position in its
+recording so that stationary disturbances keep their phase from shot to shot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+import itertools
+import math
+import re
+
+import numpy as np
+from scipy import optimize
+
+from ..effects import EffectError, get_effect, ordered
+from ..effects.base import effect_entry, Effect, ModelSpec, Physical, Search
+from ..estimators import Estimate, fit_oe, IdentError, simulate_output
+from ..estimators.least_squares import scaled_qr
+from ..estimators.oe import OutputErrorProblem
+from ..estimators.levenberg_marquardt import levenberg_marquardt
+from ..estimators.polynomials import max_root_radius
+from ..shots.inputs import input_channels, mode_pair
+from .model import Model
+from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
+
+__all__ = ['DisturbanceFit', 'ExtendedFit', 'Prediction', 'Window', 'fit_extended',
+           'ringing_khz', 'robust_uncertainty', 'shot_windows']
+
+#: Rounds of (scalar searches, refit) when the spec has 1-D parameters.
+ROUNDS = 2
+#: Most Levenberg-Marquardt iterations of a joint fit.
+MAX_ITERATIONS = 100
+#: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
+#: ask for the same ones).
+CHANNEL_CACHE = 4
+#: Longest searched time constant (high-pass, leaky peak), in units of the longest window.
+TAU_WINDOWS = 100.0
+#: A log-searched value within this factor of a bound lies at the edge of its range.
+EDGE = 1.01
+#: The robust covariance's lag window: this many times the largest lag at which the
+#: residual's autocorrelation exceeds :data:`HAC_LEVEL` (see :func:`robust_uncertainty`).
+HAC_FACTOR, HAC_LEVEL = 3, 0.1
+#: Longest lag window of the robust covariance, samples (and at most a quarter window).
+HAC_MAX_LAGS = 4000
+#: A search placeholder in a channel name or modifier value.
+_KEYS = re.compile(r'\{([^{}]+)\}')
+
+
+@dataclass(frozen=True, eq=False)
+class DisturbanceFit:
+    """
+    Fitted disturbance regressors (effects not driven by the acceleration).
+
+    Attributes:
+        effects: The disturbance effects, in column order.
+        choices: The discrete choice of each (e.g. ``{'freq_hz': 50.0}``).
+        sources: Recordings the coefficients belong to (one block of columns each).
+        coefficients: Fitted coefficients, ``sources`` blocks of every effect's columns.
+        covariance: Their covariance.
+
+    """
+
+    effects: tuple[Effect, ...]
+    choices: tuple[Mapping[str, float], ...]
+    sources: int
+    coefficients: np.ndarray = field(repr=False)
+    covariance: np.ndarray = field(repr=False)
+
+    def columns(self, window: Window, *, fs: float, sources: int | None = None) -> np.ndarray:
+        """Return the window's regressors ``(k, n)``, zero outside its recording's block."""
+        return _columns(window, self.effects, self.choices, fs=fs,
+                        sources=self.sources if sources is None else sources)
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """
+    A fitted model's prediction over windows.
+
+    Attributes:
+        induced: Acceleration-driven part per window (simulated from rest), Pa.
+        disturbance: Disturbance estimate per window (zeros without disturbances), Pa.
+        disturbance_parameters: Coefficients estimated on these windows' own residual.
+
+    """
+
+    induced: list[np.ndarray]
+    disturbance: list[np.ndarray]
+    disturbance_parameters: int
+
+    @property
+    def total(self) -> list[np.ndarray]:
+        """Return induced plus disturbance per window."""
+        return [i + d for i, d in zip(self.induced, self.disturbance)]
+
+
+@dataclass(frozen=True, eq=False)
+class ExtendedFit:
+    """
+    Result of :func:`fit_extended`.
+
+    Attributes:
+        effects: Ids of the fitted effects, in signal-path order.
+        spec: The structure fitted.
+        inputs: Input names of the model (parameters filled in).
+        estimate: The output-error estimate over ``inputs``.
+        values: Values of the 1-D parameters by search key.
+        value_std: Their standard deviations (None when the loss is flat).
+        disturbance: Disturbance coefficients, or None.
+        entries: ``Model.effects`` entries with the physical parameters.
+        fs: Sample rate in Hz.
+        notes: What the user should know (e.g. a parameter that could not be read).
+        denominators: Base-order denominators worth starting other fits of the same
+            windows from (``starts`` of :func:`fit_extended`).
+
+    """
+
+    effects: tuple[str, ...]
+    spec: ModelSpec
+    inputs: tuple[str, ...]
+    estimate: Estimate
+    values: Mapping[str, float]
+    value_std: Mapping[str, float | None]
+    disturbance: DisturbanceFit | None
+    entries: tuple[dict, ...]
+    fs: float
+    notes: tuple[str, ...] = ()
+    denominators: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    _base: tuple[tuple[str, int], ...] = field(default=(), repr=False)
+
+    def parameters(self, effect_id: str) -> Physical:
+        """Return an effect's physical parameters ``name -> (value, std)``."""
+        for entry in self.entries:
+            if entry['id'] == effect_id:
+                return {k: (v, entry['std'].get(k)) for k, v in entry['parameters'].items()}
+        raise EffectError(f'effect {effect_id!r} was not fitted (fitted: '
+                          f'{", ".join(self.effects) or "none"})')
+
+    @property
+    def base_orders(self) -> dict[str, int]:
+        """Return the orders of the base model the effects extend (``base_nf`` ...)."""
+        return dict(self._base)
+
+    def model(self, **options) -> Model:
+        """
+        Return the :class:`Model` (``options`` go to :meth:`Model.from_estimate`).
+
+        Its fit statistics hold the base orders (``base_nf``, ``base_nb``, ``base_nk``),
+        so that a diagnosis can start from the model again.
+        """
+        fit = {**self.base_orders, **(options.pop('fit', None) or {})}
+        return Model.from_estimate(self.estimate, fs=self.fs, inputs=self.inputs,
+                                   effects=self.entries, fit=fit, **options)
+
+    def predict(self, windows: Sequence[Window]) -> Prediction:
+        """
+        Return the prediction over ``windows`` (e.g. validation shots).
+
+        The acceleration-driven part is simulated from rest in each window. A disturbance's
+        phase belongs to its recording, so its coefficients are estimated again by least
+        squares on these windows' residual (per recording, the frequency kept from the
+        fit); :attr:`Prediction.disturbance_parameters` counts them.
+        """
+        us = _channels(windows, self.inputs, self.fs)
+        induced = simulate_output(self.estimate, us)
+        if self.disturbance is None:
+            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0)
+        sources = 1 + max(w.source for w in windows)
+        cols = [self.disturbance.columns(w, fs=self.fs, sources=sources) for w in windows]
+        phi = np.concatenate(cols, axis=1).T
+        target = np.concatenate([w.y - i for w, i in zip(windows, induced)])
+        used = np.flatnonzero(np.any(phi != 0, axis=0))
+        coef = np.zeros(phi.shape[1])
+        coef[used] = _lstsq(phi[:, used], target)[0]
+        return Prediction(induced, [c.T @ coef for c in cols], int(used.size))
+
+
+def _channels(windows: Sequence[Window], names: Sequence[str], fs: float) -> list[np.ndarray]:
+    return [input_channels(names, w.acceleration, {}, fs=fs) for w in windows]
+
+
+def _columns(window: Window, effects: Sequence[Effect], choices: Sequence[Mapping],
+             *, fs: float, sources: int) -> np.ndarray:
+    blocks = [effect.columns(window, fs=fs, choice=choice)
+              for effect, choice in zip(effects, choices)]
+    per = sum(b.shape[0] for b in blocks)
+    out = np.zeros((per * sources, window.y.size))
+    out[window.source * per:(window.source + 1) * per] = np.concatenate(blocks)
+    return out
+
+
+def _lstsq(phi: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve least squares with unit-norm columns; return ``(theta, unit covariance)``."""
+    scale = np.linalg.norm(phi, axis=0)
+    scale[scale == 0] = 1.0
+    q, r, _ = scaled_qr(phi / scale)
+    theta = np.linalg.solve(r, q.T @ target) / scale
+    rinv = np.linalg.solve(r, np.eye(r.shape[0]))
+    return theta, (rinv @ rinv.T) / np.outer(scale, scale)
+
+
+def _problem(us: Sequence[np.ndarray], ys: Sequence[np.ndarray],
+             cols: Sequence[np.ndarray] | None, spec: ModelSpec) -> OutputErrorProblem:
+    """Return the output-error problem of channels ``us`` plus disturbance columns."""
+    return OutputErrorProblem(us, ys, spec.nf, spec.nb, spec.nk, extra=cols)
+
+
+def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
+           feasible: Callable[[np.ndarray], bool]
+           ) -> tuple[Estimate, np.ndarray | None, np.ndarray | None]:
+    """
+    Fit ``F``, ``B`` and the disturbance coefficients jointly, starting from ``F = a0``.
+
+    Levenberg–Marquardt on all parameters with the exact Jacobian
+    (:class:`~sensor_comp.core.estimators.oe.OutputErrorProblem`); the numerators and
+    disturbance coefficients start from their least squares at ``a0``; every step keeps
+    ``feasible(F)`` (stable, and no slower than the effects' own time constants).
+    """
+    nf = problem.nf
+    io = nf + problem.n_inputs * problem.nb
+    x0 = np.concatenate([a0[1:], problem.linear(a0)])
+    result = levenberg_marquardt(
+        problem.residual, x0, stable=lambda theta: feasible(problem.unpack(theta)[0]),
+        max_iter=MAX_ITERATIONS, tol=1e-9)
+    theta, cost, e, jac = result.theta, result.cost, result.e, result.jac
+    n, p = e.size, theta.size
+    variance = cost / max(n - p, 1)
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    try:
+        _, r, _ = scaled_qr(jac / scale)
+        singular = not np.linalg.cond(r) < 1e10
+    except IdentError:
+        singular = True
+    if singular:  # over-parameterised: not identifiable
+        covariance = np.full((p, p), np.inf)
+    else:
+        rinv = np.linalg.solve(r, np.eye(p))
+        covariance = variance * (rinv @ rinv.T) / np.outer(scale, scale)
+    f, b, d = problem.unpack(theta)
+    estimate = Estimate(structure='oe', a=f, b=b, nk=problem.nk,
+                        covariance=covariance[:io, :io], noise_variance=variance,
+                        loss=cost / n, n_samples=n, iterations=result.evaluations,
+                        converged=result.converged,
+                        method=f'{method}; joint Levenberg-Marquardt over {p} parameters '
+                               f'({result.evaluations} evaluations)')
+    if problem.extra is None:
+        return estimate, None, None
+    return estimate, d, covariance[io:, io:]
+
+
+def _pairs(fs: float) -> list[tuple[float, np.ndarray]]:
+    """Return ``(zeta, [1, a1, a2])`` pole pairs: a grid of frequency and damping."""
+    return [(zeta, mode_pair(fn / 1e3, zeta, fs))
+            for fn in np.geomspace(fs / 2000, 0.4 * fs, 32) for zeta in (0.1, 0.3, 0.9)]
+
+
+def slowest_pole_s(spec: ModelSpec) -> float | None:
+    """
+    Return the slowest time constant the model's own poles may have, s, or None.
+
+    A channel high-pass (``@highpass_ms``) or a leaky peak (``peak_a_z(tau_ms=…)``) whose
+    time constant is searched can be imitated exactly by a slow real pole of the common
+    denominator with a zero at 1 in the numerators: the fit then puts the effect in the
+    mechanics and sends the searched time constant to its bound (an 82 ms amplifier
+    high-pass read as 10 s). The sensor's poles are fast, so they are held faster than the
+    shortest time constant those searches may take.
+    """
+    keys = _timed_keys(spec)
+    lows = [s.low * 1e-3 for s in spec.searches if s.key in keys]
+    if spec.slowest_pole_s is not None:
+        lows.append(spec.slowest_pole_s)
+    return min(lows) if lows else None
+
+
+def _timed_keys(spec: ModelSpec) -> set[str]:
+    """Return the search keys that are time constants of a high-pass or a leaky peak."""
+    timed = [value for modifier, value in spec.modifiers if modifier == 'highpass_ms']
+    timed += [base for base in spec.bases if base.startswith('peak_')]
+    return {match.group(1) for text in timed for match in _KEYS.finditer(text)}
+
+
+def _bound_time_constants(spec: ModelSpec, longest_s: float) -> ModelSpec:
+    """
+    Return ``spec`` with its searched time constants bounded by the data length.
+
+    A high-pass or leaky peak with a time constant of more than :data:`TAU_WINDOWS` times
+    the longest window changes the windows by less than the window over the time constant
+    (a droop or offset of a few per cent of the shot at most): the loss is flat out there
+    and a search would run to a bound that has nothing to do with the data (10 s for
+    windows of 25 ms). The upper bound (and a start above it) is lowered to that length,
+    never raised; the lower bound stays.
+    """
+    keys = _timed_keys(spec)
+    cap = TAU_WINDOWS * longest_s * 1e3
+    searches = []
+    for search in spec.searches:
+        if search.key in keys and search.high > cap > search.low:
+            start = None if search.start is None else min(search.start, cap)
+            search = replace(search, high=cap, start=start)
+        searches.append(search)
+    return replace(spec, searches=tuple(searches))
+
+
+def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
+    """Return whether a denominator is stable and no slower than :func:`slowest_pole_s`."""
+    slowest = slowest_pole_s(spec)
+
+    def feasible(a: np.ndarray) -> bool:
+        if not max_root_radius(a) < 1.0:
+            return False
+        if slowest is None or a.size < 2:
+            return True
+        with np.errstate(divide='ignore'):  # a pole at the origin is infinitely fast
+            speeds = np.abs(np.log(np.roots(a).astype(complex))) * fs
+        return bool(np.all(speeds > 1.0 / slowest))
+    return feasible
+
+
+class _Fitter:
+    """
+    One structure on one set of windows: channels, fits and searches.
+
+    Output-error losses of sensors with a slow tail (a high-pass, a zero shift) have more
+    than one basin: a 2nd-order model may imitate the tail with a real pole near 1 instead
+    of resonating. The fitter therefore keeps a few denominators (:meth:`starts`, then the
+    fits' own) and starts every fit and every trial of a search's grid from each of them.
+    Channels are computed once per set of parameter values (the last few are kept).
+    """
+
+    def __init__(self, windows: Sequence[Window], spec: ModelSpec, fs: float,
+                 disturbances: Sequence[Effect], choices: Sequence[Mapping]):
+        self.windows, self.spec, self.fs = list(windows), spec, fs
+        self.disturbances, self.choices = tuple(disturbances), tuple(choices)
+        self.sources = 1 + max(w.source for w in windows)
+        self.cols = ([_columns(w, self.disturbances, self.choices, fs=fs,
+                               sources=self.sources) for w in windows]
+                     if self.disturbances else None)
+        self.ys = [w.y for w in windows]
+        self.feasible = _feasibility(spec, fs)
+        self._channels: dict[tuple[str, ...], list[np.ndarray]] = {}
+
+    def channels(self, values: Mapping[str, float]) -> list[np.ndarray]:
+        """Return the input channels of every window at ``values`` (cached)."""
+        names = self.spec.channels(values)
+        if names not in self._channels:
+            if len(self._channels) >= CHANNEL_CACHE:
+                self._channels.pop(next(iter(self._channels)))
+            self._channels[names] = _channels(self.windows, names, self.fs)
+        return self._channels[names]
+
+    def problem(self, values: Mapping[str, float], *,
+                early: bool = False) -> OutputErrorProblem:
+        """Return the regression data; ``early``: up to 3 ms after each pulse only."""
+        us = self.channels(values)
+        if not early:
+            return _problem(us, self.ys, self.cols, self.spec)
+        stops = [w.y.size if w.end is None else min(w.y.size, w.end + round(EARLY_S * self.fs))
+                 for w in self.windows]
+        return _problem([u[:, :n] for u, n in zip(us, stops)],
+                        [y[:n] for y, n in zip(self.ys, stops)],
+                        None if self.cols is None else [c[:, :n] for c, n in
+                                                        zip(self.cols, stops)], self.spec)
+
+    def starts(self, values: Mapping[str, float], *,
+               base: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
+        """
+        Return start denominators: from output error and from a grid of pole pairs.
+
+        The grid starts are the pole pair with the least loss and the lightly damped one
+        with the least loss (a slow tail can make an overdamped pair win at the start
+        values of a search, hiding the resonant basin); beyond two poles the pairs are
+        padded with poles at the origin, for one pole a grid of real poles is used.
+        ``base`` (denominators of an earlier fit of the same windows) replaces them all.
+        Only feasible denominators (:func:`_feasibility`) are returned.
+
+        Raises:
+            IdentError: When no start can be found.
+
+        """
+        problem = self.problem(values)
+        firsts = [a for a in base if a.size == problem.nf + 1 and self.feasible(a)]
+        if firsts:
+            return firsts
+        try:
+            a = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
+                       nk=problem.nk).a
+            if self.feasible(a):
+                firsts.append(a)
+        except IdentError:
+            pass
+        # On the windows' early part (pulse and first ringing): a slow tail has not built
+        # up there to pull the grid towards slow pairs.
+        early = self.problem(values, early=True)
+        grid = [(early.profile_sse(a), zeta, a) for zeta, a in _grid(problem.nf, self.fs)
+                if self.feasible(a)]
+        grid = [g for g in grid if np.isfinite(g[0])]
+        if grid:
+            firsts.append(min(grid, key=lambda g: g[0])[2])
+            resonant = [g for g in grid if g[1] < 0.5]
+            if resonant:
+                firsts.append(min(resonant, key=lambda g: g[0])[2])
+        if not firsts:
+            raise IdentError(f'no start for a model with nf={problem.nf}: neither output '
+                             f'error nor a grid of poles gives a denominator the effects '
+                             f'allow')
+        return _distinct(firsts)
+
+    def fit(self, values: Mapping[str, float], starts: Sequence[np.ndarray], *,
+            fresh: bool = False):
+        """
+        Return the best of the fits from every start (and, ``fresh``, output error).
+
+        Raises:
+            IdentError: When no fit succeeds (no start of this order, or every fit fails).
+
+        """
+        problem = self.problem(values)
+        results, failed = [], []
+        if self.cols is None and fresh:
+            try:
+                oe = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
+                            nk=problem.nk)
+                if self.feasible(oe.a):
+                    results.append((oe, None, None))
+            except IdentError as exc:
+                failed.append(str(exc))
+        usable = [a for a in starts if a.size == problem.nf + 1 and self.feasible(a)]
+        if usable:  # Levenberg-Marquardt from the start with the least loss
+            best = min(usable, key=problem.profile_sse)
+            try:
+                results.append(_joint(problem, best, feasible=self.feasible,
+                                      method='output error from the best start denominator'))
+            except IdentError as exc:
+                failed.append(str(exc))
+        if not results:
+            raise IdentError(f'no fit of nf={problem.nf} nb={problem.nb} nk={problem.nk}: '
+                             + ('; '.join(failed) or 'no start denominator'))
+        return min(results, key=lambda r: r[0].loss)
+
+    def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
+        """Return the least loss over the start denominators, numerators re-solved."""
+        problem = self.problem(values)
+        return min(problem.profile_sse(a) for a in starts)
+
+    def search(self, search: Search, values: Mapping[str, float],
+               starts: Sequence[np.ndarray]) -> float:
+        """
+        Return the value of ``search`` with the least loss (grid, then bounded).
+
+        The grid tries every start denominator; the bounded refinement only the one that
+        was best at the grid's best point (the others lost there already).
+        """
+        def at(x):
+            return {**values, search.key: math.exp(x) if search.log else x}
+
+        grid = search.points()
+        xs = np.log(grid) if search.log else grid
+        table = np.array([[self.problem(at(x)).profile_sse(a) for a in starts] for x in xs])
+        losses = table.min(axis=1)
+        best = int(np.argmin(losses))
+        start = starts[int(np.argmin(table[best]))]
+        low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
+        if search.exclude is not None:  # refine on the best point's side of the band
+            band = np.log(search.exclude) if search.log else np.asarray(search.exclude)
+            if xs[best] < band[0]:
+                high = min(high, band[0])
+            else:
+                low = max(low, band[1])
+        result = optimize.minimize_scalar(lambda x: self.problem(at(x)).profile_sse(start),
+                                          bounds=(low, high), method='bounded',
+                                          options={'xatol': 1e-4 * max(high - low, 1e-12)})
+        x = result.x if result.fun <= losses[best] else xs[best]
+        return float(math.exp(x) if search.log else x)
+
+    def value_std(self, search: Search, values: Mapping[str, float], f: np.ndarray,
+                  variance: float) -> float | None:
+        """
+        Return the standard deviation of a searched value from the loss's curvature.
+
+        For a log search the curvature is taken in ``log(value)`` (steps of 0.1 %) and the
+        deviation carried back by the delta method; within a step of a bound, None (the
+        value is not resolved there).
+        """
+        value = values[search.key]
+        if search.log:
+            step = 1e-3
+            if not search.low * math.exp(step) <= value <= search.high * math.exp(-step):
+                return None
+            points = [math.log(value) + k * step for k in (-1, 0, 1)]
+            values_at = [math.exp(x) for x in points]
+        else:
+            step = max(1e-3 * abs(value), 1e-3 * (search.high - search.low) / search.grid)
+            values_at = []
+            for k in (-1, 0, 1):
+                v = value + k * step
+                if not search.low <= v <= search.high:
+                    v = value - k * step  # mirror a step beyond a bound (symmetric curvature)
+                values_at.append(v)
+        at = [self.problem({**values, search.key: v}).profile_sse(f) for v in values_at]
+        curvature = (at[2] - 2 * at[1] + at[0]) / step ** 2
+        if not curvature > 0:
+            return None
+        spread = math.sqrt(2 * variance / curvature)
+        return spread * value if search.log else spread
+
+
+def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
+    """Return ``(zeta, denominator)`` start candidates of order ``nf`` (see ``starts``)."""
+    if nf == 1:
+        return [(1.0, np.array([1.0, -math.exp(-2 * math.pi * fn / fs)]))
+                for fn in np.geomspace(fs / 2000, 0.4 * fs, 32)]
+    return [(zeta, np.concatenate([pair, np.zeros(nf - 2)])) for zeta, pair in _pairs(fs)]
+
+
+def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,
+                 nf: int = 2, nb: int = 2, nk: int = 1,
+                 starts: Sequence[np.ndarray] = (),
+                 slowest_pole_s: float | None = None) -> ExtendedFit:
+    """
+    Fit a base output-error model plus effects on shot windows.
+
+    Args:
+        windows: Calibration windows (:func:`shot_windows`).
+        effects: Effect ids (:data:`~sensor_comp.core.effects.EFFECTS`); empty fits the base
+            model.
+        fs: Sample rate in Hz.
+        nf: Order of the base model's denominator.
+        nb: Numerator coefficients of the base model.
+        nk: Input delay of the base model, samples.
+        starts: Base-order denominators to start from (e.g. another fit's
+            :attr:`ExtendedFit.denominators`) instead of searching for them again.
+        slowest_pole_s: Slowest time constant the model's own poles may have, s (see
+            :func:`slowest_pole_s`; the diagnosis holds the base alike, so that it cannot
+            imitate a tail its extensions may not); None: only the effects' bound.
+
+    Returns:
+        The fit, with the physical parameters of every effect.
+
+    Raises:
+        EffectError: On an unknown effect, one the data cannot support (e.g. transverse
+            sensitivity without lateral channels), or when the extended model cannot be
+            fitted (no start denominator, no stable fit): one line saying why.
+        IdentError: On no windows, bad orders, or when the base model alone (no effects)
+            cannot be fitted.
+
+    """
+    windows = list(windows)
+    if not windows:
+        raise IdentError('no calibration window to fit on')
+    chosen = ordered(effects)
+    for effect in chosen:
+        reason = effect.applicable(windows)
+        if reason is not None:
+            raise EffectError(f'cannot fit {effect.id}: {reason}')
+    spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs),
+                     slowest_pole_s=slowest_pole_s)
+    for effect in chosen:
+        spec = effect.extend(spec)
+    spec = _bound_time_constants(spec, max(w.y.size for w in windows) / fs)
+    try:
+        fitter, values, fitted, firsts = _fit_spec(windows, spec, fs, starts)
+    except IdentError as exc:
+        if not chosen:
+            raise
+        text = ' '.join(str(exc).split())
+        raise EffectError(f'cannot fit {", ".join(e.id for e in chosen)} on a base of '
+                          f'nf={nf} nb={nb} nk={nk}: {text}') from None
+    estimate, coef, cov = fitted
+    value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
+                 for s in spec.searches}
+    disturbance = None if coef is None else DisturbanceFit(
+        fitter.disturbances, fitter.choices, fitter.sources, coef, cov)
+    inputs = spec.channels(values)
+    shared = _distinct(list(firsts) + [estimate.a])
+    fit = _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
+                  tuple(shared))
+    fit = robust_uncertainty(fit, windows)
+    return replace(fit, _base=(('base_nf', nf), ('base_nb', nb), ('base_nk', nk)))
+
+
+def _fit_spec(windows: Sequence[Window], spec: ModelSpec, fs: float,
+              starts: Sequence[np.ndarray]):
+    """
+    Fit ``spec``: discrete choices, start denominators, searches and joint fits.
+
+    Returns:
+        ``(fitter, values, (estimate, coefficients, covariance), start denominators)``.
+
+    Raises:
+        IdentError: When no start or no fit can be found.
+
+    """
+    disturbances = tuple(get_effect(d) for d in spec.disturbances)
+    # Discrete choices (50 or 60 Hz) by the loss at the start denominators; then one fit.
+    values = {s.key: s.initial for s in spec.searches}
+    base = [np.asarray(a, dtype=np.float64) for a in starts]
+    fitters = [_Fitter(windows, spec, fs, disturbances, combo)
+               for combo in itertools.product(*(d.choices() for d in disturbances))]
+    firsts = fitters[0].starts(values, base=base)
+    fitter = min(fitters, key=lambda f: f.loss(values, firsts))
+    denominators = list(firsts)
+    fitted = fitter.fit(values, denominators, fresh=not starts)
+    best = None
+    for round_ in range(ROUNDS if spec.searches else 0):
+        # The first round tries every start denominator (basins); the next one searches
+        # again with the denominator refitted at the values found (they are coupled).
+        denominators = (_distinct(denominators + [fitted[0].a]) if round_ == 0
+                        else [fitted[0].a])
+        trial = dict(values)
+        for search in spec.searches:
+            trial[search.key] = fitter.search(search, trial, denominators)
+        result = fitter.fit(trial, denominators)
+        # A later round may wander to a worse basin: keep the round with the lowest loss.
+        if best is None or result[0].loss < best[1][0].loss:
+            best = (trial, result)
+        values, fitted = best
+    return fitter, values, fitted, firsts
+
+
+def _distinct(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Return the denominators without (near) repeats, the latest kept."""
+    out: list[np.ndarray] = []
+    for a in reversed(starts):
+        if not any(a.size == b.size and np.allclose(a, b, rtol=0, atol=1e-9) for b in out):
+            out.append(a)
+    return out[::-1]
+
+
+def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
+            denominators) -> ExtendedFit:
+    """Read every effect's physical parameters and build the model entries."""
+    stored = {}
+    for key, std in value_std.items():
+        effect_id, name = key.split('.', 1)
+        stored.setdefault(effect_id, {})[name] = std
+    draft = Model.from_estimate(estimate, fs=fs, inputs=inputs,
+                                effects=[{'id': e.id, 'std': stored.get(e.id, {})}
+                                         for e in chosen])
+    entries, notes = [], []
+    for effect in chosen:
+        extra = {}
+        if disturbance is not None and effect in disturbance.effects:
+            index = disturbance.effects.index(effect)
+            choice = disturbance.choices[index]
+            coefficients, covariance = _block(disturbance, index)
+            parameters = effect.disturbance_parameters(coefficients, covariance, choice=choice,
+                                                       sources=disturbance.sources)
+            extra = {'choice': dict(choice)}
+        else:
+            try:
+                parameters = effect.physical(draft, covariance=estimate.covariance)
+            except EffectError as exc:
+                parameters = {}
+                notes.append(f'{effect.id}: {exc}')
+        entries.append(effect_entry(effect, parameters, **extra))
+    for search in spec.searches:  # an arbitrary bound reached: the data do not tell
+        value = values[search.key]
+        if search.log and not search.low * EDGE < value < search.high / EDGE:
+            notes.append(f'{search.key} = {value:.4g} lies at the edge of its search range '
+                         f'{search.low:.4g}-{search.high:.4g}: not resolved by these data '
+                         f'(no deviation stated)')
+    return ExtendedFit(tuple(e.id for e in chosen), spec, tuple(inputs), estimate, values,
+                       value_std, disturbance, tuple(entries), fs, tuple(notes),
+                       denominators)
+
+
+def _block(disturbance: DisturbanceFit, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return one disturbance effect's coefficients (all recordings) and covariance."""
+    total = disturbance.coefficients.size // disturbance.sources
+    sizes = _sizes(disturbance)
+    offset = sum(sizes[:index])
+    rows = np.concatenate([np.arange(s * total + offset, s * total + offset + sizes[index])
+                           for s in range(disturbance.sources)])
+    return disturbance.coefficients[rows], disturbance.covariance[np.ix_(rows, rows)]
+
+
+def _sizes(disturbance: DisturbanceFit) -> list[int]:
+    """Return the column count of each disturbance effect (the same in every recording)."""
+    probe = Window(np.zeros((3, 2)), np.zeros(2), 0, 0, 0)
+    return [e.columns(probe, fs=1.0, choice=c).shape[0]
+            for e, c in zip(disturbance.effects, disturbance.choices)]
+
+
+def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedFit:
+    """
+    Return ``fit`` with a covariance that holds for coloured residuals and shot scatter.
+
+    The residual of ``windows`` (e.g. the measured windows of a fit to denoised ones)
+    at the fitted parameters gives the sandwich ``A⁻¹ M A⁻¹`` over the polynomials, the
+    disturbance coefficients and the searched values that have a deviation (a value at
+    an end of its range keeps none), jointly: ``A = JᵀJ``, ``M`` the least of the form
+    ``M_lag + (M_shot − M_lag)₊`` that bounds both the lag-window estimate ``M_lag`` (the
+    scores ``J_t e_t`` summed over Bartlett windows of :func:`_lag_window` samples, per
+    shot window) and the between-window estimate ``M_shot`` (``G/(G−1) Σ g_w g_wᵀ``, ``g_w``
+    a window's summed score; ``(·)₊`` keeps the positive eigenvalues). So every parameter's
+    variance is at least either. The physical parameters are read again with it. When
+    ``A`` is singular only because of a searched value (one the polynomials imitate), that
+    value gets no deviation and a note, and the others are given with it held fixed; an
+    over-parameterised fit otherwise keeps infinite deviations.
+    """
+    windows = list(windows)
+    e, jac, offsets, keys = _joint_jacobian(fit, windows)
+    covariance = _sandwich(e, jac, offsets)
+    io = fit.estimate.covariance.shape[0]
+    nd = 0 if fit.disturbance is None else fit.disturbance.coefficients.size
+    notes = []
+    if keys and not np.all(np.isfinite(covariance)):
+        # A searched value the polynomials can imitate: the others with it held fixed.
+        covariance = _sandwich(e, jac[:, :io + nd], offsets)
+        notes = [f'{key} = {fit.values[key]:.4g} cannot be told apart from the base '
+                 f'polynomials by these data (their joint covariance is singular): no '
+                 f'deviation stated; the others are given with it held fixed' for key in keys]
+        covariance = np.pad(covariance, (0, len(keys)), constant_values=np.inf)
+    variance = float(e @ e) / max(e.size - jac.shape[1], 1)
+    estimate = replace(fit.estimate, covariance=covariance[:io, :io],
+                       noise_variance=variance)
+    disturbance = (None if fit.disturbance is None else replace(
+        fit.disturbance, covariance=covariance[io:io + nd, io:io + nd]))
+    value_std = dict(fit.value_std)
+    for index, key in enumerate(keys):
+        spread = covariance[io + nd + index, io + nd + index]
+        value_std[key] = float(math.sqrt(spread)) if math.isfinite(spread) else None
+    again = _finish([get_effect(e) for e in fit.effects], fit.spec, fit.inputs, estimate,
+                    fit.values, value_std, disturbance, fit.fs, fit.denominators)
+    return replace(fit, estimate=estimate, value_std=value_std, disturbance=disturbance,
+                   entries=again.entries, notes=again.notes + tuple(notes))
+
+
+def _joint_jacobian(fit: ExtendedFit, windows: Sequence[Window]
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """
+    Return the residual, the Jacobian of all fitted parameters, window offsets and keys.
+
+    Columns: ``F``, ``B`` row by row, the disturbance coefficients (exact), then the
+    searched values with a deviation (``keys``), by central differences of the simulated
+    output (one-sided at a bound).
+    """
+    dist = fit.disturbance
+    fitter = _Fitter(windows, fit.spec, fit.fs, () if dist is None else dist.effects,
+                     () if dist is None else dist.choices)
+    problem = fitter.problem(fit.values)
+    theta = np.concatenate([fit.estimate.a[1:], fit.estimate.b.ravel(),
+                            np.zeros(0) if dist is None else dist.coefficients])
+    e, jac = problem.residual(theta, jacobian=True)
+    columns, keys = [], []
+    for search in fit.spec.searches:
+        value = fit.values[search.key]
+        if fit.value_std.get(search.key) is None:
+            continue
+        step = 1e-3 * (abs(value) or (search.high - search.low) / search.grid)
+        low, high = max(value - step, search.low), min(value + step, search.high)
+        if not high > low:
+            continue
+        up, down = (fitter.problem({**fit.values, search.key: v}).simulate(theta)
+                    for v in (high, low))
+        column = (up - down) / (high - low)
+        if np.any(column != 0):
+            columns.append(column)
+            keys.append(search.key)
+    if columns:
+        jac = np.column_stack([jac] + columns)
+    return e, jac, problem.offsets, keys
+
+
+def _lag_window(e: np.ndarray, offsets: np.ndarray) -> int:
+    """
+    Return the Bartlett lag window of the robust covariance, samples.
+
+    :data:`HAC_FACTOR` times the largest lag (1 + it) at which the residual's
+    autocorrelation, pooled over the windows, exceeds :data:`HAC_LEVEL`; at most
+    :data:`HAC_MAX_LAGS` and a quarter of the shortest window. White residuals give 3.
+    """
+    most = int(max(1, min(np.diff(offsets).min() // 4, HAC_MAX_LAGS)))
+    acf = np.zeros(most + 1)
+    for start, stop in zip(offsets[:-1], offsets[1:]):
+        x = e[start:stop] - np.mean(e[start:stop])
+        spectrum = np.fft.rfft(x, 2 * x.size)
+        acf += np.fft.irfft(spectrum * np.conj(spectrum))[:most + 1]
+    if not acf[0] > 0:
+        return 1
+    above = np.flatnonzero(np.abs(acf / acf[0]) > HAC_LEVEL)
+    return int(min(most, HAC_FACTOR * (above[-1] + 1)))
+
+
+def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Return the robust covariance of :func:`robust_uncertainty` (columns of ``jac``)."""
+    p = jac.shape[1]
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    unit = jac / scale
+    try:
+        _, r, _ = scaled_qr(unit)
+        singular = not np.linalg.cond(r) < 1e10
+    except IdentError:
+        singular = True
+    if singular:
+        return np.full((p, p), np.inf)
+    rinv = np.linalg.solve(r, np.eye(p))
+    lags = _lag_window(e, offsets)
+    within, between = np.zeros((p, p)), np.zeros((p, p))
+    for start, stop in zip(offsets[:-1], offsets[1:]):
+        n = stop - start
+        sums = np.zeros((n + 1, p))
+        np.cumsum(unit[start:stop] * e[start:stop, None], axis=0, out=sums[1:])
+        width = min(lags, n)
+        first = np.arange(-(width - 1), n)
+        blocks = sums[np.clip(first + width, 0, n)] - sums[np.clip(first, 0, n)]
+        within += blocks.T @ blocks / width
+        between += np.outer(sums[-1], sums[-1])
+    count = offsets.size - 1
+    between *= count / max(count - 1, 1)
+    excess = (between - within + (between - within).T) / 2
+    eigenvalues, vectors = np.linalg.eigh(excess)
+    meat = within + (vectors * np.maximum(eigenvalues, 0.0)) @ vectors.T
+    # As K Kᵀ with K = A⁻¹ M^½: symmetric and positive semi-definite whatever A's condition
+    # (the product A⁻¹ M A⁻¹ loses both when A is poorly conditioned).
+    eigenvalues, vectors = np.linalg.eigh((meat + meat.T) / 2)
+    factor = rinv @ (rinv.T @ (vectors * np.sqrt(np.maximum(eigenvalues, 0.0))))
+    return factor @ factor.T / np.outer(scale, scale)

@@ -1,0 +1,783 @@
+"""
+The identification workflow: recordings → shots → EMD denoising → structure → model.
+
+This is the seed paper's method (EMD denoising, then a 2nd-order input–output model) done
+so that its result can be trusted:
+
+- shots are detected on the axial acceleration and clipped shots are left out;
+- the model is fitted on calibration shots and its fit is reported on *validation* shots
+  (other shots of the same bag, alternate ones by default, or the shots of other bags);
+- EMD denoises the calibration pressure only: validation compares the simulated model with
+  the pressure as measured, so its fit is not flattered by the denoiser;
+- ``structure='auto'`` fits output-error models over a grid of orders and delays and
+  chooses by BIC plus validation fit (see :func:`~sensor_comp.core.estimators.select_structure`);
+  ``'arx'``, ``'armax'`` (extended least squares), ``'gls'`` (the paper's generalised least
+  squares) and ``'oe'`` fit one structure, with the delay from a ``delayest``-style search
+  unless given;
+- ``effects=('nonlinear_sensitivity', ...)`` extends the chosen structure with catalogued
+  physical effects (:mod:`sensor_comp.core.effects`), fitted as an output-error model by
+  :func:`~sensor_comp.core.identification.extended.fit_extended`; the model's inputs, orders and
+  ``effects`` entries (physical parameters with standard deviations) describe the
+  extension. The deviations hold for coloured residuals and for scatter between shots
+  (:func:`~sensor_comp.core.identification.extended.robust_uncertainty`), with the residual of the
+  measured, not the denoised, pressure. Without effects the workflow is unchanged.
+
+What fails on valid data falls back, and says so (``Identification.notes``, the model's
+``fit['notes']``, a ``note:`` line of the CLI): a fit to the EMD-denoised pressure that
+fails is made on the measured pressure; orders that cannot be fitted are lowered (``na``,
+then ``nb``); an unstable equation-error estimate (ARX, ARMAX) is replaced by output error;
+effects on a base of more than two poles are also fitted on the sensor's own two (poles
+chosen without the effects imitate them) and the lower BIC kept, two poles when the larger
+base cannot be fitted. An effect that cannot be fitted at all is one :class:`EffectError`
+line saying why.
+
+What the data cannot support is refused or warned about, never silently fitted:
+
+- a shot with a defect (:attr:`~sensor_comp.core.shots.detection.Shot.defects`: clipped, NaN/Inf in
+  its window, no shock, dead pressure) is left out with a line in ``excluded``; a recording
+  whose pressure is constant throughout is refused, as are too few usable shots.
+- **excitation**: the model's dynamics (its dominant resonance ``fn``, or its slowest real
+  pole) can only be identified where the calibration acceleration carries signal above its
+  own noise. The accelerometer's noise is in the regressors but drives no pressure, so a
+  least-squares or output-error fit shrinks the gain at ``fn`` by ``S/(S + N)`` (regression
+  dilution), ``S/N`` the input's signal-to-noise power ratio around ``fn``
+  (±:data:`EXCITATION_BAND`), and the damping ratio comes out about ``(1 + N/S)`` times too
+  large; at 1 MS/s the broadband input noise weighs more and a poorly excited resonance
+  collapses into fast real poles. Below :data:`MIN_EXCITATION` the dynamics are not
+  identified: the explanation warns that they come from noise and names the order the data
+  support (how many of the model's poles lie where the input is excited); below
+  :data:`WEAK_EXCITATION` it warns of the bias. Both are warnings, not errors: a sensor
+  whose resonance lies far above the shocks' band (100 kHz and more is common) is
+  compensated by such a model just as well, only its fn and ζ are not measured. A
+  lag-domain persistent-excitation order does not tell this: the Toeplitz covariance of a
+  1 ms shock at 1 MS/s has only two eigenvalues above the accelerometer noise, yet such
+  shots identify the resonance to 0.1 %; what matters is the spectrum at ``fn``.
+- **units**: the shots' peak pressure per peak acceleration (median, the MPa/g column of
+  the shot table) outside :data:`~sensor_comp.core.identification.model.PLAUSIBLE_MPA_PER_G` is
+  refused, outside :data:`~sensor_comp.core.identification.model.TYPICAL_MPA_PER_G` warned about,
+  with the likely unit mistake
+  (:func:`~sensor_comp.core.identification.model.sensitivity_problem`). The shots, not the model's
+  static gain, are used: a model without a hidden effect (an amplifier high-pass) can have an
+  absurd gain at DC on data in the right units. A factor that stays within the typical range (g for
+  m/s² on a sensor of 1e-5 MPa/g) cannot be told from the data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+import math
+
+import numpy as np
+
+from ..compensation.compare import compare, Comparison
+from .denoise import DenoiseResult, EmdDenoiser
+from ..effects import EffectError, ordered
+from .extended import fit_extended, robust_uncertainty
+from ..shots.windows import shot_windows
+from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
+                          fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
+                          Selection, simulate_output)
+from ..estimators.polynomials import max_root_radius
+from .model import Model, sensitivity_problem, Source
+from ..progress import ProgressFactory, Silent
+from ..shots.detection import (dead_channel, detect_shots, mad_sigma, no_shot_message, segments,
+                               Shot, ShotError, split_calibration)
+from ...streams import Recording
+
+__all__ = ['BASE_INPUTS', 'EXCITATION_BAND', 'MIN_EXCITATION', 'STRUCTURE_CHOICES',
+           'WEAK_EXCITATION', 'Identification', 'ShotSource', 'Sources', 'excitation', 'identify',
+           'prepare_sources']
+
+#: Structures :func:`identify` accepts.
+STRUCTURE_CHOICES = ('auto', 'arx', 'armax', 'gls', 'oe')
+
+#: Inputs of the base model: axial acceleration only.
+BASE_INPUTS = ('a_z',)
+
+#: Orders of a fixed structure when none are given: a sampled 2nd-order system.
+DEFAULT_ORDERS = (2, 2)
+
+#: Half-width of the band around a resonance whose excitation is measured, relative to
+#: ``fn``: wider than the half-power band of a lightly damped sensor (ζ ≤ 0.1), narrow
+#: enough to stay off the main lobe of a shock's spectrum.
+EXCITATION_BAND = 0.1
+#: Least input signal-to-noise power ratio at the resonance: below it the damping ratio
+#: would come out more than twice too large, the dynamics are not identified (module docs).
+MIN_EXCITATION = 1.0
+#: Below this input signal-to-noise ratio the damping bias (over 10 %) is warned about.
+WEAK_EXCITATION = 10.0
+
+_FITTERS = {
+    'arx': lambda segs, na, nb, nk: fit_arx(segs, na=na, nb=nb, nk=nk),
+    'armax': lambda segs, na, nb, nk: fit_armax_els(segs, na=na, nb=nb, nk=nk),
+    'gls': lambda segs, na, nb, nk: fit_armax_gls(segs, na=na, nb=nb, nk=nk),
+    'oe': lambda segs, na, nb, nk: fit_oe(segs, nf=na, nb=nb, nk=nk),
+}
+
+
+@dataclass(frozen=True)
+class ShotSource:
+    """
+    A recording, where it came from, and the shots used from it.
+
+    Args:
+        recording: Pressure and acceleration.
+        shots: Its shots (detected or from manual windows).
+        path: The bag or CSV file, hashed into the model's provenance; None for data made
+            in memory.
+
+    """
+
+    recording: Recording
+    shots: tuple[Shot, ...]
+    path: str | None = None
+
+    @classmethod
+    def detect(cls, recording: Recording, *, path: str | None = None, **options) -> ShotSource:
+        """
+        Detect the shots of ``recording`` (``options`` go to ``detect_shots``).
+
+        Raises:
+            ShotError: Naming the file, when no shot is found (with the threshold used and
+                the largest acceleration seen) or the acceleration cannot be scanned.
+
+        """
+        where = path or '<memory>'
+        try:
+            shots = detect_shots(recording, **options)
+            if not shots:
+                raise ShotError(no_shot_message(recording, threshold_g=options.get(
+                    'threshold_g'), polarity=options.get('polarity')))
+        except ShotError as exc:
+            raise ShotError(f'{where}: {exc}') from None
+        return cls(recording, tuple(shots), path)
+
+    @property
+    def name(self) -> str:
+        """Return the file name, or ``'<memory>'``."""
+        return self.path or '<memory>'
+
+    def usable(self) -> tuple[ShotSource, list[str]]:
+        """
+        Return this source without its defective shots, and one line per shot left out.
+
+        Raises:
+            ShotError: When the recording's pressure is constant throughout (a dead channel).
+
+        """
+        dead = dead_channel(self.recording)
+        if dead is not None:
+            raise ShotError(f'{self.name}: {dead}')
+        kept = tuple(shot for shot in self.shots if shot.usable)
+        excluded = [f'{self.name}: shot {shot.index} left out: {"; ".join(shot.defects)}'
+                    for shot in self.shots if not shot.usable]
+        return ShotSource(self.recording, kept, self.path), excluded
+
+    def check_units(self) -> str | None:
+        """
+        Check the shots' peak pressure per acceleration against pressure sensors' range.
+
+        Returns:
+            A warning naming the likely unit mistake when the median over the usable shots
+            lies outside :data:`~sensor_comp.core.identification.model.TYPICAL_MPA_PER_G`, else
+            None.
+
+        Raises:
+            ShotError: When it lies outside
+            :data:`~sensor_comp.core.identification.model.PLAUSIBLE_MPA_PER_G`
+                (see :func:`~sensor_comp.core.identification.model.sensitivity_problem`).
+
+        """
+        ratios = [abs(s.mpa_per_g) for s in self.shots if s.usable and math.isfinite(s.mpa_per_g)]
+        if not ratios:
+            return None
+        problem = sensitivity_problem(float(np.median(ratios)), what=(
+            f'the peak pressure per peak acceleration of its shots (median over {len(ratios)})'))
+        if problem is None:
+            return None
+        if problem[0]:
+            raise ShotError(f'{self.name}: {problem[1]}')
+        return f'{self.name}: {problem[1]}'
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """
+    Result of :func:`identify`.
+
+    Attributes:
+        model: The identified model (fit statistics and provenance filled in).
+        calibration: The shots fitted on, per recording.
+        validation: The shots reported on, per recording.
+        comparisons: The model against each validation recording (MATLAB ``compare``).
+        validation_fit_percent: Fit over all validation windows together.
+        selection: The structure selection table (``structure='auto'``), else None.
+        delay: The delay search, when the delay was estimated, else None.
+        denoising: One EMD result per calibration window (empty without EMD).
+        excluded: Why shots were left out (clipped), one line each.
+        explanation: Why this structure, orders and delay.
+        notes: What identification did instead of what was asked, because that failed on
+            these data (lower orders, another start, the measured pressure instead of the
+            denoised one), one line each; also in the model's ``fit['notes']``.
+
+    """
+
+    model: Model
+    calibration: tuple[ShotSource, ...]
+    validation: tuple[ShotSource, ...]
+    comparisons: tuple[Comparison, ...]
+    validation_fit_percent: float
+    selection: Selection | None
+    delay: DelayEstimate | None
+    denoising: tuple[DenoiseResult, ...]
+    excluded: tuple[str, ...]
+    explanation: str
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Sources:
+    """
+    The shots an identification (or a diagnosis) works on: checked, split and of one rate.
+
+    Attributes:
+        calibration: Recordings with the shots to fit on (usable shots only).
+        validation: Recordings with the shots to report on.
+        excluded: Why shots were left out, one line each.
+        warnings: Unit warnings (:meth:`ShotSource.check_units`).
+        fs: The common sample rate, Hz.
+
+    """
+
+    calibration: tuple[ShotSource, ...]
+    validation: tuple[ShotSource, ...]
+    excluded: tuple[str, ...]
+    warnings: tuple[str, ...]
+    fs: float
+
+
+def prepare_sources(calibration: Sequence[ShotSource],
+                    validation: Sequence[ShotSource] = ()) -> Sources:
+    """
+    Leave defective shots out, hold out validation shots and check units and sample rates.
+
+    Args:
+        calibration: Recordings with shots to fit on.
+        validation: Recordings with shots to report on; when empty, every second shot of
+            each calibration recording is held out.
+
+    Returns:
+        The usable calibration and validation shots with what was left out and why.
+
+    Raises:
+        IdentError: Without a calibration recording, without a usable shot in a role, or
+            on mixed sample rates.
+        ShotError: On a dead pressure channel, implausible units, or too few shots to hold
+            some out.
+
+    """
+    if not calibration:
+        raise IdentError('no calibration recording given')
+    excluded: list[str] = []
+    calibration = [_usable(s, excluded) for s in calibration]
+    validation = [_usable(s, excluded) for s in validation]
+    for role, sources in (('calibration', calibration), ('validation', validation)):
+        if sources and not any(s.shots for s in sources):
+            names = ', '.join(s.name for s in sources)
+            why = f' ({"; ".join(excluded)})' if excluded else ''
+            raise IdentError(f'no usable {role} shot in {names}{why}: check the acceleration '
+                             f'channel and the detection threshold')
+    calib, valid = _split(calibration, validation, excluded)
+    warnings = tuple(w for w in (s.check_units() for s in calibration + validation) if w)
+    fs = _check_rates(calib + valid)
+    return Sources(tuple(calib), tuple(valid), tuple(excluded), warnings, fs)
+
+
+def _usable(source: ShotSource, excluded: list[str]) -> ShotSource:
+    kept, left_out = source.usable()
+    excluded.extend(left_out)
+    return kept
+
+
+def _split(calibration: Sequence[ShotSource], validation: Sequence[ShotSource],
+           excluded: Sequence[str]):
+    if validation:
+        return list(calibration), list(validation)
+    calib, valid = [], []
+    for source in calibration:
+        if len(source.shots) < 2:
+            left_out = sum(line.startswith(f'{source.name}: shot ') for line in excluded)
+            raise ShotError(
+                f'{source.name}: {len(source.shots)} usable shot(s)'
+                + (f' ({left_out} more left out, see above)' if left_out else '')
+                + '; identification needs at least 2 per recording, one to fit and one held '
+                  'out to validate on: record more shots, or give validation recordings '
+                  '(--validate) to fit on every shot of this one')
+        fit_on, report_on = split_calibration(source.shots)
+        calib.append(ShotSource(source.recording, tuple(fit_on), source.path))
+        valid.append(ShotSource(source.recording, tuple(report_on), source.path))
+    return calib, valid
+
+
+def _check_rates(sources: Sequence[ShotSource]) -> float:
+    rates = {source.recording.fs for source in sources}
+    fs = sources[0].recording.fs
+    if any(not math.isclose(rate, fs, rel_tol=1e-9) for rate in rates):
+        listing = ', '.join(f'{s.name} at {s.recording.fs:g} Hz' for s in sources)
+        raise IdentError(f'recordings have different sample rates ({listing}); a model '
+                         f'belongs to one rate: identify them separately')
+    return fs
+
+
+@dataclass(eq=False)
+class _Data:
+    """The shot windows of one identification, cut once and shared by every step."""
+
+    measured: list[tuple[np.ndarray, np.ndarray]]
+    valid: list[tuple[np.ndarray, np.ndarray]]
+    fit: list[tuple[np.ndarray, np.ndarray]]
+    denoiser: EmdDenoiser | None
+
+    @classmethod
+    def cut(cls, sources: Sources, *, denoise: bool, progress: ProgressFactory) -> _Data:
+        """Return the calibration and validation windows, EMD-denoised for the fit if asked."""
+        measured = [seg for s in sources.calibration
+                    for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
+        valid = [seg for s in sources.validation
+                 for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
+        denoiser = EmdDenoiser() if denoise else None
+        fit = measured
+        if denoiser is not None:
+            with progress('EMD denoising', len(measured)) as bar:
+                denoised = denoiser.map([y for _, y in measured], done=bar.advance)
+            fit = [(u, y) for (u, _), y in zip(measured, denoised)]
+        return cls(measured, valid, fit, denoiser)
+
+
+@dataclass(eq=False)
+class _Base:
+    """The base model: its estimate and orders, and why (see :func:`_fit_base`)."""
+
+    estimate: Estimate
+    na: int
+    nb: int
+    nk: int
+    selection: Selection | None
+    delay: DelayEstimate | None
+    explanation: str
+    notes: list[str]
+
+
+def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
+              delay: int | None, criterion: str, progress: ProgressFactory) -> _Base:
+    """
+    Choose the structure and delay on the measured pressure and fit the base model.
+
+    Structure and delay are chosen on the measured pressure: information criteria assume
+    white residuals, and EMD leaves coloured ones (BIC then rewards spurious poles). The
+    chosen structure is then fitted to the denoised pressure (:func:`_robust_fit`).
+    """
+    na, nb = orders or DEFAULT_ORDERS
+    selection = search = provisional = None
+    if structure == 'auto':
+        with progress('structure selection', 1) as bar:
+            selection = select_structure(
+                data.measured, valid_segments=data.valid,
+                orders=None if orders is None else [orders],
+                delays=None if delay is None else [delay], criterion=criterion)
+            bar.advance()
+        chosen = selection.candidates[selection.chosen]
+        na, nb, delay = chosen.na, chosen.nb, chosen.nk
+        explanation = f'output error chosen by {criterion.upper()}: {selection.explanation}'
+        provisional = selection.estimate
+    else:
+        if delay is None:
+            with progress('delay search', 1) as bar:
+                # The model's own fit at nk = 1 is the model when the search ends there and
+                # the pressure is not denoised; an output-error one (oe, gls) starts the
+                # search (an equation-error denominator is biased: a worse start).
+                provisional = _attempt(lambda: _FITTERS[structure](data.measured, na, nb, 1))
+                unbiased = provisional is not None and provisional.structure == 'oe'
+                search = _search_delay(data, provisional if unbiased else None)
+                bar.advance()
+            delay = search.nk
+            how = f'delay from the search: {search.explanation}'
+        else:
+            how = 'delay given'
+        explanation = f'{structure} with na={na} nb={nb} nk={delay} as asked; {how}'
+    reuse = (provisional if provisional is not None and data.denoiser is None
+             and (provisional.na, provisional.nb, provisional.nk) == (na, nb, delay) else None)
+    estimate, na, nb, notes = _robust_fit('oe' if structure == 'auto' else structure, data,
+                                          na, nb, delay, fitted=reuse)
+    if data.denoiser is not None and not any('measured pressure' in n for n in notes):
+        explanation += '; fitted to the EMD-denoised pressure'
+    return _Base(estimate, na, nb, delay, selection, search, explanation, notes)
+
+
+def _search_delay(data: _Data, start: Estimate | None) -> DelayEstimate:
+    """
+    Search the delay from ``start`` and from a fit of its own; keep the lower loss.
+
+    A start whose denominator is far from the sensor's (a base missing an effect can fit
+    an overdamped pair) leads the search into another minimum: on the tutorial's case f it
+    chose nk = 18 (validation fit 83 %) where the search's own start gives nk = 0 (95 %).
+    """
+    search = estimate_delay(data.measured, start=start)
+    if start is None:
+        return search
+    own = _attempt(lambda: estimate_delay(data.measured))
+    return own if own is not None and np.nanmin(own.losses) < np.nanmin(search.losses) \
+        else search
+
+
+def _attempt(fit):
+    """Return ``fit()``, or None when it raises :class:`IdentError`."""
+    try:
+        return fit()
+    except IdentError:
+        return None
+
+
+def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
+                fitted: Estimate | None = None) -> tuple[Estimate, int, int, list[str]]:
+    """
+    Fit ``structure`` to the fit windows; fall back where it fails, saying so.
+
+    In turn: the EMD-denoised pressure as asked; the measured pressure (denoising can make
+    the output lags too collinear); lower orders (``na``, then ``nb``, down to 1); output
+    error when an equation-error estimate is unstable. Each fallback is one note.
+
+    Args:
+        structure: A key of :data:`_FITTERS`.
+        data: The windows.
+        na: Denominator order asked for.
+        nb: Numerator length asked for.
+        nk: Delay.
+        fitted: The fit as asked, when already made (the delay search's start).
+
+    Returns:
+        ``(estimate, na, nb, notes)``.
+
+    Raises:
+        IdentError: When every fallback fails too (naming the first failure).
+
+    """
+    notes: list[str] = []
+    tries = [(data.fit, na, nb, None)]
+    if data.denoiser is not None:
+        tries.append((data.measured, na, nb,
+                      'the measured pressure instead of the EMD-denoised one'))
+    lower = [(na - k, nb) for k in range(1, na)] + [(1, nb - k) for k in range(1, nb)]
+    tries += [(data.measured if data.denoiser is not None else data.fit, a, b,
+               f'na={a} nb={b} instead of na={na} nb={nb}') for a, b in lower]
+    first = None
+    for segs, a, b, what in tries:
+        try:
+            estimate = fitted if what is None and fitted is not None else \
+                _FITTERS[structure](segs, a, b, nk)
+        except IdentError as exc:
+            first = first or f'{structure} na={a} nb={b} nk={nk}: {exc}'
+            continue
+        if what is not None:
+            notes.append(f'fallback: fitted {what}, because {first}')
+        if structure != 'oe' and not is_stable(estimate.a):
+            notes.append(f'fallback: output error instead of {structure}, whose estimate '
+                         f'na={a} nb={b} nk={nk} is unstable (poles up to |z| = '
+                         f'{max_root_radius(estimate.a):.6f})')
+            estimate = fit_oe(segs, nf=a, nb=b, nk=nk)
+        return estimate, a, b, notes
+    raise IdentError(f'no {structure} model could be fitted, at the orders asked or lower: '
+                     f'{first}')
+
+
+def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSource] = (),
+             structure: str = 'auto', orders: tuple[int, int] | None = None,
+             delay: int | None = None, denoise: bool = True, criterion: str = 'bic',
+             effects: Sequence[str] = (),
+             progress: ProgressFactory | None = None) -> Identification:
+    """
+    Identify the acceleration-induced pressure model of a sensor.
+
+    Args:
+        calibration: Recordings with shots to fit on.
+        validation: Recordings with shots to report on; when empty, every second shot of
+            each calibration recording is held out for validation.
+        structure: One of :data:`STRUCTURE_CHOICES`.
+        orders: ``(na, nb)`` (``na`` is the output-error ``nf``); for ``'auto'`` it fixes
+            the orders and leaves the delay to the search; default :data:`DEFAULT_ORDERS`
+            for a fixed structure, the full grid for ``'auto'``.
+        delay: Input delay ``nk`` in samples; estimated when None.
+        denoise: EMD-denoise the calibration pressure per shot window (paper step 1).
+        criterion: Information criterion for ``'auto'``: ``'bic'``, ``'aic'``, ``'aicc'``,
+            ``'fpe'``.
+        effects: Catalogued effect ids to add to the chosen structure (fitted as output
+            error whatever the structure); empty for the base model.
+        progress: Progress bar factory ``progress(label, total)`` for the long steps.
+
+    Returns:
+        The model with what it was fitted and validated on, why this structure, and the
+        fallbacks taken (``notes``).
+
+    Raises:
+        IdentError: On an unknown structure, bad orders, mixed sample rates, no usable
+            shots, or when no stable model is found even at lower orders.
+        ShotError: On too few shots to hold some out for validation.
+        EffectError: On an unknown effect or one the data cannot support (one line: why).
+
+    """
+    if structure not in STRUCTURE_CHOICES:
+        raise IdentError(f'unknown structure {structure!r}; use one of '
+                         f'{", ".join(STRUCTURE_CHOICES)}')
+    if orders is not None and (len(orders) != 2 or min(orders) < 1):
+        raise IdentError(f'orders must be two integers na nb >= 1, got {orders!r}')
+    effects = tuple(e.id for e in ordered(effects))
+    progress = progress or Silent
+    sources = prepare_sources(calibration, validation)
+    data = _Data.cut(sources, denoise=denoise, progress=progress)
+    base = _fit_base(data, structure=structure, orders=orders, delay=delay,
+                     criterion=criterion, progress=progress)
+    explanation = base.explanation + ''.join(f'; WARNING: {w}' for w in sources.warnings)
+    if not base.estimate.converged:
+        explanation += (f'; WARNING: the {base.estimate.method} iteration did not converge '
+                        f'in {base.estimate.iterations} iterations: prefer oe or auto')
+    notes = list(base.notes)
+    extension = None
+    if effects:
+        with progress('effects', 1) as bar:
+            extension, chosen = _fit_effects(sources, data, effects, base,
+                                             compare=structure == 'auto')
+            bar.advance()
+        notes += chosen
+        explanation += (f'; extended with {", ".join(effects)} (output error: '
+                        f'{extension.estimate.method})')
+        explanation += ''.join(f'; {note}' for note in extension.notes)
+    return _finish(sources, data, base, extension, explanation, notes, structure, denoise)
+
+
+def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _Base, *,
+                 compare: bool):
+    """
+    Fit the base structure plus ``effects`` on the calibration windows.
+
+    With ``compare`` (orders chosen by the selection, without the effects) a base of other
+    than two poles is compared with the sensor's own two, and the structure with the lower
+    BIC (the searched parameters counted) kept: a pole that imitated a missing effect (a
+    slow real one for a high-pass or a zero shift) competes with the effect and bends its
+    parameters, and one pole chosen for data whose mode lay beyond the shocks' band may not
+    hold it once an effect needs it. Orders that cannot be fitted fall back to two poles.
+
+    Returns:
+        ``(extended fit, notes)``.
+
+    Raises:
+        EffectError: One line, when no structure can be fitted with the effects, or an
+            effect does not apply to the recordings.
+
+    """
+    measured = shot_windows([s for s in sources.calibration if s.shots])
+    windows = [replace(w, y=y) for w, (_, y) in zip(measured, data.fit)]
+    for effect in ordered(effects):
+        reason = effect.applicable(windows)
+        if reason is not None:
+            raise EffectError(f'cannot fit {effect.id}: {reason}')
+    tries = [base.na] + ([2] if base.na != 2 else [])
+    fits, failed = {}, {}
+    for nf in tries:
+        if nf != base.na and not compare and fits:
+            break
+        try:
+            fits[nf] = fit_extended(windows, effects=effects, fs=sources.fs, nf=nf,
+                                    nb=base.nb, nk=base.nk)
+        except (IdentError, EffectError) as exc:
+            failed[nf] = str(exc).splitlines()[0]
+    names = ', '.join(effects)
+    if not fits:
+        why = '; '.join(f'nf={nf}: {text}' for nf, text in failed.items())
+        raise EffectError(f'cannot fit {names} on a base of nf={base.na} nb={base.nb} '
+                          f'nk={base.nk}' + (' or nf=2' if len(tries) > 1 else '') + f': {why}')
+    chosen = min(fits, key=lambda nf: _bic(fits[nf]))
+    notes = []
+    if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
+        fits[chosen] = robust_uncertainty(fits[chosen], measured)
+    if chosen != base.na:
+        if base.na in failed:
+            notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
+                         f'nf={base.na}, which could not be fitted ({failed[base.na]})')
+        else:
+            why = ('the extra poles imitated the effect' if base.na > 2 else
+                   'with the effect in, the mode needs both poles')
+            notes.append(f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
+                         f'instead of the nf={base.na} chosen without them: BIC lower by '
+                         f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} ({why})')
+    return fits[chosen], notes
+
+
+def _bic(fit) -> float:
+    """Return the BIC of an extended fit, its searched values and disturbances counted."""
+    estimate = fit.estimate
+    extra = len(fit.values) + (0 if fit.disturbance is None
+                               else fit.disturbance.coefficients.size)
+    n = estimate.n_samples
+    return n * math.log(max(estimate.loss, np.finfo(float).tiny)) + \
+        (estimate.n_parameters + extra) * math.log(n)
+
+
+def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: str,
+            notes: Sequence[str], structure: str, denoise: bool) -> Identification:
+    """Build the model, check its excitation and validate it on the held-out shots."""
+    calib, valid = sources.calibration, sources.validation
+    estimate, inputs, entries = base.estimate, BASE_INPUTS, ()
+    if extension is not None:
+        estimate, inputs, entries = extension.estimate, extension.inputs, extension.entries
+    charge = {s.recording.charge_sensitivity for s in calib} - {None}
+    fit = {'calibration_shots': sum(len(s.shots) for s in calib),
+           'validation_shots': sum(len(s.shots) for s in valid),
+           'emd_denoised': bool(denoise), 'selection': explanation}
+    if notes:
+        fit['notes'] = ' | '.join(notes)
+    if extension is not None:  # the structure the effects extend, for a later diagnosis
+        fit.update(extension.base_orders)
+    provenance = _provenance(calib, 'calibration') + _provenance(valid, 'validation')
+    draft = Model.from_estimate(estimate, fs=sources.fs, inputs=inputs,
+                                charge_sensitivity_pC_per_MPa=min(charge) if charge else None,
+                                fit=fit, provenance=provenance, effects=entries)
+    draft.check_stable()
+    explanation += _check_excitation(draft, calib)
+    fit['selection'] = explanation
+    comparisons = tuple(compare([draft], s.recording, s.shots, labels=[structure])[0]
+                        for s in valid if s.shots)
+    valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
+                                  [shot.simulated for c in comparisons for shot in c.shots]))
+    worst = max(c.peak_residual_percent for c in comparisons)
+    if extension is not None and extension.disturbance is not None:
+        # The comparisons simulate the acceleration-driven part only; with the disturbance
+        # re-estimated on the validation windows (its phase belongs to each recording):
+        windows = shot_windows([s for s in valid if s.shots])
+        fit['validation_fit_percent_disturbance_removed'] = float(fit_percent(
+            [w.y for w in windows], extension.predict(windows).total))
+    calib_inputs = ([u for u, _ in data.measured] if extension is None else
+                    [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)])
+    model = Model.from_estimate(
+        estimate, fs=sources.fs, inputs=inputs,
+        charge_sensitivity_pC_per_MPa=draft.charge_sensitivity_pC_per_MPa,
+        fit={**fit, 'calibration_fit_percent': float(fit_percent(
+            [y for _, y in data.measured], simulate_output(draft, calib_inputs))),
+            'validation_fit_percent': valid_fit,
+            'validation_peak_residual_percent': worst},
+        provenance=provenance, effects=entries, created=draft.created)
+    return Identification(model=model, calibration=calib, validation=valid,
+                          comparisons=comparisons, validation_fit_percent=valid_fit,
+                          selection=base.selection, delay=base.delay,
+                          denoising=tuple(data.denoiser.results) if data.denoiser else (),
+                          excluded=sources.excluded, explanation=explanation,
+                          notes=tuple(notes))
+
+
+def excitation(sources: Sequence[ShotSource], f_hz: float | np.ndarray
+               ) -> float | np.ndarray | None:
+    """
+    Return the signal-to-noise power ratio of the axial acceleration of the shots around ``f_hz``.
+
+    The power of every shot window (baseline removed) in the band ``f·(1 ±``
+    :data:`EXCITATION_BAND```)`` over the power the accelerometer noise alone would put there
+    (white, its σ from the window's pre-trigger), minus one; pooled over all windows.
+
+    Returns:
+        ``S/N`` at each frequency (``inf`` for noise-free data), or None when the windows
+        hold too little pre-trigger (16 samples in all) to measure the noise.
+
+    """
+    shots = [(s.recording, shot) for s in sources for shot in s.shots]
+    quiet = [recording.axial[shot.baseline_window] for recording, shot in shots]
+    if sum(q.size for q in quiet) < 16:
+        return None
+    fs = shots[0][0].fs
+    f = np.atleast_1d(np.asarray(f_hz, dtype=np.float64))
+    # Resolve the narrowest band with about 8 bins, nfft >= 8 fs / (2 · band · f), padding
+    # the windows at most 8 times (their own resolution bounds what they can tell).
+    longest = max(shot.n_samples for _, shot in shots)
+    nfft = 1 << math.ceil(math.log2(min(max(longest, 4 * fs / (EXCITATION_BAND * f.min())),
+                                        8 * longest)))
+    power = np.zeros(nfft // 2 + 1)
+    noise = 0.0
+    for (recording, shot), q in zip(shots, quiet):
+        u = recording.axial[shot.window] - shot.baseline_acceleration[2]
+        power += np.abs(np.fft.rfft(u, nfft)) ** 2
+        noise += u.size * mad_sigma(q) ** 2
+    grid = np.fft.rfftfreq(nfft, 1 / fs)
+    total = np.concatenate(([0.0], np.cumsum(power)))
+    hi = np.clip(np.searchsorted(grid, f * (1 + EXCITATION_BAND), side='right'), 1, grid.size)
+    lo = np.minimum(np.searchsorted(grid, f * (1 - EXCITATION_BAND)), hi - 1)
+    band = (total[hi] - total[lo]) / (hi - lo)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ratio = np.where(noise > 0, band / noise - 1, np.inf)
+    return float(ratio[0]) if np.ndim(f_hz) == 0 else ratio
+
+
+def _dynamics(model: Model) -> tuple[str, float] | None:
+    """
+    Return the dynamics the model claims, ``(description, frequency in Hz)``, or None.
+
+    The dominant resonance (see :meth:`Model.continuous`), else the slowest positive real
+    pole; faster extra poles are numerical detail of the discretisation.
+    """
+    view = model.continuous()
+    if view.natural_frequency_hz is not None:
+        fn = view.natural_frequency_hz
+        return f'resonance at {fn / 1e3:.3g} kHz (ζ = {view.damping_ratio:.3g})', fn
+    if not view.time_constants_s:
+        return None
+    tau = view.time_constants_s[0]
+    corner = 1 / (2 * math.pi * tau)
+    return f'time constant of {1e6 * tau:.3g} µs (corner {corner / 1e3:.3g} kHz)', corner
+
+
+def _supported_order(model: Model, calib: Sequence[ShotSource]) -> int:
+    """Return how many of the model's poles lie where the input is excited above noise."""
+    poles = np.roots(model.a) if model.a.size > 1 else np.empty(0)
+    physical = poles[(np.abs(poles.imag) > 1e-12) | (poles.real > 0)]
+    f = np.abs(np.log(physical.astype(complex))) * model.fs / (2 * math.pi)
+    f = f[f < model.fs / 2 / (1 + EXCITATION_BAND)]
+    return int(np.count_nonzero(excitation(calib, f) >= MIN_EXCITATION)) if f.size else 0
+
+
+def _check_excitation(model: Model, calib: Sequence[ShotSource]) -> str:
+    """Return a warning when the calibration acceleration does not excite the model's dynamics."""
+    dynamics = _dynamics(model)
+    if dynamics is None:
+        return ''
+    what, f = dynamics
+    if f >= model.fs / 2 / (1 + EXCITATION_BAND):
+        return ''
+    snr = excitation(calib, f)
+    if snr is None:
+        return '; excitation not checked: no pre-trigger to measure the accelerometer noise'
+    if snr >= WEAK_EXCITATION:
+        return ''
+    if snr >= MIN_EXCITATION:
+        return (f'; WARNING: the calibration acceleration excites the {what} only {snr:.2g} '
+                f'times above its noise power: the accelerometer noise biases the model '
+                f'towards more damping (ζ about {100 / snr:.0f} % too large); add shorter, '
+                f'harder shots')
+    grid = np.geomspace(f / 10, model.fs / 2 / (1 + EXCITATION_BAND), 200)
+    excited = grid[excitation(calib, grid) >= MIN_EXCITATION]
+    reach = (f'the shots carry signal above that noise up to about '
+             f'{excited.max() / 1e3:.3g} kHz' if excited.size
+             else 'the shots carry no signal above that noise')
+    order = _supported_order(model, calib)
+    supported = f'order {order}' + (' (the static sensitivity only)' if order == 0 else '')
+    return (f'; WARNING: the calibration acceleration does not excite the model\'s {what}: its '
+            f'signal power there is {max(snr, 0.0):.2g} times its noise power (at least '
+            f'{MIN_EXCITATION:g} needed), so these dynamics come from the accelerometer noise, '
+            f'not from the sensor; {reach}. The data support {supported}, not na = '
+            f'{model.orders["na"]}: the model compensates shocks like these but its physics '
+            f'(fn, ζ) is not measured. Record shorter, harder shots (a shock of width T '
+            f'carries signal to a few times 1/T) to identify it')
+
+
+def _provenance(sources: Sequence[ShotSource], role: str) -> tuple[Source, ...]:
+    return tuple(Source.from_file(s.path, shots=[{'role': role, 'index': shot.index,
+                                                  'start': shot.start, 'stop': shot.stop}
+                                                 for shot in s.shots])
+                 for s in sources if s.path is not None)

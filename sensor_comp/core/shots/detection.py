@@ -1,0 +1,736 @@
+"""
+Shots: find the shocks of a drop-hammer recording and cut one window around each.
+
+Detection runs on the axial acceleration ``a_z`` in g, after removing its median:
+
+- Noise floor: σ from the median absolute deviation (``1.4826 · MAD``), robust to the shots
+  themselves as long as they fill less than half of the recording.
+- Threshold with hysteresis: a shot starts where the signal reaches the threshold and ends
+  where it falls below ``hysteresis × threshold``. The default threshold is the larger of
+  :data:`DEFAULT_THRESHOLD_FRACTION` of the largest peak (Table 2 of the seed paper spans
+  180–2185 g, 8 %, in one series) and :data:`NOISE_FACTOR` σ (no false triggers from
+  Gaussian noise). Crossings less than ``holdoff_ms`` apart (ringing, rebound) are one shot.
+- Polarity: the sign of the largest excursion unless given.
+
+Pulse timing models the shock as a half-sine ``A sin(π t / T)``: its width at half amplitude
+is ``2T/3`` (it crosses ``A/2`` at ``T/6`` and ``5T/6``), so the base width is
+``T = 1.5 × FWHM``, with the half-amplitude crossings interpolated between samples. At half
+amplitude the slope is steep (``0.87 Aπ/T``), so noise moves the crossings little, while a
+low-level threshold crossing would depend on the threshold and the baseline. The onset is
+``T/6`` before the rising crossing and the end of pulse ``T`` after the onset.
+
+Windows run from ``pre_ms`` before the onset to ``post_ms`` after the end of pulse: the
+pre-trigger holds the quiet baseline (and keeps EMD end effects away from the shock), the
+post-trigger holds the sensor's ringing and the slow tail (amplifier high-pass undershoot).
+Windows are clipped at the recording ends and never overlap: when two shots are closer than
+their windows, the windows meet half-way between the end of one pulse and the onset of the
+next, and both shots carry a note saying so. The baseline (mean of the pre-trigger, up to
+a guard of a tenth of the pulse width before the onset) is removed from pressure and
+acceleration inside each window.
+
+A shot that cannot be fitted or compared carries its reasons in :attr:`Shot.defects` (and
+the table's mode column says so); :func:`~sensor_comp.core.identification.identify.identify`,
+``compare``
+and the diagnosis leave such shots out with a warning naming the reason:
+
+- non-finite samples (a stream gap becomes NaN; a NaN or Inf in the data) anywhere in the
+  window, named by channel, count and first sample. Outside the windows they do not matter:
+  detection ignores them.
+- clipping: the acceleration or the pressure sits flat at its extreme, at an ADC rail or an
+  amplifier limit. The flat top is told from a smooth crest by its length. A half-sine
+  crest of amplitude ``A`` and base width ``T`` (``T`` = 1.5 × the crest's half-amplitude
+  width, measured per channel) stays within ``r`` of its top for
+  ``(2T/π)·arccos(1 − r/A)`` samples; a run of samples within a band ``δ`` of the extreme
+  that lasts :data:`CLIP_MARGIN` times that (and at least 3 samples, 2 % of ``T``), mostly
+  inside the band, is a flat top. Two bands are tried: ``δ = 0`` (an ADC rail repeats one
+  code exactly, however noisy the signal; a smooth crest holds its top code only within
+  ``r = 2q``, ``q`` the quantisation step seen in the window: an 8-bit scope holds it for a
+  few samples on any crest), and ``δ = max(q, CLIP_NOISE_Z σ)`` (an amplifier limit with
+  the channel's pre-trigger noise ``σ`` on top; noise raises the extreme by about 3σ, so a
+  smooth crest's noisy samples stay within ``r = δ + q + 3σ``).
+- no shock: a manual window whose axial acceleration stays within :data:`NOISE_FACTOR`
+  noise σ of its baseline.
+- a dead channel: the pressure constant throughout the window.
+
+A recording whose axial acceleration is constant throughout (a dead or disconnected
+accelerometer) is refused outright: there is nothing to trigger on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from .inputs import input_channels
+from ...errors import SensorCompError
+from ...streams import G0, Recording
+
+__all__ = [
+    'BASELINE_GUARD',
+    'CLIP_MARGIN',
+    'CLIP_NOISE_Z',
+    'DEFAULT_HOLDOFF_MS',
+    'DEFAULT_HYSTERESIS',
+    'DEFAULT_POST_MS',
+    'DEFAULT_PRE_MS',
+    'DEFAULT_THRESHOLD_FRACTION',
+    'NOISE_FACTOR',
+    'Shot',
+    'ShotError',
+    'dead_channel',
+    'detect_shots',
+    'mad_sigma',
+    'no_shot_message',
+    'segments',
+    'shot_table',
+    'shots_from_windows',
+    'split_calibration',
+]
+
+#: Pre-trigger window before the pulse onset, ms: baseline and quiet EMD boundary.
+DEFAULT_PRE_MS = 5.0
+#: Post-trigger window after the end of pulse, ms: ringing and slow tail.
+DEFAULT_POST_MS = 20.0
+#: Default threshold as a fraction of the largest peak.
+DEFAULT_THRESHOLD_FRACTION = 0.05
+#: The threshold is never below this many noise σ.
+NOISE_FACTOR = 8.0
+#: A shot ends below this fraction of the threshold.
+DEFAULT_HYSTERESIS = 0.5
+#: Threshold crossings closer than this (ms) belong to one shot.
+DEFAULT_HOLDOFF_MS = 1.0
+#: Samples within this fraction of the pulse width before the onset stay out of the baseline.
+BASELINE_GUARD = 0.1
+#: Half-width of the band below a clipped extreme, in noise σ (see the module docs).
+CLIP_NOISE_Z = 4.0
+#: A flat top is this many times longer than a smooth half-sine crest could stay in the band.
+CLIP_MARGIN = 1.5
+# ... and at least 3 samples and 2 % of the crest's base width long.
+_CLIP_RUN_MIN = 3
+_CLIP_RUN_FRACTION = 0.02
+# A flat top holds at least this fraction of in-band samples between its first and last one
+# (two separate crests near the extreme do not).
+_CLIP_FILL = 0.5
+_CHANNELS = ('pressure', 'acceleration x', 'acceleration y', 'axial acceleration (z)')
+
+
+class ShotError(SensorCompError, ValueError):
+    """Shots cannot be found or cut as asked."""
+
+
+@dataclass(frozen=True)
+class Shot:
+    """
+    One shock and its analysis window (sample indices into the recording).
+
+    Args:
+        index: Position of the shot in its list, from 0.
+        fs: Sample rate in Hz.
+        start: First sample of the window.
+        stop: One past the last sample of the window.
+        onset: First sample of the pulse (half-sine start).
+        end: One past the last sample of the pulse (half-sine end).
+        peak: Sample of the acceleration peak.
+        peak_g: Axial acceleration at the peak, baseline removed, in g (sign kept).
+        width_ms: Half-sine base width in ms (1.5 × the half-amplitude width).
+        peak_pressure_mpa: Largest-magnitude pressure from the onset to the window end,
+            baseline removed, in MPa (sign kept).
+        charge_pc: ``peak_pressure_mpa`` × the charge sensitivity in pC, or None when the
+            recording's metadata does not give it.
+        mpa_per_g: ``peak_pressure_mpa / peak_g``.
+        clipped: The acceleration or the pressure sits flat at its extreme (saturated
+            amplifier or ADC; see the module docs).
+        baseline_stop: One past the last pre-trigger sample used for the baseline.
+        baseline_pa: Pre-trigger mean pressure in Pa.
+        baseline_acceleration: Pre-trigger mean acceleration (x, y, z) in m/s².
+        notes: Anything a user should know: shortened windows, merged crossings, gaps.
+        defects: Why the shot must not be fitted or compared (clipped, non-finite samples,
+            no shock, a dead pressure channel), one sentence each; empty for a usable shot.
+
+    """
+
+    index: int
+    fs: float
+    start: int
+    stop: int
+    onset: int
+    end: int
+    peak: int
+    peak_g: float
+    width_ms: float
+    peak_pressure_mpa: float
+    charge_pc: float | None
+    mpa_per_g: float
+    clipped: bool
+    baseline_stop: int
+    baseline_pa: float
+    baseline_acceleration: tuple[float, float, float]
+    notes: tuple[str, ...] = ()
+    defects: tuple[str, ...] = ()
+
+    @property
+    def usable(self) -> bool:
+        """Return whether the shot can be fitted and compared (it has no defect)."""
+        return not self.defects
+
+    @property
+    def mode(self) -> str:
+        """Return ``'normal'``, ``'clipped'`` or ``'excluded'`` (another defect)."""
+        return 'clipped' if self.clipped else 'excluded' if self.defects else 'normal'
+
+    @property
+    def window(self) -> slice:
+        """Return the samples of the window."""
+        return slice(self.start, self.stop)
+
+    @property
+    def baseline_window(self) -> slice:
+        """Return the pre-trigger samples the baseline is the mean of."""
+        return slice(self.start, self.baseline_stop)
+
+    @property
+    def n_samples(self) -> int:
+        """Return the number of samples in the window."""
+        return self.stop - self.start
+
+    @property
+    def start_s(self) -> float:
+        """Return the window start in seconds since the recording start."""
+        return self.start / self.fs
+
+    @property
+    def stop_s(self) -> float:
+        """Return the window end in seconds since the recording start."""
+        return self.stop / self.fs
+
+    @property
+    def onset_s(self) -> float:
+        """Return the pulse onset in seconds since the recording start."""
+        return self.onset / self.fs
+
+    def to_dict(self) -> dict:
+        """Return the shot as plain JSON-ready values (times in s, as in the fields)."""
+        return {
+            'index': self.index, 'start': self.start, 'stop': self.stop,
+            'start_s': self.start_s, 'stop_s': self.stop_s, 'onset': self.onset,
+            'end': self.end, 'peak': self.peak, 'peak_g': self.peak_g,
+            'width_ms': self.width_ms, 'peak_pressure_mpa': self.peak_pressure_mpa,
+            'charge_pc': self.charge_pc, 'mpa_per_g': self.mpa_per_g,
+            'clipped': self.clipped, 'baseline_pa': self.baseline_pa,
+            'baseline_acceleration': list(self.baseline_acceleration),
+            'notes': list(self.notes), 'defects': list(self.defects),
+        }
+
+
+def mad_sigma(x: np.ndarray) -> float:
+    """
+    Return the noise σ of ``x`` from its median absolute deviation (NaN ignored).
+
+    ``1.4826 · median|x − median x|`` equals σ for Gaussian noise and ignores outliers such
+    as shots that fill less than half of the samples.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    return float(1.4826 * np.nanmedian(np.abs(x - np.nanmedian(x))))
+
+
+def _polarity(s: np.ndarray, polarity: int | None, where: str) -> int:
+    if polarity is not None:
+        if polarity not in (1, -1):
+            raise ShotError(f'polarity must be 1, -1 or None (automatic), got {polarity!r}')
+        return polarity
+    if not np.any(np.isfinite(s)):
+        raise ShotError(f'{where}: the axial acceleration holds no finite sample')
+    magnitude = np.abs(s)  # np.nanargmax, with one temporary instead of two
+    magnitude[np.isnan(magnitude)] = -np.inf
+    return 1 if s[np.argmax(magnitude)] >= 0 else -1
+
+
+def _nanmedian_of_copy(x: np.ndarray) -> float:
+    """Return ``np.nanmedian(x)``, partitioning one copy of ``x`` in place (no second)."""
+    return np.nanmedian(np.array(x, dtype=np.float64), overwrite_input=True)
+
+
+def _pulse_timing(s: np.ndarray, peak: int) -> tuple[float, float, list[str]]:
+    """Return the half-sine (onset, end) in fractional samples of ``s`` around ``peak``."""
+    half = s[peak] / 2.0
+    notes = []
+    below = np.flatnonzero(s[:peak] < half)
+    if below.size and np.isfinite(s[below[-1] + 1]):
+        k = below[-1]
+        left = k + (half - s[k]) / (s[k + 1] - s[k])
+    else:
+        left = 0.0
+        notes.append('pulse rise cut off: width and onset are estimates')
+    above = np.flatnonzero(s[peak + 1:] < half)
+    if above.size and np.isfinite(s[peak + above[0]]):
+        k = peak + 1 + above[0]
+        right = k - 1 + (s[k - 1] - half) / (s[k - 1] - s[k])
+    else:
+        right = s.size - 1.0
+        notes.append('pulse decay cut off: width and end are estimates')
+    base = 1.5 * (right - left)
+    onset = left - base / 6.0
+    return onset, onset + base, notes
+
+
+def _quantum(x: np.ndarray) -> float:
+    """Return the smallest step between distinct values of ``x`` (its quantisation)."""
+    steps = np.diff(np.unique(x))
+    return float(steps.min()) if steps.size else 0.0
+
+
+def _flat_top(x: np.ndarray, sigma: float) -> tuple[float, int] | None:
+    """
+    Return ``(level, samples)`` of the flat top of ``x`` (baseline removed), or None.
+
+    See the module docs for the test; ``sigma`` is the channel's noise.
+    """
+    finite = np.isfinite(x)
+    if not finite.any():
+        return None
+    q = _quantum(x[finite])
+    peaks = {sign: float(np.max(sign * x[finite])) for sign in (1, -1)}
+    for sign, amplitude in peaks.items():
+        if not (amplitude > max(q, CLIP_NOISE_Z * sigma)
+                and amplitude >= 0.5 * max(peaks.values())):
+            continue
+        y = np.where(finite, sign * x, -np.inf)
+        # An ADC rail repeats one code, however noisy the signal (a smooth crest holds its
+        # top code only while it stays within a step or two); an amplifier limit followed
+        # by noise stays within the noise band.
+        for delta, reach in ((0.0, 2 * q), (max(q, CLIP_NOISE_Z * sigma),
+                                            max(q, CLIP_NOISE_Z * sigma) + q + 3 * sigma)):
+            band = np.flatnonzero(y >= amplitude - delta)
+            first, last = int(band[0]), int(band[-1])
+            span = last - first + 1
+            if band.size < _CLIP_FILL * span:
+                continue
+            # The crest's base width: 1.5 × its half-amplitude width (a half-sine's).
+            low = np.flatnonzero(y[:first] < amplitude / 2)
+            high = np.flatnonzero(y[last:] < amplitude / 2)
+            base = 1.5 * (last + (high[0] if high.size else y.size - last)
+                          - (low[-1] if low.size else -1) - 1)
+            smooth = 2 * base / math.pi * math.acos(1 - min(1.0, reach / amplitude))
+            if span >= max(_CLIP_RUN_MIN, _CLIP_RUN_FRACTION * base, CLIP_MARGIN * smooth):
+                return sign * float(np.median(y[band])), span
+    return None
+
+
+def _noise(x: np.ndarray, base: slice) -> float:
+    """Return the noise σ of ``x`` from its pre-trigger, or from the whole window if short."""
+    quiet = x[base]
+    quiet = quiet[np.isfinite(quiet)]
+    return mad_sigma(quiet if quiet.size >= 16 else x)
+
+
+def _non_finite(recording: Recording, window: slice) -> list[str]:
+    """Describe the NaN/Inf samples of every channel inside ``window``."""
+    out = []
+    # The window's rows only (views): stacking whole channels copied the whole recording
+    # once per shot.
+    rows = (recording.pressure[window], *recording.acceleration[:, window])
+    for name, row in zip(_CHANNELS, rows):
+        bad = np.flatnonzero(~np.isfinite(row))
+        if bad.size:
+            first = window.start + int(bad[0])
+            kinds = '/'.join(kind for kind, test in (('NaN', np.isnan), ('Inf', np.isinf))
+                             if test(row[bad]).any())
+            out.append(f'{name} holds {bad.size} non-finite sample(s) ({kinds}: a stream gap '
+                       f'or bad data), the first at sample {first} '
+                       f'({first / recording.fs:.6f} s)')
+    return out
+
+
+def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: float,
+             end: float, peak: int, notes: list[str]) -> Shot:
+    fs = recording.fs
+    width = end - onset
+    onset_i = min(max(start, math.floor(onset)), stop - 1)
+    end_i = min(max(onset_i + 1, math.ceil(end)), stop)
+    baseline_stop = onset_i - max(1, round(BASELINE_GUARD * width))
+    if baseline_stop <= start:
+        baseline_stop = start + 1
+        notes.append('no quiet pre-trigger: baseline from the first window sample')
+    elif baseline_stop - start < width:
+        notes.append(f'short pre-trigger: baseline from {baseline_stop - start} samples')
+    window = slice(start, stop)
+    defects = _non_finite(recording, window)
+    base = slice(start, baseline_stop)
+    with np.errstate(invalid='ignore'):
+        baseline_pa = float(np.nanmean(recording.pressure[base])) \
+            if np.any(np.isfinite(recording.pressure[base])) else 0.0
+        baseline_acc = np.array([np.nanmean(row) if np.any(np.isfinite(row)) else 0.0
+                                 for row in recording.acceleration[:, base]])
+    peak_g = float((recording.axial[peak] - baseline_acc[2]) / G0)
+    pressure = recording.pressure[onset_i:stop] - baseline_pa
+    finite = np.isfinite(pressure)
+    peak_pressure = float(pressure[np.nanargmax(np.where(finite, np.abs(pressure), np.nan))]
+                          / 1e6) if finite.any() else math.nan
+    sensitivity = recording.charge_sensitivity
+    local = slice(0, baseline_stop - start)
+    axial = recording.axial[window] - baseline_acc[2]
+    p = recording.pressure[window] - baseline_pa
+    clipped = False
+    for name, x, unit, scale, offset in (
+            ('axial acceleration', axial, 'g', G0, baseline_acc[2]),
+            ('pressure', p, 'MPa', 1e6, baseline_pa)):
+        top = _flat_top(x, _noise(x, local))
+        if top is not None:
+            clipped = True
+            level, count = top
+            defects.append(f'clipped: the {name} sits flat at {(level + offset) / scale:.5g} '
+                           f'{unit} for {count} samples ({1e3 * count / fs:.3g} ms): the '
+                           f'sensor, its amplifier or the ADC saturated')
+    sigma = _noise(axial, local)
+    if not defects and not np.nanmax(np.abs(axial)) > NOISE_FACTOR * sigma:
+        defects.append(f'no shock: the axial acceleration stays within '
+                       f'{np.nanmax(np.abs(axial)) / G0:.3g} g of its baseline, '
+                       f'{NOISE_FACTOR:g} noise σ ({NOISE_FACTOR * sigma / G0:.3g} g) being '
+                       f'the least a shot must reach')
+    if np.all(p == p[0]) and not defects:
+        defects.append(f'the pressure is constant at {p[0] + baseline_pa:g} Pa throughout the '
+                       f'window: a dead, disconnected or overloaded pressure channel')
+    return Shot(index=index, fs=fs, start=start, stop=stop, onset=onset_i, end=end_i,
+                peak=peak, peak_g=peak_g, width_ms=1e3 * width / fs,
+                peak_pressure_mpa=peak_pressure,
+                charge_pc=None if sensitivity is None else peak_pressure * sensitivity,
+                mpa_per_g=peak_pressure / peak_g if peak_g else math.nan, clipped=clipped,
+                baseline_stop=baseline_stop, baseline_pa=baseline_pa,
+                baseline_acceleration=tuple(float(v) for v in baseline_acc),
+                notes=tuple(notes), defects=tuple(defects))
+
+
+def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
+    """
+    Return why the recording's axial acceleration (or its pressure) is dead, or None.
+
+    A channel is dead when every finite sample has one value (a disconnected sensor, an
+    amplifier in reset or overload, a channel mapped to nothing).
+
+    Args:
+        recording: The recording.
+        pressure: Check the pressure too.
+
+    """
+    channels = [('axial acceleration (row z)', recording.axial, 'm/s²')]
+    if pressure:
+        channels.insert(0, ('pressure', recording.pressure, 'Pa'))
+    for name, row, unit in channels:
+        finite = row[np.isfinite(row)]
+        if finite.size > 1 and finite.min() == finite.max():
+            return (f'the {name} is constant at {finite[0]:g} {unit} over all '
+                    f'{recording.n_samples} samples: the sensor is dead or disconnected, its '
+                    f'amplifier is in reset or overload, or the channel is mapped wrong; check '
+                    f'the wiring and the recorded channels')
+    return None
+
+
+def _check_ms(**values: float) -> None:
+    for name, value in values.items():
+        if not (math.isfinite(value) and value >= 0):
+            raise ShotError(f'{name} must be a non-negative number of ms, got {value!r}')
+
+
+def _events(s: np.ndarray, on: float, off: float) -> list[list[int]]:
+    """Return ``[first, stop)`` sample runs from ``s >= on`` until ``s < off``."""
+    ons = np.flatnonzero(s >= on)
+    offs = np.flatnonzero(s < off)
+    events = []
+    position = 0
+    while True:
+        j = np.searchsorted(ons, position)
+        if j == ons.size:
+            return events
+        first = int(ons[j])
+        k = np.searchsorted(offs, first)
+        stop = int(offs[k]) if k < offs.size else s.size
+        events.append([first, stop])
+        position = stop
+
+
+@dataclass(frozen=True)
+class _Trigger:
+    """The detection signal and its level: ``s`` in g, baseline removed, pulses positive."""
+
+    s: np.ndarray
+    threshold_g: float
+    largest_g: float
+    sigma_g: float
+    automatic: bool
+
+
+def _trigger(recording: Recording, threshold_g: float | None,
+             polarity: int | None) -> _Trigger:
+    if threshold_g is not None and not threshold_g > 0:
+        raise ShotError(f'threshold must be a positive number of g, got {threshold_g!r}')
+    # In place, one channel-sized temporary at a time (the recording's channel may be
+    # hundreds of MB): the values of the plain expressions, bit for bit.
+    s = recording.axial / G0
+    s[~np.isfinite(s)] = np.nan  # an Inf is bad data, not a shock
+    dead = dead_channel(recording, pressure=False)
+    if dead is not None:
+        raise ShotError(dead)
+    if np.isfinite(s).any():
+        s -= _nanmedian_of_copy(s)
+    s *= _polarity(s, polarity, 'recording')
+    largest = float(np.nanmax(s))
+    deviation = s - _nanmedian_of_copy(s)  # mad_sigma(s)
+    np.abs(deviation, out=deviation)
+    sigma = float(1.4826 * np.nanmedian(deviation, overwrite_input=True))
+    del deviation
+    automatic = threshold_g is None
+    if automatic:
+        threshold_g = max(DEFAULT_THRESHOLD_FRACTION * largest, NOISE_FACTOR * sigma)
+    return _Trigger(s, threshold_g, largest, sigma, automatic)
+
+
+def no_shot_message(recording: Recording, *, threshold_g: float | None = None,
+                    polarity: int | None = None) -> str:
+    """
+    Return why :func:`detect_shots` finds nothing, with the numbers and what to try.
+
+    Raises:
+        ShotError: As :func:`detect_shots` does on a recording it cannot scan.
+
+    """
+    trigger = _trigger(recording, threshold_g, polarity)
+    how = (f'the automatic threshold, the larger of '
+           f'{100 * DEFAULT_THRESHOLD_FRACTION:g} % of the largest excursion and '
+           f'{NOISE_FACTOR:g} noise σ' if trigger.automatic else 'the threshold given')
+    return (f'no shot found: the axial acceleration never reaches {trigger.threshold_g:.4g} g '
+            f'above its median ({how}); its largest excursion is {trigger.largest_g:.4g} g '
+            f'and its noise σ {trigger.sigma_g:.3g} g. Give a lower --threshold G (one below '
+            f'{NOISE_FACTOR:g} σ = {NOISE_FACTOR * trigger.sigma_g:.3g} g may trigger on '
+            f'noise) or the shot windows with --window START STOP in seconds')
+
+
+def detect_shots(recording: Recording, *, threshold_g: float | None = None,
+                 hysteresis: float = DEFAULT_HYSTERESIS, pre_ms: float = DEFAULT_PRE_MS,
+                 post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
+                 polarity: int | None = None) -> list[Shot]:
+    """
+    Find the shots in a recording's axial acceleration.
+
+    Args:
+        recording: Pressure and acceleration.
+        threshold_g: Trigger level in g above the median; default: the larger of
+            :data:`DEFAULT_THRESHOLD_FRACTION` of the largest peak and :data:`NOISE_FACTOR`
+            noise σ.
+        hysteresis: A shot ends below ``hysteresis × threshold`` (0 < hysteresis ≤ 1).
+        pre_ms: Window length before the pulse onset in ms.
+        post_ms: Window length after the end of pulse in ms.
+        holdoff_ms: Threshold crossings closer than this are one shot.
+        polarity: 1 for positive pulses, -1 for negative ones, None to follow the largest
+            excursion.
+
+    Returns:
+        The shots in time order (empty when nothing reaches the threshold:
+        :func:`no_shot_message` says why). NaN and Inf samples never trigger; a shot whose
+        window holds one has it in its :attr:`Shot.defects`.
+
+    Raises:
+        ShotError: On bad options, or a recording whose axial acceleration is constant or
+            holds no finite sample.
+
+    """
+    _check_ms(pre_ms=pre_ms, post_ms=post_ms, holdoff_ms=holdoff_ms)
+    if not 0 < hysteresis <= 1:
+        raise ShotError(f'hysteresis must lie in (0, 1], got {hysteresis!r}')
+    fs, n = recording.fs, recording.n_samples
+    trigger = _trigger(recording, threshold_g, polarity)
+    s, threshold_g = trigger.s, trigger.threshold_g
+    if not trigger.largest_g >= threshold_g:
+        return []
+    events = _events(s, threshold_g, hysteresis * threshold_g)
+    holdoff = holdoff_ms * fs / 1e3
+    merged = [events[0] + [1]]
+    for first, stop in events[1:]:
+        if first - merged[-1][1] < holdoff:
+            merged[-1][1] = stop
+            merged[-1][2] += 1
+        else:
+            merged.append([first, stop, 1])
+    timings = []
+    for i, (first, stop, count) in enumerate(merged):
+        lo = merged[i - 1][1] if i else 0
+        hi = merged[i + 1][0] if i + 1 < len(merged) else n
+        peak = first + int(np.nanargmax(s[first:stop]))
+        onset, end, notes = _pulse_timing(s[lo:hi], peak - lo)
+        if count > 1:
+            notes.append(f'{count} threshold crossings within {holdoff_ms:g} ms merged '
+                         f'(ringing or rebound)')
+        timings.append((onset + lo, end + lo, peak, notes))
+    pre, post = pre_ms * fs / 1e3, post_ms * fs / 1e3
+    bounds = [[max(0, math.floor(onset - pre)), min(n, math.ceil(end + post))]
+              for onset, end, _, _ in timings]
+    for (onset, end, _, notes), (start, stop) in zip(timings, bounds):
+        if onset - pre < 0:
+            notes.append(f'pre-trigger cut to {1e3 * (onset - start) / fs:.2f} ms by the '
+                         f'recording start')
+        if end + post > n:
+            notes.append(f'post-trigger cut to {1e3 * (stop - end) / fs:.2f} ms by the '
+                         f'recording end')
+    for i in range(len(timings) - 1):
+        if bounds[i][1] > bounds[i + 1][0]:
+            end, onset = timings[i][1], timings[i + 1][0]
+            middle = max(bounds[i][0] + 1, min(bounds[i + 1][1] - 1, round((end + onset) / 2)))
+            bounds[i][1] = bounds[i + 1][0] = middle
+            gap = 1e3 * (onset - end) / fs
+            timings[i][3].append(f'window shortened: next shot starts {gap:.2f} ms after '
+                                 f'this pulse ends')
+            timings[i + 1][3].append(f'window shortened: previous pulse ends {gap:.2f} ms '
+                                     f'before this one')
+    return [_measure(recording, index=i, start=start, stop=stop, onset=onset, end=end,
+                     peak=peak, notes=notes)
+            for i, ((onset, end, peak, notes), (start, stop)) in enumerate(zip(timings, bounds))]
+
+
+def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, float]], *,
+                       polarity: int | None = None) -> list[Shot]:
+    """
+    Build shots from given windows instead of detecting them.
+
+    Inside each window the pulse is the largest excursion of the axial acceleration from
+    the window's median; its timing and the baseline follow the same rules as
+    :func:`detect_shots`.
+
+    Args:
+        recording: Pressure and acceleration.
+        windows_s: ``(start, stop)`` pairs in seconds since the recording start, in time
+            order, not overlapping.
+        polarity: As in :func:`detect_shots`.
+
+    Returns:
+        One shot per window.
+
+    Raises:
+        ShotError: On a window outside the recording, empty, overlapping or out of order.
+
+    """
+    fs, n = recording.fs, recording.n_samples
+    shots: list[Shot] = []
+    previous_stop = 0
+    for index, (t_start, t_stop) in enumerate(windows_s):
+        start, stop = round(t_start * fs), round(t_stop * fs)
+        where = f'window {index} ({t_start:g} s to {t_stop:g} s)'
+        if not 0 <= start < stop <= n:
+            raise ShotError(f'{where} must lie inside the recording (0 s to '
+                            f'{n / fs:g} s) and hold at least one sample')
+        if start < previous_stop:
+            raise ShotError(f'{where} overlaps the previous window or is out of time order')
+        previous_stop = stop
+        s = recording.axial[start:stop] / G0
+        s = np.where(np.isfinite(s), s, np.nan)
+        s = (s - np.nanmedian(s)) * _polarity(s - np.nanmedian(s), polarity, where)
+        peak = int(np.nanargmax(s))
+        onset, end, notes = _pulse_timing(s, peak)
+        shots.append(_measure(recording, index=index, start=start, stop=stop,
+                              onset=onset + start, end=end + start, peak=peak + start,
+                              notes=notes))
+    return shots
+
+
+def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[str] = ('a_z',),
+             denoise: Callable[[np.ndarray], np.ndarray] | None = None
+             ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """
+    Return identification data per shot window, baselines removed.
+
+    Each window starts at rest (quiet pre-trigger), so a model simulated from a zero state
+    at the window start can be compared with it.
+
+    Args:
+        recording: Pressure and acceleration.
+        shots: Shots with their windows.
+        inputs: Model input names (see :mod:`sensor_comp.core.shots.inputs`), in m/s² based units.
+        denoise: Applied to each window's pressure, e.g. an
+            :class:`~sensor_comp.core.identification.denoise.EmdDenoiser`; None keeps the measured
+            pressure.
+
+    Returns:
+        ``(u, y)`` per shot: inputs ``(len(inputs), n)`` and pressure ``(n,)`` in Pa.
+
+    Raises:
+        ShotError: When a window holds a NaN or Inf sample or lies outside the recording.
+
+    """
+    out = []
+    for shot in shots:
+        if shot.stop > recording.n_samples:
+            raise ShotError(f'shot {shot.index}: window ends at sample {shot.stop}, beyond '
+                            f'the {recording.n_samples}-sample recording')
+        acc = recording.acceleration[:, shot.window] - \
+            np.asarray(shot.baseline_acceleration)[:, np.newaxis]
+        y = recording.pressure[shot.window] - shot.baseline_pa
+        if not (np.isfinite(y).all() and np.isfinite(acc).all()):
+            raise ShotError(f'shot {shot.index}: {"; ".join(_non_finite(recording, shot.window))}'
+                            f'; leave the shot out or give windows that avoid the gap '
+                            f'(--window START STOP)')
+        u = input_channels(inputs, acc, {}, fs=recording.fs)
+        out.append((u, y if denoise is None else np.asarray(denoise(y), dtype=np.float64)))
+    return out
+
+
+def split_calibration(shots: Sequence[Shot], *,
+                      validation: str | Iterable[int] = 'alternate'
+                      ) -> tuple[list[Shot], list[Shot]]:
+    """
+    Split shots into a calibration set (to fit on) and a validation set (to report on).
+
+    Args:
+        shots: All shots.
+        validation: ``'alternate'`` holds out every second shot (indices 1, 3, 5, ...);
+            otherwise the :attr:`Shot.index` values of the validation shots.
+
+    Returns:
+        ``(calibration, validation)``, both non-empty.
+
+    Raises:
+        ShotError: With fewer than two shots, an unknown index, or an empty side.
+
+    """
+    shots = list(shots)
+    if len(shots) < 2:
+        raise ShotError(f'need at least two shots to validate on data not used for the fit, '
+                        f'got {len(shots)}')
+    if isinstance(validation, str):
+        if validation != 'alternate':
+            raise ShotError(f"validation must be 'alternate' or shot indices, got "
+                            f'{validation!r}')
+        return shots[0::2], shots[1::2]
+    wanted = set(validation)
+    known = {shot.index for shot in shots}
+    if wanted - known:
+        raise ShotError(f'no shot with index {sorted(wanted - known)}; shots are '
+                        f'{sorted(known)}')
+    held = [shot for shot in shots if shot.index in wanted]
+    kept = [shot for shot in shots if shot.index not in wanted]
+    if not held or not kept:
+        raise ShotError('calibration and validation sets must both hold at least one shot')
+    return kept, held
+
+
+def shot_table(shots: Sequence[Shot]) -> str:
+    """
+    Return the shots as a text table in the layout of the seed paper's Table 2.
+
+    Columns: shot index, peak acceleration (g), pulse width (ms), output charge (pC, '-'
+    without a charge sensitivity), peak pressure (MPa), pressure per g (MPa/g) and the
+    sensor mode (:attr:`Shot.mode`: 'normal', 'clipped' or 'excluded'); notes and defects
+    follow the table.
+    """
+    header = (f'{"No.":>4} {"Accel. (g)":>11} {"Width (ms)":>11} {"Charge (pC)":>12} '
+              f'{"Pressure (MPa)":>15} {"MPa/g":>10} {"Window (ms)":>12}  Mode')
+    lines = [header, '-' * len(header)]
+    notes = []
+    for shot in shots:
+        charge = '-' if shot.charge_pc is None else f'{shot.charge_pc:.2f}'
+        lines.append(f'{shot.index:>4} {shot.peak_g:>11.1f} {shot.width_ms:>11.3f} '
+                     f'{charge:>12} {shot.peak_pressure_mpa:>15.4f} {shot.mpa_per_g:>10.3e} '
+                     f'{1e3 * shot.n_samples / shot.fs:>12.1f}  {shot.mode}')
+        notes.extend(f'shot {shot.index}: {note}' for note in shot.notes)
+        notes.extend(f'shot {shot.index}: not usable: {defect}' for defect in shot.defects)
+    return '\n'.join(lines + ([''] + notes if notes else [])) + '\n'

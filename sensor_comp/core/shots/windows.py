@@ -1,0 +1,93 @@
+"""
+Shot windows as the extended fits and the diagnosis see them.
+
+Acceleration and pressure with baselines removed, where the pulse ends, and the ringing
+after the pulses. Below the effects and the model, so both can use it without a cycle.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .detection import segments
+
+__all__ = ['EARLY_S', 'Window', 'ringing_khz', 'shot_windows']
+
+#: Part of a window after the pulse that the grid start sees, s.
+EARLY_S = 3e-3
+
+
+@dataclass(frozen=True, eq=False)
+class Window:
+    """
+    One shot window, baselines removed.
+
+    Args:
+        acceleration: ``(3, n)`` acceleration in m/s² (x, y, z).
+        y: ``(n,)`` pressure in Pa.
+        start: Index of the first sample in its recording.
+        baseline: Leading samples the baseline was the mean of (the pre-trigger).
+        source: Index of its recording among the windows' recordings.
+        label: Name for messages, e.g. ``'calib.mcap shot 3'``.
+        end: End of the pulse in window samples (None: unknown).
+
+    """
+
+    acceleration: np.ndarray = field(repr=False)
+    y: np.ndarray = field(repr=False)
+    start: int
+    baseline: int
+    source: int
+    label: str = ''
+    end: int | None = None
+
+
+def shot_windows(sources: Sequence, *,
+                 denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Window]:
+    """
+    Return the windows of every shot of ``sources``.
+
+    Args:
+        sources: Objects with ``recording`` and ``shots`` (e.g.
+            :class:`~sensor_comp.core.identification.identify.ShotSource`).
+        denoise: Applied to each window's pressure (as in :func:`segments`).
+
+    Raises:
+        ShotError: When a window holds missing samples.
+
+    """
+    out = []
+    for index, source in enumerate(sources):
+        name = getattr(source, 'name', f'recording {index}')
+        cut = segments(source.recording, source.shots, inputs=('a_x', 'a_y', 'a_z'),
+                       denoise=denoise)
+        for shot, (acc, y) in zip(source.shots, cut):
+            out.append(Window(acc, y, shot.start, shot.baseline_stop - shot.start, index,
+                              f'{name} shot {shot.index}', shot.end - shot.start))
+    return out
+
+
+def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
+    """
+    Return the frequency in kHz of the strongest ringing after the pulses (None: no pulse end).
+
+    The peak of the pooled spectrum over :data:`EARLY_S` after each pulse (quadratic trend
+    removed, Hann window, zero-padded), at two cycles or more in that time.
+    """
+    parts = [w.y[w.end:w.end + round(EARLY_S * fs)] for w in windows
+             if w.end is not None and w.y.size - w.end >= 16]
+    if not parts:
+        return None
+    n = 1 << int(math.ceil(math.log2(4 * max(p.size for p in parts))))
+    power = 0.0
+    for p in parts:
+        t = np.arange(p.size)
+        p = p - np.polyval(np.polyfit(t, p, 2), t)
+        power = power + np.abs(np.fft.rfft(p * np.hanning(p.size), n)) ** 2
+    f = np.fft.rfftfreq(n, 1 / fs)
+    low = int(np.searchsorted(f, 2 / EARLY_S))
+    return float(f[low + int(np.argmax(power[low:]))] / 1e3)

@@ -1,0 +1,137 @@
+"""
+MATLAB-``compare``-style comparison: fit ceiling of the true model, peak error, tables, JSON.
+
+Acceleration is noise-free here, so the true model simulates the clean induced pressure
+exactly and the only error is the pressure noise: the fit must equal its analytic ceiling.
+"""
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from sensor_comp.core.compensation.compare import compare, format_table
+from sensor_comp.core.compensation.filter import CompensationError
+from sensor_comp.core.identification.denoise import EmdDenoiser
+from sensor_comp.core.shots.detection import detect_shots, ShotError
+from sensor_comp.streams import G0, Recording
+
+FS = 100e3
+WN = 2 * np.pi * 8e3
+_B, A, _ = signal.cont2discrete(([14.0 * WN ** 2], [1, 0.2 * WN, WN ** 2]), 1 / FS)
+B = np.ravel(_B)[1:]
+SHOTS = ((0.05, 380.9, 1.504), (0.15, 180.4, 2.936), (0.25, 1006.0, 1.13),
+         (0.35, 2185.0, 0.942))
+
+
+def model(scale=1.0, name='true'):
+    return SimpleNamespace(fs=FS, inputs=('a_z',), b=np.atleast_2d(scale * B), a=A, nk=1,
+                           name=name)
+
+
+def make(sigma, seed=0):
+    n = round(0.45 * FS)
+    t = np.arange(n) / FS
+    az = np.zeros(n)
+    for onset, peak, width in SHOTS:
+        x = np.clip((t - onset) / (width / 1e3), 0, 1)
+        az += np.where((x > 0) & (x < 1), peak * G0 * np.sin(np.pi * x), 0.0)
+    induced = signal.lfilter(np.concatenate([[0.0], B]), A, az)
+    acc = np.zeros((3, n))
+    acc[2] = az
+    noise = np.random.default_rng(seed).standard_normal(n) * sigma
+    return Recording(fs=FS, t0_ns=0, pressure=induced + noise, acceleration=acc), induced
+
+
+def ceiling(y, sigma):
+    """Return the fit of a perfect simulation when y carries white noise of σ."""
+    ref = np.sqrt(sum(np.sum((w - w.mean()) ** 2) for w in y))
+    return 100 * (1 - sigma * np.sqrt(sum(w.size for w in y)) / ref)
+
+
+def test_true_model_fit_equals_the_noise_ceiling():
+    sigma = 3000.0
+    rec, _ = make(sigma)
+    shots = detect_shots(rec)
+    (result,) = compare([model()], rec, shots)
+    y = [s.measured for s in result.shots]
+    expected = ceiling(y, sigma)
+    assert 50 < expected < 95  # the noise matters, so the test can tell
+    # ‖noise‖ fluctuates by ~1/√(2N) relative; allow 4 of those on the error term.
+    n = sum(w.size for w in y)
+    assert result.fit_percent == pytest.approx(expected, abs=4 * (100 - expected) / np.sqrt(2 * n))
+    for shot in result.shots:
+        one = ceiling([shot.measured], sigma)
+        assert shot.fit_percent == pytest.approx(
+            one, abs=4 * (100 - one) / np.sqrt(2 * shot.measured.size))
+
+
+def test_peak_error_and_residual_of_a_scaled_model():
+    sigma = 100.0
+    rec, induced = make(sigma)
+    shots = detect_shots(rec)
+    true, scaled = compare([model(), model(0.9, 'scaled')], rec, shots)
+    assert scaled.label == 'scaled'
+    for t, s, shot in zip(true.shots, scaled.shots, shots):
+        peak = np.max(np.abs(induced[shot.window]))
+        noise = 100 * 5 * sigma / peak  # % of the peak that noise can move a peak
+        assert s.peak_error_percent == pytest.approx(-10.0, abs=noise)
+        assert s.peak_residual_percent == pytest.approx(10.0, abs=noise)
+        assert abs(t.peak_error_percent) < noise
+        assert t.peak_residual_percent < noise
+        assert s.peak_error_mpa == pytest.approx(s.model_peak_mpa - s.peak_mpa)
+        assert s.model_peak_mpa == pytest.approx(0.9 * t.model_peak_mpa)
+    assert scaled.fit_percent < true.fit_percent
+    assert scaled.peak_residual_percent == max(s.peak_residual_percent for s in scaled.shots)
+
+
+def test_to_dict_is_json_with_per_shot_numbers():
+    rec, _ = make(500.0)
+    shots = detect_shots(rec)
+    (result,) = compare(model(), rec, shots[:3])
+    data = json.loads(json.dumps(result.to_dict()))
+    assert data['fit_percent'] == pytest.approx(result.fit_percent)
+    assert data['peak_residual_percent'] == pytest.approx(result.peak_residual_percent)
+    assert [s['index'] for s in data['shots']] == [0, 1, 2]
+    assert data['n_samples'] == sum(s.n_samples for s in shots[:3])
+    assert data['shots'][1]['start_s'] == pytest.approx(shots[1].start_s)
+    assert 'windows' in data and data['denoised'] is False
+
+
+def test_format_table_has_one_row_per_shot_and_model_columns():
+    rec, _ = make(500.0)
+    shots = detect_shots(rec)
+    results = compare([model(), model(0.9)], rec, shots, labels=['ARX', 'OE'])
+    lines = format_table(results).splitlines()
+    assert 'ARX' in lines[0] and 'OE' in lines[0]
+    assert len(lines) == 3 + len(shots) + 2
+    last = lines[-1].split('|')
+    assert float(last[1].split()[0]) == pytest.approx(results[0].fit_percent, abs=0.01)
+    assert float(last[2].split()[-1]) == pytest.approx(results[1].peak_residual_percent,
+                                                       abs=0.01)
+
+
+def test_denoised_comparison_is_closer_to_the_true_model():
+    sigma = 3000.0
+    rec, _ = make(sigma)
+    shots = detect_shots(rec)
+    (plain,) = compare([model()], rec, shots)
+    denoiser = EmdDenoiser()
+    (denoised,) = compare([model()], rec, shots, denoise=denoiser)
+    assert denoised.denoised and len(denoiser.results) == len(shots)
+    assert denoised.fit_percent > plain.fit_percent + 5
+
+
+def test_bad_requests_are_refused():
+    rec, _ = make(500.0)
+    shots = detect_shots(rec)
+    other = model()
+    other.fs = 2 * FS
+    with pytest.raises(CompensationError, match='Hz'):
+        compare([other], rec, shots)
+    with pytest.raises(ShotError, match='labels'):
+        compare([model()], rec, shots, labels=['a', 'b'])
+    with pytest.raises(ShotError, match='no shots'):
+        compare([model()], rec, [])

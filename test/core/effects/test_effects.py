@@ -1,0 +1,269 @@
+"""
+The effect catalogue, its input channels and streaming trackers, on exact signals.
+
+Every check compares with a closed form: a Lagrange fractional delay with the analytically
+delayed sine, the high-pass with the matched first-order recursion, the leaky peak with its
+exponential decay, the line tracker with the line it is fed. Physical parameters are read
+from models built with known coefficients. Block-size invariance is checked against the
+whole signal at 1e-9 of its peak (float64 round-off of short recursions).
+"""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from sensor_comp.core.compensation.filter import CompensationFilter
+from sensor_comp.core.effects import (describe_effects, disturbance_trackers, EFFECTS,
+                                      EffectError, get_effect, ordered, Outcome)
+from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, mechanics_delay_s,
+                                           ModelSpec, ResidualView)
+from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
+from sensor_comp.core.shots.inputs import (fractional_delay, input_channels, InputError, mode_pair,
+                                           needs_rate, parse_channel)
+from sensor_comp.core.identification.model import load, Model
+from sensor_comp.streams import G0
+
+FS = 200e3
+REL = 1e-9
+IDS = ('amplifier_highpass', 'channel_delay', 'mains_hum', 'nonlinear_sensitivity',
+       'second_resonance', 'strain_sensitivity', 'transverse_sensitivity', 'zero_shift')
+CHANNELS = ('a_z', 'a_z_abs_a_z', 'da_z@mode=12.5,0.7', 'peak_a_z(tau_ms=3.0)',
+            'a_x@delay_us=12.5', 'a_z@highpass_ms=20.0@delay_us=3.7',
+            'a_y@mode=9.0,0.02@highpass_ms=5.0')
+
+
+def shocks(n: int, seed: int = 0) -> np.ndarray:
+    """Return half-sine shocks ``(3, n)``: 1 ms, 300–2000 g, alternating sign, plus noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / FS
+    acc = rng.standard_normal((3, n)) * 20.0
+    for k, onset in enumerate(np.arange(0.002, t[-1] - 0.002, 0.01)):
+        s = (t - onset) / 1e-3
+        pulse = np.where((s >= 0) & (s <= 1), np.sin(np.pi * np.clip(s, 0, 1)), 0.0)
+        acc[2] += (-1) ** k * rng.uniform(300, 2000) * G0 * pulse
+        acc[0] += 0.05 * rng.uniform(300, 2000) * G0 * pulse
+    return acc
+
+
+def in_blocks(names, acc, sizes):
+    state, out, start = {}, [], 0
+    for size in sizes:
+        out.append(input_channels(names, acc[:, start:start + size], state, fs=FS))
+        start += size
+    out.append(input_channels(names, acc[:, start:], state, fs=FS))
+    return np.concatenate(out, axis=1)
+
+
+def test_catalogue_lists_every_effect_with_its_description():
+    assert sorted(EFFECTS) == sorted(IDS)
+    for effect_id, effect in EFFECTS.items():
+        assert effect.id == effect_id
+        assert effect.title and len(effect.explanation) > 200 and effect.signature
+        assert effect.parameters and all(effect.parameters.values())
+    assert not EFFECTS['mains_hum'].acceleration_driven
+    assert sum(not e.acceleration_driven for e in EFFECTS.values()) == 1
+    text = describe_effects()
+    assert all(effect_id in text for effect_id in IDS)
+    assert [e.id for e in ordered(['zero_shift', 'channel_delay', 'zero_shift'])] == \
+        ['channel_delay', 'zero_shift']
+
+
+def test_evidence_reads_the_analysis_through_its_protocol_or_goes_without():
+    peak = SimpleNamespace(frequency_hz=20e3, prominence=30.0, model_resonance=False)
+    analysis = SimpleNamespace(
+        probes={}, spectrum=SimpleNamespace(peaks=[peak]),
+        segments=[SimpleNamespace(name='tail', energy_fraction=0.6, sample_fraction=0.3),
+                  SimpleNamespace(name='ringing', energy_fraction=0.2, sample_fraction=0.1)],
+        amplitude=SimpleNamespace(exponent=2.0), pretrigger_excess=3.0)
+    assert isinstance(analysis, ResidualView)
+    for effect in EFFECTS.values():
+        outcome = Outcome(score=0.25, parameters={}, statistic=1.0, p_value=0.01)
+        assert '25.0 %' in effect.evidence(None, outcome)
+        analysis.probes = {p.name: SimpleNamespace(fraction=0.37) for p in effect.probes}
+        text = effect.evidence(analysis, outcome)
+        assert '25.0 %' in text and text.endswith('.')
+        assert ('37 %' in text) == bool(effect.probes), (effect.id, text)
+
+
+def test_unknown_effect_names_the_known_ones():
+    with pytest.raises(EffectError, match='unknown effect .*channel_delay'):
+        get_effect('hammer_bounce')
+
+
+def test_extensions_change_the_structure_as_documented():
+    base = ModelSpec(nf=2, nb=2, nk=1, fs=FS, ringing_khz=5.0)
+    values = {'amplifier_highpass.tau_ms': 20.0, 'channel_delay.delay_us': 12.5,
+              'zero_shift.tau_ms': 50.0, 'second_resonance.freq_khz': 10.0,
+              'second_resonance.zeta': 0.02}
+    spec = get_effect('second_resonance').extend(base)
+    assert (spec.nf, spec.nb) == (2, 4)
+    assert spec.channels(values) == ('a_z@mode=10.0,0.02',)
+    assert not any(4.2 < f < 6.0 for f in spec.searches[0].points())
+    spec = get_effect('channel_delay').extend(base)
+    assert (spec.nk, spec.nb, spec.channels(values)) == (0, 3, ('a_z@delay_us=12.5',))
+    spec = get_effect('transverse_sensitivity').extend(get_effect('zero_shift').extend(base))
+    assert spec.channels(values) == ('a_z', 'peak_a_z(tau_ms=50.0)', 'a_x', 'a_y')
+    spec = get_effect('amplifier_highpass').extend(get_effect('nonlinear_sensitivity')
+                                                   .extend(base))
+    assert spec.channels(values) == ('a_z@highpass_ms=20.0', 'a_z_abs_a_z@highpass_ms=20.0')
+    assert get_effect('mains_hum').extend(base).disturbances == ('mains_hum',)
+    spec = get_effect('strain_sensitivity').extend(base)
+    assert (spec.nk, spec.nb) == (0, 3)
+    assert spec.channels(values) == ('a_z', 'da_z@mode=20.0,0.7')
+    with pytest.raises(EffectError, match='needs the value'):
+        get_effect('zero_shift').extend(base).channels({})
+
+
+@pytest.mark.parametrize('sizes', [[1, 2, 3, 5, 8, 13] * 40, [999, 1, 4000, 17]])
+def test_channels_are_block_size_invariant(sizes):
+    acc = shocks(12_000)
+    whole = input_channels(CHANNELS, acc, {}, fs=FS)
+    blocks = in_blocks(CHANNELS, acc, sizes)
+    scale = np.max(np.abs(whole), axis=1, keepdims=True)
+    assert np.all(np.abs(blocks - whole) <= REL * scale)
+    assert needs_rate(CHANNELS[2:]) and not needs_rate(CHANNELS[:2])
+
+
+def test_fractional_delay_matches_the_delayed_sine():
+    t = np.arange(4000) / FS
+    for delay_us in (0.0, 1.7, 12.5, 48.2):
+        for f in (500.0, 5e3, 10e3):
+            delayed = input_channels([f'a_z@delay_us={delay_us!r}'],
+                                     np.vstack([0 * t, 0 * t, np.sin(2 * np.pi * f * t)]),
+                                     {}, fs=FS)[0]
+            truth = np.sin(2 * np.pi * f * (t - delay_us * 1e-6))
+            taps = fractional_delay(delay_us * 1e-6 * FS)
+            d = delay_us * 1e-6 * FS - (taps.size - 8)  # the delay within the 8 taps
+            # Lagrange remainder ∏|d − j| (2πf/fs)^8 / 8!, plus round-off.
+            bound = np.prod(np.abs(d - np.arange(8))) * (2 * np.pi * f / FS) ** 8 / \
+                math.factorial(8) + 1e-13
+            assert np.max(np.abs(delayed - truth)[100:]) < bound
+    taps = fractional_delay(12.5 * 1e-6 * FS)
+    assert taps.sum() == pytest.approx(1.0, abs=1e-12)
+
+
+def test_highpass_leaky_peak_and_mode_follow_their_closed_forms():
+    n = 4000
+    step = np.zeros((3, n))
+    step[2, 100:] = 1.0
+    hp, peak, mode = input_channels(['a_z@highpass_ms=2.0', 'peak_a_z(tau_ms=1.0)',
+                                     'a_z@mode=10.0,0.05'], step, {}, fs=FS)
+    k = np.arange(n - 100)
+    pole = math.exp(-1e3 / (2.0 * FS))
+    assert np.allclose(hp[100:], 0.5 * (1 + pole) * pole ** k, rtol=0, atol=1e-12)
+    assert np.allclose(peak[100:], 1.0)  # a step is its own peak
+    assert mode[-1] == pytest.approx(1.0, abs=1e-9)  # unit gain at DC
+    impulse = np.zeros((3, n))
+    impulse[2, 10] = -5.0
+    peak = input_channels(['peak_a_z(tau_ms=1.0)'], impulse, {}, fs=FS)[0]
+    assert np.allclose(peak[10:], 5.0 * np.exp(-np.arange(n - 10) / (1e-3 * FS)))
+    assert np.all(peak[:10] == 0)
+
+
+def test_channels_restart_from_rest_after_missing_samples():
+    acc = shocks(3000)
+    gap = acc.copy()
+    gap[:, 1000:1010] = np.nan
+    names = ['peak_a_z(tau_ms=5.0)', 'a_z@delay_us=20.0', 'a_z@highpass_ms=3.0']
+    out = input_channels(names, gap, {}, fs=FS)
+    assert np.all(np.isnan(out[:, 1000:1010]))
+    fresh = input_channels(names, acc[:, 1010:], {}, fs=FS)
+    assert np.allclose(out[:, 1010:], fresh, rtol=0, atol=1e-9 * np.max(np.abs(fresh)))
+
+
+@pytest.mark.parametrize('name, message', [
+    ('a_w', 'unknown model input'), ('a_z@delay_us=-1', 'delay_us'),
+    ('a_z@speed=3', 'unknown modifier'), ('peak_a_z(tau_ms=0)', 'tau_ms'),
+    ('a_z@mode=5.0', 'kHz,damping'), ('a_z@mode=5.0,1.5', 'below 1'),
+    ('a_z@highpass_ms=nan', 'highpass_ms')])
+def test_bad_channel_names_say_what_is_wrong(name, message):
+    with pytest.raises(InputError, match=message):
+        parse_channel(name)
+
+
+def test_line_tracker_settles_on_a_stationary_line_in_any_blocks():
+    fs = 20e3
+    n = int(2.0 * fs)
+    t = np.arange(n) / fs
+    hum = 800 * np.sin(2 * np.pi * 50 * t + 0.3) + 240 * np.cos(2 * np.pi * 150 * t - 1.0)
+    x = hum + np.random.default_rng(2).standard_normal(n) * 300
+    whole = LineTracker([50.0, 150.0, 250.0], fs=fs)(x)
+    settled = slice(int(1.0 * fs), None)  # ten averaging times
+    assert np.std((whole - hum)[settled]) < 0.05 * np.std(hum)
+    tracker, parts, start = LineTracker([50.0, 150.0, 250.0], fs=fs), [], 0
+    for size in [1, 7, 333, 4096] * 100:
+        parts.append(tracker(x[start:start + size]))
+        start += size
+    parts.append(tracker(x[start:]))
+    assert np.allclose(np.concatenate(parts), whole, rtol=0, atol=REL * np.max(np.abs(hum)))
+
+
+def test_line_columns_run_on_in_recording_time():
+    whole = line_columns(60.0, start=0, n=3000, fs=FS, baseline=0)
+    part = line_columns(60.0, start=1234, n=500, fs=FS, baseline=0)
+    assert np.allclose(part, whole[:, 1234:1734], atol=1e-12)
+    assert line_columns(50.0, start=77, n=400, fs=FS, baseline=100)[:, :100].mean(
+        axis=1) == pytest.approx(np.zeros(6), abs=1e-12)
+
+
+def _model(inputs, b, a=(1.0, -1.9, 0.91), nk=1, effects=()):
+    return Model(fs=FS, structure='oe', inputs=tuple(inputs), b=np.atleast_2d(b), a=a, nk=nk,
+                 effects=effects)
+
+
+def test_physical_parameters_from_known_coefficients():
+    b = np.array([[0.006, 0.004], [-3e-4 / G0 * 0.006, -3e-4 / G0 * 0.004],
+                  [0.2 * 0.006, 0.2 * 0.004], [-0.1 * 0.006, -0.1 * 0.004]])
+    model = _model(['a_z', 'a_z_abs_a_z', 'a_x', 'a_y'], b)
+    beta, = get_effect('nonlinear_sensitivity').physical(model).values()
+    assert beta[0] == pytest.approx(-3e-4, rel=1e-9) and beta[1] is None
+    ratio, angle = get_effect('transverse_sensitivity').physical(model).values()
+    assert ratio[0] == pytest.approx(math.hypot(0.2, 0.1), rel=1e-9)
+    assert angle[0] == pytest.approx(math.degrees(math.atan2(-0.1, 0.2)), rel=1e-9)
+    covariance = np.diag(np.full(2 + b.size, 1e-14))
+    assert get_effect('nonlinear_sensitivity').physical(
+        model, covariance=covariance)['beta_per_g'][1] > 0
+    with pytest.raises(EffectError, match='no a_abs_a input'):
+        get_effect('nonlinear_sensitivity').physical(_model(['a_z'], b[:1]))
+
+
+def test_delays_are_read_from_the_dc_group_delay():
+    a = mode_pair(5.0, 0.05, FS)
+    wn = 2e4 * math.pi
+    num, den, _ = signal.cont2discrete(([1.0], [1, 2 * 0.05 * wn, wn ** 2]), 1 / FS,
+                                       method='foh')
+    num = np.ravel(num)
+    # A sampled all-pole system with a linearly interpolated input lags like the continuous
+    # one (to the round-off of a polynomial with poles near 1).
+    assert dc_delay_s(np.ravel(den), num, FS) == pytest.approx(
+        mechanics_delay_s(np.ravel(den), FS), rel=1e-4)
+    assert mechanics_delay_s(a, FS) == pytest.approx(2 * 0.05 / (1e4 * math.pi), rel=1e-6)
+    delayed = _model(['a_z@delay_us=25.0'], num, a=np.ravel(den), nk=0)
+    assert get_effect('channel_delay').physical(delayed)['delay_us'][0] == pytest.approx(
+        25.0, rel=1e-4)
+    entry = effect_entry(get_effect('zero_shift'), {'pa_per_g': (3.0, 0.1),
+                                                    'tau_ms': (40.0, None)})
+    zero = _model(['a_z', 'peak_a_z(tau_ms=40.0)'], [[1.0, 1.0], [2.0, 3.0]],
+                  effects=[entry])
+    physical = get_effect('zero_shift').physical(zero)
+    assert physical['pa_per_g'][0] == pytest.approx(5.0 / 0.01 * G0)
+    assert physical['tau_ms'] == (40.0, None)
+
+
+def test_model_file_with_effects_compensates_alike_after_loading(tmp_path):
+    entry = effect_entry(get_effect('mains_hum'), {'freq_hz': (60.0, 0.0),
+                                                   'amplitude_pa': (500.0, 5.0)})
+    model = _model(['a_z@delay_us=7.5', 'peak_a_z(tau_ms=20.0)@delay_us=7.5'],
+                   [[0.006, 0.004], [0.1, 0.2]], effects=[entry])
+    model.save(tmp_path / 'model.json')
+    again = load(tmp_path / 'model.json')
+    assert again.inputs == model.inputs and again.effects == model.effects
+    [tracker] = disturbance_trackers(again.effects, fs=FS)
+    assert tracker.freqs_hz == (60.0, 180.0, 300.0)
+    acc, pressure = shocks(5000), np.random.default_rng(1).standard_normal(5000)
+    first = CompensationFilter.from_model(model).process(acc, pressure)
+    second = CompensationFilter.from_model(again).process(acc, pressure)
+    assert np.array_equal(first[0], second[0]) and np.array_equal(first[1], second[1])
