@@ -1,67 +1,10 @@
 """
 Compensation of the acceleration-induced pressure: subtract the model's response.
 
-The model (``Model`` from identification, or plain arrays) is the discrete transfer function
-from each input channel ``u_i`` (see :mod:`sensor_comp.core.shots.inputs`) to the induced
-pressure::
-
-    induced = Σ_i B_i(q) q^-nk / A(q) · u_i        compensated = raw − induced
-
-with ``A = [1, a1, ..., ana]`` and ``B_i`` the row ``i`` of ``b`` (first coefficient at lag
-``nk``). :class:`CompensationFilter` runs it block by block: the filter state (``lfilter``'s
-``zi``, one per input channel, plus the input-channel state) is carried from block to
-block, so any split of a signal into blocks, down to single samples, gives the output of the
-whole signal filtered at once.
-
-Stability is checked when the filter is built: a pole on or outside the unit circle makes
-the induced estimate grow without bound from any disturbance, so such a model is rejected
-with :class:`UnstableModelError` naming the pole magnitude (re-identify it, e.g. with an
-output-error structure or a lower order).
-
-Invalid samples never poison the state. A non-finite input sample (NaN: a stream gap; Inf:
-an overflowed or corrupted sample) gives NaN output and restarts the filter from rest after
-it, as at the start of a stream; so does an output that overflows (a corrupted block of
-~1e300 values), which would otherwise leave an infinite state and NaN output for ever. A
-non-finite raw pressure sample gives a NaN compensated sample (the filter is not
-involved). Rest, not the steady state of the first valid sample, is the restart: the state
-after missing data is unknown, and from rest the output after a gap is exactly the
-compensation of the data after the gap as a recording of its own (the convention of the
-stream start and of every identification window). The restart transient is the model's
-response to the acceleration's mean (from rest) or to one sample's noise (from that
-sample's steady state): on the simulated rig at 1 MS/s, in a quiet stretch, it peaks at
-0.02 pressure-noise σ from rest against 0.29 σ from the steady state; rest stays the
-smaller up to an acceleration offset of about 1 g (0.22 σ) and grows with it (2.1 σ at
-10 g, where a DC-coupled accelerometer's offset would call for the steady state).
-
-Model changes (:meth:`CompensationFilter.take_over`): a new model's filter starts with the
-state it would have had, had it run on the same input all along: it filters the recent
-input history (since the latest restart, at most :meth:`~CompensationFilter.memory`
-samples, after which the slowest pole's free response has decayed to 1e-9). The output then
-changes by the change of the induced estimate only, with no start-up transient.
-
-Models with catalogued effects (:mod:`sensor_comp.core.effects`) need nothing more for the
-acceleration-driven ones: their channels (``a_z·|a_z|``, delays, the amplifier high-pass,
-a shot-triggered offset...) are named, with their parameters, in the model's inputs, and
-computed here with their own carried state. Disturbances that the acceleration does not
-drive (mains hum) cannot be predicted from it, and their phase in a new recording is
-unknown: they are *estimated* from the compensated pressure itself and removed too.
-``induced`` stays the acceleration-driven part; ``compensated`` has the disturbance
-estimate removed as well. Two estimators:
-
-- offline, a whole recording at hand (:func:`compensate_recording`, ``sensor-comp
-  compensate`` in two passes): :class:`RecordingDisturbances` fits each disturbance by
-  least squares on the whole recording's residual with the regressors the identification
-  and the diagnosis use, so it is removed from the first sample on, as the diagnosis
-  credits it, however short the recording, down to the limit
-  :func:`disturbance_removal_warnings` states (for mains hum about half a period of the
-  line), below which it is left in with a :class:`DisturbanceWarning`;
-- live (:class:`CompensationFilter` as built by :meth:`~CompensationFilter.from_model`),
-  streaming trackers (:class:`~sensor_comp.core.effects.mains_hum.LineTracker`, whose
-  documentation says when that is not sound: during its settling time, about 0.5 s, after
-  the start of a stream or a gap, a drifting mains frequency, intermittent pickup).
-
-An effect id this version does not know is refused (:class:`CompensationError`): it may
-be a disturbance that compensation would silently leave in.
+``induced = Σ_i B_i(q) q^-nk / A(q) · u_i``, ``compensated = raw − induced``, run block by
+block with the state carried (any split gives the whole-signal output), restarted from rest
+after non-finite samples; disturbances (mains hum) are estimated and removed too. Design,
+restart transients and the disturbance rule: ``doc/compensation.md``.
 """
 
 from __future__ import annotations
@@ -123,18 +66,17 @@ class CompensationFilter:
     Streaming induced-pressure filter with state carried across blocks.
 
     Args:
-        b: ``(n_inputs, nb)`` numerators; ``b[i, 0]`` multiplies ``q^-nk``. A 1-D array is
-            one input.
+        b: ``(n_inputs, nb)`` numerators (or 1-D for one input); ``b[i, 0]`` multiplies
+            ``q^-nk``.
         a: Denominator ``[a0, a1, ..., ana]``, ``a0 ≠ 0`` (normalised to 1).
         nk: Input delay in samples.
-        inputs: One input name per row of ``b`` (see :mod:`sensor_comp.core.shots.inputs`).
+        inputs: One input name per row of ``b``.
         fs: Sample rate in Hz; needed by derivative inputs.
-        disturbances: Streaming disturbance estimators (``tracker(residual) -> estimate``
-            with ``reset()``), e.g. from :func:`~sensor_comp.core.effects.
-            disturbance_trackers`; their estimate is removed from the compensated pressure.
+        disturbances: Streaming disturbance trackers (``tracker(residual)``, ``reset()``),
+            whose estimate is removed from the compensated pressure.
 
     Raises:
-        CompensationError: On shapes that do not match or non-finite coefficients.
+        CompensationError: On mismatched shapes or non-finite coefficients.
         UnstableModelError: When a pole has magnitude ≥ 1.
         InputError: On an unknown input name or a derivative input without ``fs``.
 
@@ -183,11 +125,7 @@ class CompensationFilter:
     @classmethod
     def from_model(cls, model: LinearModel, *, trackers: bool = True) -> CompensationFilter:
         """
-        Build the filter of ``model`` (anything with ``b``, ``a``, ``nk``, ``inputs``, ``fs``).
-
-        The trackers of the model's disturbance effects (its ``effects`` entries, when it
-        has them) come along, unless ``trackers`` is False (offline compensation, which
-        fits the disturbances on the whole recording: :class:`RecordingDisturbances`).
+        Build the filter of ``model``, with its disturbance trackers unless ``trackers`` is False.
 
         Raises:
             UnstableModelError: When the model has a pole of magnitude ≥ 1.
@@ -212,19 +150,10 @@ class CompensationFilter:
 
     def memory(self, *, tolerance: float = STATE_TOLERANCE) -> int:
         """
-        Return how many past input samples fix the filter's state to ``tolerance``.
+        Return how many past input samples fix the filter's state to ``tolerance`` (relative).
 
-        The state after filtering only the last ``n`` samples of a history (from rest)
-        differs from the state after the whole history by the free response to what came
-        before, which decays as ``r^n`` with ``r`` the slowest pole radius; the input stages
-        (derivative, delay taps, high-pass, extra mode, peak detector) add their own memory
-        in series.
-
-        Args:
-            tolerance: Relative size of the neglected free response (0 < tolerance < 1).
-
-        Returns:
-            The number of samples (at least the filter order).
+        The neglected free response decays as ``r^n`` (slowest pole ``r``); input stages add
+        their own memory in series. At least the filter order.
 
         """
         stages = []
@@ -255,20 +184,13 @@ class CompensationFilter:
         """
         Start this filter mid-stream as if it had been running on the stream all along.
 
-        A model change then changes the output by the change of the induced estimate only:
-        a filter started from rest would add its start-up transient, up to the size of the
-        induced pressure in the middle of a shot. The state comes from filtering
-        ``history`` from rest (exact when the history reaches back to the stream start or
-        the latest restart, else within :meth:`memory`'s tolerance when it is at least that
-        long). Disturbance trackers of the same type and settings as one of ``previous``'s
-        take over that tracker with its state (they estimate pickup in the compensated
-        pressure, which a model change barely moves at the line frequencies); the others
-        start afresh and settle as after a gap.
+        The state comes from filtering ``history`` from rest, so a model change moves the output
+        by the change of the induced estimate only; trackers matching one of ``previous``'s take
+        it over with its state (``doc/compensation.md``).
 
         Args:
-            history: ``(3, n)`` acceleration in m/s² just before the next block (``n`` may
-                be 0: from rest).
-            previous: The filter being replaced, whose trackers may carry over.
+            history: ``(3, n)`` acceleration in m/s² just before the next block (``n`` may be 0).
+            previous: The filter being replaced.
 
         """
         self.reset()
@@ -288,17 +210,9 @@ class CompensationFilter:
 
     def filter_inputs(self, u: np.ndarray) -> np.ndarray:
         """
-        Return the induced pressure for input rows ``u``, continuing from the current state.
+        Return the induced pressure (Pa) for input rows ``u`` ``(n_inputs, w)``, continuing.
 
-        A sample where any input is non-finite gives NaN, and the filter restarts from rest
-        after it (and after an output sample that overflows), as at the start of a stream:
-        splitting ``u`` into blocks anywhere gives the same output.
-
-        Args:
-            u: ``(n_inputs, w)`` model input channels.
-
-        Returns:
-            ``(w,)`` induced pressure in Pa; NaN where any input is non-finite.
+        Non-finite input samples give NaN and restart the filter from rest after them.
 
         Raises:
             CompensationError: When ``u`` does not have one row per input.
@@ -362,13 +276,7 @@ class CompensationFilter:
 
     def induced(self, acceleration: np.ndarray) -> np.ndarray:
         """
-        Return the induced pressure (Pa) for an acceleration block, continuing the state.
-
-        Args:
-            acceleration: ``(3, w)`` block in m/s², rows x, y, z.
-
-        Returns:
-            ``(w,)`` induced pressure in Pa.
+        Return the induced pressure (Pa) for a ``(3, w)`` acceleration block, continuing.
 
         Raises:
             InputError: When the block is not ``(3, w)``.
@@ -386,13 +294,12 @@ class CompensationFilter:
         Compensate one block of raw pressure.
 
         Args:
-            acceleration: ``(3, w)`` block in m/s², rows x, y, z.
-            pressure: ``(w,)`` raw pressure in Pa (a ``(1, w)`` block is accepted).
+            acceleration: ``(3, w)`` block in m/s².
+            pressure: ``(w,)`` (or ``(1, w)``) raw pressure in Pa.
 
         Returns:
-            ``(compensated, induced)``, both ``(w,)`` in Pa; ``compensated`` has the
-            disturbance estimates removed too, and is NaN wherever it is not finite (a
-            non-finite raw sample or input).
+            ``(compensated, induced)`` in Pa; ``compensated`` has disturbances removed and is NaN
+            wherever not finite.
 
         Raises:
             CompensationError: When the blocks do not have the same number of samples.
@@ -433,18 +340,11 @@ def _same_settings(a, b) -> bool:
 def compensate_recording(model: LinearModel,
                          recording: Recording) -> tuple[np.ndarray, np.ndarray]:
     """
-    Compensate a whole recording offline, from rest at its first sample.
+    Compensate a whole recording offline, from rest, disturbances fitted on all of it.
 
-    The acceleration is used as recorded (no offset removed): a constant acceleration offset
-    becomes a constant pressure offset through the model's static gain. The model's
-    disturbances (mains hum) are fitted on the whole recording's residual and removed
-    (:class:`RecordingDisturbances`), as the diagnosis credits them: no tracker has to
-    settle first. One that the recording is too short for is left in, with a
-    :class:`DisturbanceWarning` saying so.
-
-    Args:
-        model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``, optional ``effects``).
-        recording: Pressure and acceleration.
+    The acceleration is used as recorded (an offset becomes a pressure offset through the
+    static gain); a disturbance the recording is too short for is left in with a
+    :class:`DisturbanceWarning`.
 
     Returns:
         ``(compensated, induced)`` pressure in Pa, ``(N,)`` each.
@@ -535,22 +435,11 @@ def _warning(effect: Effect, choice: Mapping, samples: int, fs: float,
 def disturbance_removal_warnings(entries: Iterable[Mapping], *, samples: int,
                                  fs: float) -> list[str]:
     """
-    Return why each disturbance of a model cannot be removed from a recording this short.
+    Return why each disturbance of a model cannot be removed from ``samples`` samples.
 
-    The rule of offline compensation (:class:`RecordingDisturbances`) for a recording of
-    ``samples`` consecutive samples: a disturbance is fitted with the effect's own
-    regressors next to the pressure offset, and left in when the recording is too short to
-    tell the two apart (mean variance inflation above :data:`MAX_INFLATION`; for mains hum,
-    a recording shorter than about 0.55 of a period of the line: 9 ms at 60 Hz, 11 ms at
-    50 Hz). The diagnosis calls it to say so for the recording it scores on.
-
-    Args:
-        entries: The model's ``effects`` entries (acceleration-driven ones are ignored).
-        samples: Length of the recording.
-        fs: Sample rate in Hz.
-
-    Returns:
-        One sentence per disturbance that would be left in; empty when all can be removed.
+    Left in when its variance inflation against the pressure offset exceeds
+    :data:`MAX_INFLATION` (mains hum: below ~0.55 line period). Acceleration-driven entries
+    are ignored; empty when all can be removed.
 
     """
     out = []
@@ -569,25 +458,11 @@ class RecordingDisturbances:
     """
     A model's disturbances in one recording, fitted by least squares on its whole residual.
 
-    Offline compensation needs no tracker that settles: the residual (raw minus induced
-    pressure) of the whole recording is regressed on the effects' own regressors (those
-    the identification fits and the diagnosis scores with: :meth:`Effect.columns
-    <sensor_comp.core.effects.base.Effect.columns>`, in recording time) plus a constant
-    for the pressure offset, which is not removed. Stationary disturbances (one amplitude
-    and phase per recording) are then removed from the first sample on. In blocks: a first
-    pass :meth:`add` s every block's residual, :meth:`solve` fits, a second pass subtracts
-    ``self(start, n)`` (what :func:`~sensor_comp.core.compensation.streaming.fit_disturbances` and
-    :class:`~sensor_comp.core.compensation.streaming.BlockCompensator` do); either way the result
-    equals that of one call. A disturbance the recording is too short for is left in (see
-    :func:`disturbance_removal_warnings`).
-
-    Args:
-        entries: The model's ``effects`` entries.
-        fs: Sample rate in Hz.
+    Two passes: :meth:`add` every block's residual, :meth:`solve`, then subtract
+    ``self(start, n)`` (``doc/compensation.md``).
 
     Attributes:
-        coefficients: The fitted coefficients (zero for a disturbance left in), after
-            :meth:`solve`.
+        coefficients: Fitted coefficients (zero for one left in), after :meth:`solve`.
         warnings: What :meth:`solve` could not remove, as sentences.
         samples: Finite residual samples added.
 
@@ -614,14 +489,7 @@ class RecordingDisturbances:
         return cls(entries, fs=model.fs) if _disturbances(entries) else None
 
     def add(self, residual: np.ndarray, start: int) -> None:
-        """
-        Add the residual of samples ``start ...`` of the recording (non-finite ones skipped).
-
-        Args:
-            residual: ``(w,)`` raw minus induced pressure, Pa.
-            start: Recording sample index of its first sample.
-
-        """
+        """Add the residual (Pa) of recording samples ``start ...`` (non-finite ones skipped)."""
         residual = np.asarray(residual, dtype=np.float64)
         for offset in range(0, residual.size, _CHUNK):
             r = residual[offset:offset + _CHUNK]
@@ -640,13 +508,7 @@ class RecordingDisturbances:
                           max(self._span[1], start + offset + where[-1])]
 
     def solve(self) -> list[str]:
-        """
-        Fit the coefficients on the residual added; return what cannot be removed.
-
-        Returns:
-            :attr:`warnings`: one sentence per disturbance left in (too short a recording).
-
-        """
+        """Fit the coefficients; return :attr:`warnings` (one sentence per disturbance left in)."""
         k = self._rhs.size - 1
         keep = np.zeros(k, dtype=bool)
         self.warnings = []
@@ -695,21 +557,14 @@ def window_disturbances(model, starts: Sequence[int], baselines: Sequence[int],
     """
     Return the model's disturbances in shot windows of one recording, as the diagnosis does.
 
-    Least squares of the windows' residual (measured minus simulated, baselines removed)
-    on the effects' regressors with each window's pre-trigger mean removed, all windows of
-    the recording together: what :meth:`ExtendedFit.predict
-    <sensor_comp.core.identification.extended.ExtendedFit.predict>` adds to the induced pressure
-    when the diagnosis scores an effect. A comparison that adds it credits the model with the
-    disturbance removal that compensation performs.
+    Least squares on the windows' residuals (measured minus simulated, Pa) with each window's
+    pre-trigger mean removed; zeros without disturbance effects.
 
     Args:
         model: The model (``fs`` and ``effects``).
         starts: Recording sample index of each window's first sample.
-        baselines: Pre-trigger samples of each window (whose mean was removed).
-        residuals: Each window's measured minus simulated pressure, Pa.
-
-    Returns:
-        The disturbance estimate per window (zeros without disturbance effects).
+        baselines: Pre-trigger samples of each window.
+        residuals: Each window's residual.
 
     """
     parts = _disturbances(getattr(model, 'effects', ()))
@@ -730,14 +585,7 @@ def peak_residual_percent(raw: np.ndarray, compensated: np.ndarray) -> float:
     """
     Return peak ``|compensated|`` as a percentage of peak ``|raw|`` (baselines removed).
 
-    This is the seed paper's figure of merit (0.016 of 0.1402 MPa, < 11 %).
-
-    Args:
-        raw: Raw pressure in one shot window, pre-trigger baseline removed.
-        compensated: Compensated pressure in the same window, baseline removed.
-
-    Returns:
-        The percentage.
+    The seed paper's figure of merit (0.016 of 0.1402 MPa, < 11 %).
 
     Raises:
         CompensationError: When the raw window has no non-zero finite sample.
@@ -753,18 +601,7 @@ def peak_residual_percent(raw: np.ndarray, compensated: np.ndarray) -> float:
 def shot_residuals(shots: Sequence[Shot], raw: np.ndarray,
                    compensated: np.ndarray) -> np.ndarray:
     """
-    Return the peak residual percentage of every shot window.
-
-    Each window's pre-trigger mean is removed from the raw and the compensated pressure
-    before the peaks are taken.
-
-    Args:
-        shots: Shots with their windows.
-        raw: ``(N,)`` raw pressure of the recording in Pa.
-        compensated: ``(N,)`` compensated pressure in Pa.
-
-    Returns:
-        ``(len(shots),)`` percentages.
+    Return the peak residual percentage of every shot window (pre-trigger means removed).
 
     Raises:
         CompensationError: When a window lies outside the arrays or holds no raw peak.

@@ -1,45 +1,11 @@
 """
 Live block streams: pair pressure and acceleration blocks, compensate them, keep count.
 
-Blocks of one DAQ carry the same stamp on the pressure and acceleration topics but may
-arrive in either order. :class:`BlockPairer` pairs them by stamp, checks that consecutive
-pairs follow each other, and accounts for every sample:
-
-- a pair that starts where the previous one ended is passed on;
-- a pair that starts later is passed on with the number of samples missing before it (a
-  stamp gap, counted in ``gaps``);
-- a pair that starts before the previous one ended (out of order, overlapping, sent twice)
-  is dropped and its samples counted as ``overlapping``;
-- a pair whose two blocks differ in width is dropped (``mismatched``), and a block whose
-  partner never comes is given up as ``unpaired`` once it can no longer come: when the
-  other topic has delivered a later stamp (each topic arrives in order; the two topics
-  are delivered independently, and under load one ran seconds of data ahead of the
-  other), or at :meth:`~BlockPairer.flush` (end of stream). A partner that is merely late
-  still pairs, however many blocks wait for it. The safety net against a topic that
-  stopped for good is ``max_wait``: a block is given up when its own topic has run more
-  than that many seconds of data ahead of it (10 s: 80 MB of pressure or 240 MB of
-  acceleration waiting at 1 MS/s, about what the DDS queue of a node that far behind holds).
-
-Each of these events is one log line naming the topic, the stamp and the reason (when a
-``log`` function is given), so a live node says what it skipped and why. Consecutive
-unpaired blocks of one topic are one event: the first is logged at once, and a line with
-the count follows when the run ends (a dead publisher gives two lines, not one per block).
-:class:`BlockCompensator` runs the streaming
-:class:`~sensor_comp.core.compensation.filter.CompensationFilter` over the pairs in time order:
-a stamp gap restarts the filter from rest (the samples that would carry its state are
-missing), non-finite samples give NaN output (logged once per run of such blocks, counted
-as ``invalid_samples``), and a model change (:meth:`~BlockCompensator.set_filter`)
-computes the new filter's state from the recent input history, so that the output changes
-by the change of model only. The compensation node and ``sensor-comp compensate`` share it,
-and the identification node pairs its blocks with :class:`BlockPairer`.
-
-Offline, a whole recording at hand, the model's disturbances (mains hum) are fitted on the
-whole recording instead of tracked (no settling time): :func:`fit_recording_disturbances`
-runs a first pass over the raw blocks, and a :class:`BlockCompensator` given the result
-(``disturbances=``, with a filter built without trackers) subtracts it from every block in
-the second pass, at the block's sample index in recording time (from its stamp, so stamp
-gaps keep the phase). The output equals :func:`~sensor_comp.core.compensation.filter.
-compensate_recording` of the whole recording.
+:class:`BlockPairer` pairs blocks by stamp and accounts for every sample (gaps, overlaps,
+mismatched and unpaired blocks, one log line per event); :class:`BlockCompensator` runs the
+compensation filter over the pairs, restarting at gaps and taking over at model changes.
+Shared by the compensation node and ``sensor-comp compensate``; see
+``doc/compensation.md`` (live block streams).
 """
 
 from __future__ import annotations
@@ -78,8 +44,7 @@ class BlockPair:
         stamp_ns: Acquisition time of the blocks' first sample.
         pressure: ``(w,)`` raw pressure, Pa.
         acceleration: ``(3, w)`` acceleration, m/s².
-        missing: Samples missing between the previous pair and this one (a stamp gap); 0
-            when it follows on, or for the first pair.
+        missing: Samples missing before this pair (a stamp gap); 0 when it follows on.
 
     """
 
@@ -95,9 +60,9 @@ class CompensatedBlock:
     One compensated block.
 
     Attributes:
-        stamp_ns: Acquisition time of the block's first sample (the inputs' stamp).
+        stamp_ns: Acquisition time of the block's first sample.
         compensated: ``(w,)`` raw pressure minus the induced estimate, Pa.
-        induced: ``(w,)`` the model's estimate of the acceleration-induced pressure, Pa.
+        induced: ``(w,)`` the acceleration-induced pressure estimate, Pa.
 
     """
 
@@ -109,24 +74,17 @@ class CompensatedBlock:
 @dataclass
 class StreamCounters:
     """
-    Sample accounting of a :class:`BlockPairer` (and of the :class:`BlockCompensator` on it).
-
-    Every received sample ends up in exactly one place: ``pressure_samples == output_samples
-    + unpaired_pressure + overlapping`` (and the same for acceleration) once the pairer is
-    flushed.
+    Sample accounting: once flushed, ``received == output + unpaired + overlapping`` per topic.
 
     Attributes:
         pressure_samples: Raw pressure samples received.
         acceleration_samples: Acceleration samples (per axis) received.
-        output_samples: Samples passed on in pairs (compensated samples produced).
-        unpaired_pressure: Pressure blocks that never got an acceleration block (samples).
-        unpaired_acceleration: Acceleration blocks that never got a pressure block (samples).
-        mismatched: Pairs rejected because their widths differ (blocks; their samples are
-            counted as unpaired).
-        overlapping: Samples (per topic) of pairs dropped because they started before the
-            previous pair ended: out of order, overlapping or repeated.
-        gaps: Stamp gaps between consecutive pairs, as ``Gap(start, count)`` where
-            ``start`` counts output samples and ``count`` is the missing samples.
+        output_samples: Samples passed on in pairs.
+        unpaired_pressure: Pressure samples that never got a partner.
+        unpaired_acceleration: Acceleration samples that never got a partner.
+        mismatched: Pairs (blocks) rejected for differing widths (samples count as unpaired).
+        overlapping: Samples of pairs dropped for starting before the previous pair ended.
+        gaps: Stamp gaps as ``Gap(start, count)`` (``start`` in output samples).
         invalid_samples: Output samples that are NaN because an input was not finite.
         model_changes: How often the filter was replaced.
 
@@ -177,13 +135,9 @@ class BlockPairer:
     Pair pressure and acceleration blocks by stamp and check their continuity.
 
     Args:
-        fs: Sample rate in Hz (to know where the next pair should start; half a sample of
-            stamp error is tolerated).
-        max_wait: Seconds of data a block waits for its partner at most: once its own
-            topic has delivered a stamp that much later, it is given up as unpaired (a
-            safety net; see the module documentation).
-        log: Called with one line per event (gap, overlap, mismatch, run of unpaired
-            blocks).
+        fs: Sample rate in Hz.
+        max_wait: Seconds of data a block waits for its partner at most (safety net).
+        log: Called with one line per event.
         gap_note: What a stamp gap does to the consumer, appended to its log line.
         names: How the log lines name the pressure and the acceleration topics.
 
@@ -365,14 +319,11 @@ class BlockPairer:
 
 class NonFiniteRuns:
     """
-    Log runs of blocks holding non-finite samples: a line where a run starts, one where it ends.
-
-    One line per block would flood the log when a channel is dead; a run of consecutive
-    blocks with non-finite samples is one event.
+    Log runs of blocks holding non-finite samples: one line where a run starts and ends.
 
     Args:
         log: Called with each line.
-        where: The stream, as the lines name it (e.g. the topics).
+        where: The stream, as the lines name it.
         effect: What the non-finite samples do, for the line at the start of a run.
 
     """
@@ -403,18 +354,14 @@ class BlockCompensator:
     Pair blocks by stamp and compensate them, with state carried across blocks.
 
     Args:
-        compensation: The filter to run (its state continues across pairs).
-        fs: Sample rate in Hz (to know where the next block should start).
-        max_wait: Seconds of data a block waits for its partner at most (see
-            :class:`BlockPairer`).
-        log: Called with one line per event (see :class:`BlockPairer`, plus runs of
-            non-finite samples).
+        compensation: The filter to run.
+        fs: Sample rate in Hz.
+        max_wait: See :class:`BlockPairer`.
+        log: Called with one line per event.
         names: How the log lines name the pressure and the acceleration topics.
-        disturbances: Disturbances fitted on the whole recording (the second pass of
-            offline compensation), subtracted from every block; the filter must then have
-            no trackers of its own.
-        fitting: Disturbances to fit (the first pass): every block's residual is added
-            to it.
+        disturbances: Disturbances fitted on the whole recording (offline second pass),
+            subtracted from every block.
+        fitting: Disturbances to fit (offline first pass) from every block's residual.
 
     Attributes:
         counters: The sample accounting (:class:`StreamCounters`).
@@ -459,13 +406,7 @@ class BlockCompensator:
 
     def set_filter(self, compensation: CompensationFilter) -> int:
         """
-        Use a new filter from the next block on (a model update).
-
-        The new filter's state is the one it would have had, had it run on the stream all
-        along (:meth:`CompensationFilter.take_over` on the acceleration since the latest
-        restart, at most twice the current filter's :meth:`~CompensationFilter.memory`):
-        the output changes by the change of the induced estimate only, with no start-up
-        transient. No sample is dropped or repeated.
+        Use a new filter from the next block on, its state taken over from recent history.
 
         Returns:
             The number of history samples the new state was computed from.
@@ -558,20 +499,14 @@ def fit_recording_disturbances(model, blocks: Iterable[tuple[str, int, np.ndarra
     """
     Fit a model's disturbances on a whole recording: the first pass of offline compensation.
 
-    The raw blocks are paired and compensated as the second pass will (a filter without
-    trackers), and every block's residual goes into the fit. Blocks that cannot be paired
-    (wrong shape, no sample) are skipped: the second pass reports them.
-
     Args:
         model: The model (its ``effects`` name the disturbances).
-        blocks: ``(kind, stamp_ns, data)`` in stream order, ``kind`` being
-            :data:`~sensor_comp.streams.PRESSURE_RAW` or
-            :data:`~sensor_comp.streams.ACCELERATION`.
+        blocks: ``(kind, stamp_ns, data)`` in stream order (``PRESSURE_RAW`` or
+            ``ACCELERATION``); unpairable blocks are skipped.
         fs: Sample rate in Hz.
 
     Returns:
-        The fitted disturbances (:attr:`RecordingDisturbances.warnings` says what cannot be
-        removed), or None when the model has none.
+        The fitted disturbances, or None when the model has none.
 
     """
     disturbances = RecordingDisturbances.of(model)
