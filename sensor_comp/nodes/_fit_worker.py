@@ -1,14 +1,8 @@
 """
-The identification node's fits, run in a worker process.
+The identification node's fits, run in a worker process (no ROS imported here).
 
-A fit (EMD, the output-error search) and its diagnosis take seconds to minutes of Python
-and numpy. Run in a thread of the node, they held the GIL for long stretches and starved
-block reception (in the soak the node fell behind by 0.3-0.5 s per second of fit). They
-run in a :class:`sensor_comp.worker.Worker` instead: a fresh interpreter that never
-imports the user's ``__main__`` script, so a rig script needs no
-``if __name__ == '__main__':`` guard. What crosses the process boundary is picklable
-(numpy arrays, frozen dataclasses, option dicts), and errors of the core come back as
-text. This module imports no ROS.
+Fits held the GIL and starved block reception when run in a thread; a fresh interpreter
+per fit also returns its memory. Why and how much: ``doc/nodes.md`` (the fit worker).
 """
 
 from __future__ import annotations
@@ -34,11 +28,11 @@ class Fitted:
     What a fit in the worker gave.
 
     Attributes:
-        model: The identified model (provenance as :func:`identify` made it), or None.
+        model: The identified model, or None.
         error: Why the fit failed (the core's message), or None.
         roles: ``'calibration'`` or ``'validation'`` by shot index.
-        calibration: The shots fitted on (for the diagnosis).
-        validation: The shots reported on (for the diagnosis).
+        calibration: The shots fitted on.
+        validation: The shots reported on.
         pid: The worker process that fitted.
 
     """
@@ -67,15 +61,7 @@ class DiagnosisStatus:
 
 
 def start_worker() -> Worker:
-    """
-    Return a new worker process.
-
-    The node starts one for each fit and its diagnosis and retires it after them: a fit
-    allocates hundreds of MB (EMD, the search), and a long-lived interpreter keeps some of
-    it (the 10-minute soak measured its node plus worker growing by 4 MB/min with one
-    worker for every fit); a fresh interpreter costs about a second against fits of tens
-    of seconds.
-    """
+    """Return a new worker process (one per fit and its diagnosis, then retired)."""
     # EMD in this one process: helper processes would take the cores the node receives
     # blocks on.
     return Worker(name='fit worker', env={PROCESSES_ENV: '1'})
@@ -85,13 +71,8 @@ def fit_shots(recording: Recording, shots: tuple[Shot, ...], options: dict) -> F
     """
     Identify a model on ``shots`` of ``recording`` (what the node's fit does).
 
-    Args:
-        recording: The kept shot windows joined into one recording.
-        shots: The shots in it.
-        options: Keyword arguments of :func:`~sensor_comp.core.identification.identify.identify`.
-
-    Returns:
-        The model and the shots' roles, or the error of the core.
+    ``options`` are :func:`identify` keyword arguments; errors of the core come back in
+    :attr:`Fitted.error`.
 
     """
     try:

@@ -1,85 +1,20 @@
 """
 The ``compensation`` node: subtract the model's induced pressure from the live stream.
 
-Run it as ``compensation --ros-args -p model_file:=sensor.json`` (or
-``python -m sensor_comp.nodes.compensation``), or without a file: it then waits for the
-model the ``identification`` node publishes. It is the live form of ``sensor-comp
-compensate`` and gives the same samples: both run
-:class:`~sensor_comp.core.compensation.streaming.BlockCompensator` (blocks paired by stamp, filter
-state carried from block to block, a stamp gap or non-finite acceleration restarts the
-filter from rest, out-of-order and overlapping pairs are dropped).
+Run: ``compensation --ros-args -p model_file:=sensor.json``, or without a file to wait for
+the model the ``identification`` node publishes. The live form of ``sensor-comp
+compensate`` (same samples: both run ``BlockCompensator``). Subscribes to ``pressure/raw``,
+``acceleration``, ``stream_info`` and ``model``; publishes ``pressure/compensated``,
+``pressure/induced``, ``stream_info`` and ``/diagnostics`` (every sample accounted for).
+Models, held blocks, faults and the hot path: ``doc/nodes.md`` (compensation).
 
-Topics, relative to the node's namespace (default ``/rig``):
+Parameters (read once at start):
 
-- Subscribed: ``pressure/raw`` and ``acceleration`` (block streams, raw CDR, reliable
-  keep-all), ``stream_info`` (latched; gives the sample rate) and ``model``
-  (``std_msgs/msg/String`` holding a model file's JSON, latched: a node started after the
-  identification still gets the model).
-- Published: ``pressure/compensated`` (raw minus induced) and ``pressure/induced`` (the
-  model's estimate), Pa, one block per input block pair with the input's stamp and
-  ``frame_id`` (reliable, keep-all: a slow subscriber slows the node down rather than
-  losing blocks); ``stream_info`` (latched) describing those two streams; and
-  ``/diagnostics`` (status ``sensor_comp: compensation``) every ``diagnostics_period``:
-  samples in and out, blocks held, unpaired, overlapping, invalid (NaN output) and
-  unprocessed samples, stamp gaps, model changes, refused models, malformed messages.
-  Every received sample is accounted for: once the node has stopped, ``pressure_samples
-  = output_samples + unpaired_pressure_samples + overlapping_samples`` (and likewise for
-  acceleration), and samples dropped before a model came are ``unprocessed``.
-
-Parameters (read once at start; a bad value stops the node with a message naming it, a
-parameter it does not have is logged with the closest name it has):
-
-- ``model_file`` (default empty): a model file to start with (it must exist and load as a
-  model this node can run); a model arriving on ``model`` later replaces it.
-- ``max_pending_blocks`` (default 1000): while there is no model (or no ``stream_info``)
-  yet, this many blocks per input topic are held (2x as many messages in all, the oldest
-  dropped first); when the model comes they are compensated in order, from rest at the
-  first one, exactly as if the model had been there from the start. Dropped blocks are
-  counted as unprocessed on ``/diagnostics``. Memory: 32 bytes per sample of block width
-  per held pair (a 10 000-sample pair is 320 kB).
-- ``max_pairing_wait`` (s of data, default 10.0): the two topics are delivered
-  independently, and under load one ran seconds of data ahead of the other; a block waits
-  for its partner until the other topic has delivered a later stamp (its partner can no
-  longer come) or the node stops, however many blocks that takes. This is the safety net
-  against a topic that stopped: a block is given up as unpaired once its own topic has run
-  this much data ahead of it. Memory: at 1 MS/s, 10 s is 80 MB of pressure or 240 MB of
-  acceleration waiting.
-- ``diagnostics_period`` (s, default 1.0), ``ack_timeout`` (s, default 10.0: at exit, how
-  long to wait for subscribers to acknowledge the last blocks).
-
-Models: a model is used from the next block on (``BlockCompensator.set_filter``: no sample
-dropped or repeated), with the filter state it would have had, had it run on the stream
-all along (computed from the recent acceleration, see
-:meth:`~sensor_comp.core.compensation.filter.CompensationFilter.take_over`): the output changes
-by the change of the induced estimate only, with no start-up transient. A model is
-refused, with a logged error and the model in use kept, when its sample rate is not the
-stream's, when it is unstable, names an unknown input or effect, or when the message is
-not a model file (not JSON, another schema version...). The same model text received
-again changes nothing. A node (re)started while the identification runs gets the latched
-model and compensates from its first block on, from rest.
-
-Faults never stop the node; each is one log line naming the topic, the stamp and the
-reason, and is counted on ``/diagnostics``: a malformed message (not a ``64FC1``
-little-endian block, step or data size inconsistent, wrong number of rows for the topic,
-no sample) is skipped (``malformed_messages``); a pair of two widths, a block without
-partner (``unpaired``), an out-of-order or overlapping pair (``overlapping``) is dropped;
-a stamp gap restarts the filter from rest; non-finite samples give NaN output and restart
-the filter after non-finite acceleration (``invalid_samples``; one line where such a run
-of blocks starts and one where it ends); a bad ``stream_info`` or model is refused. On
-SIGINT/SIGTERM the node compensates what its subscriptions still hold, counts the blocks
-still without partner as unpaired, logs the accounting and waits for the subscribers'
-last acknowledgements.
-
-Hot path: raw subscriptions, :func:`~sensor_comp.io.messages.decode_block` (a zero-copy
-view of the CDR bytes), the streaming filter (``lfilter`` with carried state), pre-encoded
-CDR published raw; a callback also takes the messages already queued on both input
-subscriptions (up to 64, one of each in turn, so that pairs stay in step) without an
-executor round each. :meth:`Compensation.run` (the node's ``main``) waits on the two input
-subscriptions alone (:class:`~.transport.BlockWaitSet`, one wait set reused) and takes
-their messages itself; the executor runs one round every 10 ms for the timer, the
-``stream_info`` and ``model`` subscriptions and the parameter services (an executor round
-per message, which rebuilds its wait set from all of them, was half of the node's busy
-time at 1 000 block pairs/s).
+- ``model_file`` (empty): model to start with; a model on ``model`` replaces it.
+- ``max_pending_blocks`` (1000): blocks per topic held until a model and ``stream_info``.
+- ``max_pairing_wait`` (10.0 s of data): give a block up once its topic ran this far ahead.
+- ``diagnostics_period`` (1.0 s).
+- ``ack_timeout`` (10.0 s): at exit, wait this long for the last acknowledgements.
 """
 
 from __future__ import annotations
@@ -125,14 +60,10 @@ _BATCH = 64
 
 def model_from_text(text: str, *, where: str) -> Model:
     """
-    Read a model from the JSON text of a model file.
-
-    Args:
-        text: The JSON, as :meth:`Model.save` writes it or the ``model`` topic carries it.
-        where: Where it came from, for error messages (e.g. the topic name).
+    Read a model from the JSON text of a model file (``where``: its origin, for errors).
 
     Raises:
-        ModelError: If it is not a valid model (the message names ``where``).
+        ModelError: If it is not a valid model.
 
     """
     # Model files have one strict reader, core.model.load, which reads a path.
@@ -147,19 +78,17 @@ def model_from_text(text: str, *, where: str) -> Model:
 
 class Compensation(Node):
     """
-    Compensate the live pressure stream (see the module documentation for parameters).
+    Compensate the live pressure stream (parameters: module docstring).
 
     Spin it with any executor and destroy it when done, or call :meth:`run`.
 
     Args:
         node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
-            ``/rig``; ``context``; ``parameter_overrides``; ...).
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace`` default ``/rig``).
 
     Attributes:
         model: The model in use, or None.
-        compensator: The block compensator (None until a model and ``stream_info`` came);
-            its ``counters`` account for every sample.
+        compensator: The block compensator (None until a model and ``stream_info`` came).
         unprocessed: Samples per input topic dropped while waiting for a model.
         received: Input block messages received (held ones too; replays not counted).
         malformed: Messages skipped because they could not be decoded or paired.
@@ -423,13 +352,7 @@ class Compensation(Node):
                                               message=message, values=values))
 
     def run(self, stop: threading.Event) -> None:
-        """
-        Compensate until ``stop`` is set, then what had arrived; log the accounting.
-
-        Args:
-            stop: Set it (from a signal handler or another thread) to stop.
-
-        """
+        """Compensate until ``stop`` is set, then what had arrived; log the accounting."""
         blocks = BlockWaitSet(self, list(self._inputs.values()))
         with SingleThreadedExecutor(context=self.context) as executor:
             executor.add_node(self)

@@ -1,109 +1,29 @@
 """
 The ``identification`` node: detect shots in the live streams and fit the sensor model.
 
-Run it as ``identification --ros-args -p structure:=oe -p min_shots:=4`` (or
-``python -m sensor_comp.nodes.identification``). It does live what ``sensor-comp identify``
-does on a bag: find the shots on the axial acceleration, keep their windows, fit the model
-on alternate shots and report its fit on the others
-(:func:`~sensor_comp.core.identification.identify.identify`, validation as the core does it).
+Run: ``identification --ros-args -p structure:=oe -p min_shots:=4``. Live form of
+``sensor-comp identify``: subscribes to ``acceleration``, ``pressure/raw``, ``stream_info``;
+publishes ``model`` (latched model-file JSON) and ``/diagnostics``; service ``~/fit``
+(Trigger). Fits and diagnoses run in a worker process so reception never waits. Topics,
+memory bounds, faults and threads: ``doc/nodes.md`` (identification).
 
-Topics, relative to the node's namespace (default ``/rig``):
+Parameters (read once at start):
 
-- Subscribed: ``acceleration`` and ``pressure/raw`` (block streams, raw CDR, reliable
-  keep-all) and ``stream_info`` (latched: transient-local, reliable; the sample rate and
-  the sensor metadata such as the charge sensitivity come from it).
-- Published: ``model`` (``std_msgs/msg/String``, transient-local depth 1: a node started
-  later still gets the last model): the model as JSON, ``json.dumps(Model.to_json())``,
-  the content of a model file. ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``,
-  status ``sensor_comp: identification``): shots found and kept, and after a fit its
-  statistics (validation fit %, natural frequency, damping ratio, MPa/g, shot counts),
-  every ``diagnostics_period`` and after each shot and fit.
-- Service ``~/fit`` (``std_srvs/srv/Trigger``): fit now on the shots kept so far (at least
-  2: one to fit on, one to validate on); the answer is success with a one-line summary
-  of the fit, or failure with the reason (e.g. ``1 shot kept, need at least 2``).
-
-Parameters (read once at start; a bad value stops the node with a message naming it, a
-parameter it does not have is logged with the closest name it has):
-
-- ``structure`` (``auto``, ``arx``, ``armax``, ``gls``, ``oe``; default ``auto``),
-  ``orders`` (``[na, nb]``, default empty: the structure's default or the ``auto`` grid),
-  ``delay`` (samples, default -1: estimated), ``emd`` (bool, default true: EMD-denoise the
-  calibration windows), ``effects`` (string array, default empty: extra physical effects
-  to fit, ids of :data:`sensor_comp.core.effects.EFFECTS`, given to
-  ``identify(effects=...)``).
-- ``min_shots`` (default 4): fit automatically once this many shots are kept;
-  ``refit_shots`` (default 0 = never): fit again after this many more; ``max_shots``
-  (default 20): keep at most the latest this many shot windows.
-- ``threshold_g`` (g, default 0 = automatic per buffer: the larger of 5 % of the largest
-  peak and 8 noise σ), ``pre_ms`` and ``post_ms`` (window before the pulse onset and after
-  the pulse end, default 5 and 20 ms), ``max_pulse_ms`` (longest pulse expected, default
-  10 ms; sizes the buffer).
-- ``model_file`` (default empty): also write each model to this file (atomically). Checked
-  at start: its folder must exist and be writable, and a file already there must be a
-  model file (never a bag or another input).
-- ``max_pending_blocks`` (default 1000): blocks per topic held until ``stream_info``
-  arrives; older ones are dropped and counted.
-- ``diagnose`` (bool, default true): after each fit, run the diagnosis
-  (:func:`~sensor_comp.core.diagnosis.diagnose.diagnose`) of the new model on the same calibration
-  and validation shots, in the worker thread once the model is published, and add its
-  verdict, the effects it names, what they leave (in noise energies), the next step and the
-  top-ranked effect to ``/diagnostics`` (level WARN for every verdict but ``adequate``:
-  ``missing_effect``, ``partly_explained``, ``unexplained``, and a diagnosis that
-  ``failed``).
-- ``diagnostics_period`` (s, default 1.0), ``fit_timeout`` (s the service waits for a
-  fit, default 300).
-
-Memory is bounded: with ``span = pre_ms + max_pulse_ms + post_ms + holdoff`` (1 ms), the
-streams go through a rolling buffer of 2.5 spans (3 spans plus a block just before a
-scan), never the whole stream; each accepted shot keeps a copy of its window only. Shots
-are found by :func:`~sensor_comp.core.shots.detection.detect_shots` on the buffer each time half a
-span has come in (about 5 ms of work per 80 000 buffered samples) and only when it can find
-something new: a new axial sample reaches 3/4 of the trigger level, or a shot found is due
-to be taken (about two detections per shot; 0.33 s of CPU per 4.54 s of a 1 MS/s stream
-with a shot every 0.5 s, 1.75 s when quiet scans detected too). A shot is taken
-once the buffer runs a span past its pulse end, so that a following shot close enough to
-shorten its window (windows never overlap) is complete in the same scan; it is taken
-once, and shots that are clipped or whose window holds a stream gap are left out (logged,
-counted). Offline
-detection on the whole recording finds the same shots; their windows may differ by a
-sample where the median of the buffer and of the whole recording round a half-amplitude
-crossing differently, so the model states its windows in ``provenance`` (stream sample
-indices since the first sample received, the stamp of each window start);
-:func:`~sensor_comp.core.identification.live_shots.provenance_shots` rebuilds those shots in a
-recording of the same streams, and :func:`~sensor_comp.core.identification.identify.identify` run
-offline on them gives the same coefficients. The rolling buffer is
-:class:`~sensor_comp.core.identification.live_shots.LiveShots` (no ROS: the node feeds it the
-paired blocks).
-
-Faults never stop the node; each is one log line naming the topic, the stamp and the
-reason, and is counted on ``/diagnostics``. Blocks are paired by
-:class:`~sensor_comp.core.compensation.streaming.BlockPairer`, as in the compensation: a malformed
-message (not a ``64FC1`` little-endian block, step or data size inconsistent, wrong number
-of rows for the topic, no sample) is skipped (``malformed_messages``); a pair of two
-widths (``mismatched_blocks``) or a block without partner (``unpaired_*_samples``) is
-dropped, an out-of-order or overlapping pair too (``overlapping_samples``); a stamp gap
-becomes NaN samples (``gaps``, ``missing_samples``), and so do non-finite samples
-(``invalid_samples``; one line where a run of such blocks starts and one where it ends),
-so that shot windows holding them are left out; an undecodable ``stream_info`` is skipped
-and a later change of rate ignored. Once ``stream_info`` has come, ``samples_received =
-paired_samples + unpaired_pressure_samples + overlapping_samples`` (blocks still waiting
-for their partner aside).
-
-Threads and processes: identification (EMD, the output-error fit) and the diagnosis run in
-a worker **process** (:mod:`sensor_comp.nodes._fit_worker`: a fresh interpreter started
-for each fit and ended after its diagnosis, ~1-2 s of imports; it never imports the
-caller's ``__main__``, so scripts need no ``if __name__ == '__main__':`` guard), fed with
-a snapshot of the kept windows; a thread of the node waits for it and publishes the
-result. So the callbacks that receive blocks return at once, never wait for a fit, and
-never compete with it for the GIL (in a thread, a fit starved reception: 0.3-0.5 s
-behind per second of fit in the soak). A worker that dies (killed, out of memory) fails
-the call it was running with a logged error saying how it ended; the next call starts a
-new worker. Destroying the node stops the worker, a running fit included.
-The ``~/fit`` service waits for its fit in the service callback, which has a callback
-group of its own: with a ``MultiThreadedExecutor`` (what :func:`main` and
-:mod:`sensor_comp.nodes.pipeline` use) the blocks keep coming in on the other thread
-meanwhile; with a single-threaded executor they queue in DDS (keep-all, nothing lost)
-until the answer is sent.
+- ``structure`` (``auto``): ``auto``, ``arx``, ``armax``, ``gls`` or ``oe``.
+- ``orders`` (``[]``): ``[na, nb]``; empty = the structure's default or the ``auto`` grid.
+- ``delay`` (-1): input delay in samples; -1 = estimated.
+- ``emd`` (true): EMD-denoise the calibration windows.
+- ``effects`` (``[]``): extra effect ids to fit (``core.effects.EFFECTS``).
+- ``min_shots`` (4): fit automatically once this many shots are kept.
+- ``refit_shots`` (0): fit again after this many more; 0 = never.
+- ``max_shots`` (20): keep at most the latest this many shot windows.
+- ``threshold_g`` (0): trigger level in g; 0 = automatic per buffer.
+- ``pre_ms``, ``post_ms`` (5, 20): window before the onset and after the pulse end.
+- ``max_pulse_ms`` (10): longest pulse expected; sizes the buffer.
+- ``model_file`` (empty): also write each model to this file (atomically).
+- ``max_pending_blocks`` (1000): blocks per topic held until ``stream_info`` arrives.
+- ``diagnose`` (true): diagnose each new model and report the verdict.
+- ``diagnostics_period`` (1.0 s), ``fit_timeout`` (300 s the service waits for a fit).
 """
 
 from __future__ import annotations
@@ -172,21 +92,19 @@ class _Outcome:
 
 class Identification(Node):
     """
-    Find shots in the live streams and identify the model (see the module documentation).
+    Find shots in the live streams and identify the model (parameters: module docstring).
 
-    Spin it with a ``MultiThreadedExecutor`` (or any executor; see the module
-    documentation for what the ``~/fit`` service does to a single-threaded one) and
+    Spin it with a ``MultiThreadedExecutor`` (so blocks flow while ``~/fit`` waits) and
     destroy it when done; :meth:`fit` runs a fit from Python.
 
     Args:
         node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace``, default
-            ``/rig``; ``context``; ``parameter_overrides``; ...).
+        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace`` default ``/rig``).
 
     Attributes:
         model: The latest identified model, or None.
         windows: The shot windows kept (the latest ``max_shots``).
-        rejected: Shots found but left out; ``rejections`` holds the latest reasons.
+        rejected: Shots left out; ``rejections`` holds the latest reasons.
         fits: Fits done (successful or not).
         samples_received: Samples received per input topic (in decodable blocks).
         received: Input block messages received, malformed ones too.
@@ -420,11 +338,11 @@ class Identification(Node):
 
     def fit(self) -> Future:
         """
-        Fit on the shots kept now, in the worker thread.
+        Fit on the shots kept now, in the worker.
 
         Returns:
-            A future of the outcome (``success``, ``message``, ``model``); it is done at
-            once, unsuccessful, with fewer than 2 shots kept.
+            A future of the outcome (``success``, ``message``, ``model``); done at once,
+            unsuccessful, with fewer than 2 shots kept.
 
         """
         return self._submit()
@@ -446,12 +364,7 @@ class Identification(Node):
         return future
 
     def _due(self) -> bool:
-        """
-        Return whether an automatic fit is due (call with the lock held).
-
-        The first fit comes at ``min_shots`` shots (again after each new shot while fits
-        fail), later ones every ``refit_shots`` new shots; never while one runs.
-        """
+        """Return whether an automatic fit is due (call with the lock held)."""
         if self._fit_running is not None:
             return False
         if self.model is None:
@@ -515,13 +428,10 @@ class Identification(Node):
 
     def _in_process(self, function, *args):
         """
-        Run ``function(*args)`` in the fit process (started if needed) and return its result.
-
-        A worker found dead before the call (it died while idle) is replaced at once.
+        Run ``function(*args)`` in the fit process (started or replaced if needed).
 
         Raises:
-            WorkerDied: If the worker died during the call (the next call starts a new
-                one), or the node is being destroyed.
+            WorkerDied: If the worker died during the call, or the node is being destroyed.
 
         """
         with self._process_lock:
@@ -681,13 +591,11 @@ def verdict_status(verdict: dict) -> tuple[bool, str]:
     """
     Return whether a diagnosis calls for a warning, and its text for ``/diagnostics``.
 
-    ``verdict``: the ``diagnosis_*`` values (:func:`~sensor_comp.nodes._fit_worker.
-    diagnose_fit`); empty before the first diagnosis (no warning). Every verdict of
-    :data:`~sensor_comp.core.diagnosis.diagnose.VERDICTS` is handled by :data:`ATTENTION`, plus
-    ``'failed'`` (the diagnosis could not run: a warning with the reason).
+    ``verdict`` holds the ``diagnosis_*`` values (empty before the first diagnosis: no
+    warning); ``'failed'`` is a warning with the reason.
 
     Raises:
-        KeyError: For a verdict that is none of these (a new verdict must be handled here).
+        KeyError: For a verdict :data:`ATTENTION` does not handle.
 
     """
     name = verdict.get('diagnosis_verdict')

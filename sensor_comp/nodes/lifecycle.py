@@ -1,23 +1,9 @@
 """
 A node's process: Fast DDS profile, signals, spinning and the end of the executor.
 
-Fast DDS settings (:func:`use_fastdds_profile`, called by :func:`run_main`), measured here
-with the Jazzy wheels:
-
-- A keep-all **reader** holds at most 5 000 messages it has not handed to the callback yet;
-  what arrives beyond that is rejected and never delivered, although the writer is
-  reliable (a reader that stalled while 7 000 messages came got 5 000). Our profile lifts
-  the limit, so a recorder that falls behind buffers in memory instead of losing data.
-- A reader acknowledges only when the writer sends a heartbeat, by default every 3 s: a
-  keep-all writer whose history (5 000 messages) is full waits up to 3 s for room, and
-  waiting for the last acknowledgements before exiting takes up to 3 s. Our profile sends
-  heartbeats every 50 ms: the player's exit wait fell from ~2.7 s to ~0.06 s and
-  10 000-sample blocks flowed about twice as fast.
-
-Signals: :func:`run_main` handles SIGINT and SIGTERM itself (rclpy's own handlers shut the
-context down at once) so that a node can finish its work: the recorder takes what its
-subscriptions still hold and finalises the bag, the publishers stop between two messages.
-A second signal interrupts that with ``KeyboardInterrupt``.
+:func:`run_main` applies the profile (unlimited reader queues, 50 ms heartbeats) and
+handles SIGINT/SIGTERM so a node can finish its work; a second signal interrupts.
+Measured numbers and reasons: ``doc/nodes.md`` (a node's process).
 """
 
 from __future__ import annotations
@@ -80,14 +66,11 @@ def spin_until(executor: Executor, stop: threading.Event, *,
     Args:
         executor: The executor with the node(s) added.
         stop: Set it (from a signal handler or another thread) to stop.
-        progress: A count that grows while messages are handled (e.g. blocks received):
-            after the stop, spinning goes on while it grows, at most 10 s.
-        wait: With ``take``, the fast path for a node's busy subscriptions: ``wait(timeout)``
-            waits for their messages (e.g. :meth:`~.transport.BlockWaitSet.wait`); the
-            executor then runs one round every :data:`ROUND_S` (timers, the other
-            subscriptions, services) instead of one per message.
-        take: Handle the messages queued on those subscriptions (e.g. with
-            :func:`~.transport.take_queued`).
+        progress: A count that grows while messages are handled: after the stop, spinning
+            goes on while it grows, at most 10 s.
+        wait: With ``take``, ``wait(timeout)`` waits for the busy subscriptions' messages;
+            the executor then runs one round every :data:`ROUND_S`.
+        take: Handle the messages queued on those subscriptions.
 
     """
     context = executor.context
@@ -122,12 +105,9 @@ def join_callbacks(executor: Executor) -> None:
     """
     Wait for the callbacks a shut-down executor still runs in its thread pool.
 
-    rclpy 7.1's ``Executor.shutdown()`` does not wait for the callbacks in flight (its wait
-    is skipped once the shutdown flag is set), and a ``MultiThreadedExecutor`` runs them in
-    a thread pool: destroying a node while one of its callbacks runs fails at random
-    (a timer writing to a closed file gave EBADF). Call this after ``shutdown()`` and after
-    the spinning thread has ended, before destroying the nodes; it does nothing for an
-    executor without a pool (single-threaded: its callbacks ran in the spinning thread).
+    rclpy 7.1's ``shutdown()`` does not; destroying a node under a running callback fails at
+    random. Call after ``shutdown()`` and the spinning thread's end, before destroying nodes.
+
     """
     pool = getattr(executor, '_executor', None)  # MultiThreadedExecutor's ThreadPoolExecutor
     if pool is not None:
@@ -136,12 +116,11 @@ def join_callbacks(executor: Executor) -> None:
 
 def use_fastdds_profile() -> None:
     """
-    Give this process unlimited reader queues and 50 ms writer heartbeats (see above).
+    Give this process unlimited reader queues and 50 ms writer heartbeats.
 
-    Does nothing for another RMW, when ``FASTRTPS_DEFAULT_PROFILES_FILE`` or
-    ``FASTDDS_DEFAULT_PROFILES_FILE`` is set, or when the working directory holds Fast DDS's
-    ``DEFAULT_FASTRTPS_PROFILES.xml``: the user's choice wins. Call it before the first
-    ``rclpy`` context starts; Fast DDS reads the profile once.
+    Does nothing for another RMW or when the user set a profile (environment variable or
+    ``DEFAULT_FASTRTPS_PROFILES.xml``). Call before the first rclpy context starts.
+
     """
     if os.environ.get('RMW_IMPLEMENTATION', _FASTDDS) != _FASTDDS:
         return

@@ -1,13 +1,9 @@
 """
 Moving messages: the default namespace, message classes, raw publishing and taking.
 
-Raw publishing: Fast DDS makes ``publish`` fail ("cannot publish data") when a keep-all
-writer's history stays full for its blocking time (100 ms); the message is then *not* sent.
-:func:`publish_raw` retries, which is what makes keep-all lossless from Python.
-
-:func:`take_queued` takes what raw subscriptions (:func:`subscribe_blocks`) already hold,
-faster than an executor round, and :class:`BlockWaitSet` waits for them without one;
-:func:`merge_stream_infos` keeps the raw streams' rates.
+:func:`publish_raw` retries while a keep-all history is full (lossless from Python);
+:func:`take_queued` and :class:`BlockWaitSet` take block messages without an executor
+round. Measured costs: ``doc/nodes.md`` (moving messages).
 """
 
 from __future__ import annotations
@@ -75,9 +71,8 @@ def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
     """
     Merge the raw streams' descriptions from a ``stream_info`` message into ``known``.
 
-    Several nodes may publish ``stream_info``; the first description of ``pressure/raw``
-    and of ``acceleration`` stays in use (blocks already taken were read at its rate); a
-    later one with another rate is logged as an error and ignored.
+    The first description of each raw stream stays in use; a later one with another rate is
+    logged as an error and ignored.
 
     Args:
         node: The node (for the log).
@@ -88,8 +83,7 @@ def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
         The description of ``pressure/raw`` once both raw streams are described, else None.
 
     Raises:
-        NodeError: If the two raw streams are described at different rates (their blocks
-            cannot be paired).
+        NodeError: If the two raw streams are described at different rates.
 
     """
     for info in infos:
@@ -185,19 +179,8 @@ def take_queued(handlers: Sequence[tuple[Subscription, Callable[[bytes, dict], N
     """
     Hand messages already queued on raw subscriptions to their handlers, round robin.
 
-    An executor round costs ~0.15 ms per message, a direct take ~0.02 ms (what the executor
-    itself calls): a callback that calls this after its own message keeps up with several
-    times more messages per second. One message of each subscription in turn keeps
-    streams that belong together (pressure and acceleration blocks of one stamp) in step;
-    the limit gives the other callbacks their turn.
-
-    Args:
-        handlers: ``(subscription, handle)`` pairs; ``handle(data, info)`` gets each
-            message taken from the subscription.
-        limit: Most messages taken in all.
-
-    Returns:
-        The number of messages taken.
+    One of each subscription in turn keeps paired streams in step; ``limit`` caps the
+    messages taken in all. Returns the number taken.
 
     """
     taken = 0
@@ -218,15 +201,8 @@ class BlockWaitSet:
     """
     Wait for messages on a few subscriptions (the block inputs), with one reused wait set.
 
-    An executor round rebuilds its wait set from every entity of the node (subscriptions,
-    timers, the parameter services...) before it waits, and hands out one callback: in
-    the compensation node that was about half of the busy time per block pair at 1 000
-    pairs/s. This waits on the given subscriptions alone; the caller takes their messages
-    itself (:func:`take_queued`) and still spins the executor now and then for the rest.
-
-    Args:
-        node: The node owning the subscriptions (its context).
-        subscriptions: The subscriptions to wait on.
+    The caller takes the messages itself (:func:`take_queued`) and still spins the executor
+    now and then for the rest.
 
     """
 
@@ -263,7 +239,7 @@ def subscribe_blocks(node: Node, topics: Sequence[str], on_block: Callable[[str,
         take: Handler for messages taken directly, ``take(topic, data, info)``.
 
     Returns:
-        ``({topic: subscription}, takers)``: takers are the pairs :func:`take_queued` takes.
+        ``({topic: subscription}, takers)``; takers are what :func:`take_queued` takes.
 
     """
     image = message_class(IMAGE)
