@@ -1,39 +1,10 @@
 """
 Estimators with a noise model: the seed paper's generalised least squares, and ELS.
 
-**Generalised least squares** (:func:`fit_armax_gls`) follows the seed paper's Section 4.2,
-steps 1–4 (ARMAX ``A y = B u + C e``, eq. 11):
-
-1. least squares on the raw data gives the start values ``â``, ``b̂``, ``ĉ`` (eq. 13);
-2. filter output and inputs of every segment by the current noise-model estimate (eq. 15);
-3. least squares on the filtered data (eq. 16) gives new ``â``, ``b̂``, ``ĉ``;
-4. repeat from 2 until the relative change of ``â``, ``b̂`` is below ``tol``, or
-   ``max_iter`` passes.
-
-Eq. (15) is ambiguous: it prints ``ỹ = y/Â``, ``ũ = u/Â`` although the steps also carry a
-noise polynomial ``ĉ``. ``filter_by`` selects one of two consistent readings:
-
-- ``filter_by='denominator'`` (default) takes eq. (15) as printed: divide by the current
-  ``Â``. That is the ARMAX model with the noise polynomial tied to the denominator,
-  ``C = A``: ``A y = B u + A e``, i.e. ``y = B/A u + e``, white noise added at the sensor
-  output, which is how measurement noise enters here. Step 1's ``ĉ_LS`` is then ``â_LS``
-  and "filter by the noise model" and "filter by ``Â``" coincide. The iteration is the
-  Steiglitz–McBride method; its fixed point is an output-error estimate, so the result has
-  structure ``'oe'``. It removes the bias ARX shows at high sample rates.
-- ``filter_by='noise'`` reads the noise polynomial as Clarke's GLS does (the method the
-  paper cites): ``C`` is fitted by least squares as an autoregression of the equation error
-  ``w = Â y − B̂ u`` (``C(q) w = e``, the only noise polynomial plain least squares can give
-  in step 1), the noise model is ``1/Ĉ`` and dividing by it is FIR filtering,
-  ``ỹ = Ĉ(q) y``, ``ũ = Ĉ(q) u``. The structure is ARARX ``A y = B u + e/C``
-  (:class:`Estimate` keeps ``Ĉ`` in ``d``). With white output noise the equation-error
-  colour is ``1/A`` with poles next to ``z = 1``, which a low-order ``C`` cannot whiten:
-  at 200 kS/s–1 MS/s this reading stays as biased as ARX (raising ``nc`` does not help).
-
-Filters run over each segment from rest (the windows start in a quiet pre-trigger).
-
-**Extended least squares** (:func:`fit_armax_els`) estimates ARMAX ``A y = B u + C e`` by
-pseudo-linear regression on lagged residuals. It does not remove the bias of white output
-noise at high sample rates either (see :func:`fit_armax_els`); output error does.
+:func:`fit_armax_gls` follows the paper's Section 4.2 with two readings of its eq. (15)
+(``filter_by``); :func:`fit_armax_els` is extended least squares. Neither removes the bias
+of white output noise at high rates except GLS's default reading (output error). Steps,
+readings and measurements: ``doc/estimators.md`` (generalised and extended least squares).
 """
 
 from __future__ import annotations
@@ -59,12 +30,7 @@ FILTERS = ('denominator', 'noise')
 
 
 def _autoregression(ws: list[np.ndarray], order: int) -> tuple[np.ndarray, np.ndarray]:
-    """
-    Fit ``C(q) w = e`` by least squares over the segments.
-
-    Returns ``[1, c1, ...]`` (with roots outside the unit circle reflected) and the
-    covariance of ``c1 …``.
-    """
+    """Fit ``C(q) w = e``; return ``[1, c1, ...]`` (stable) and its covariance."""
     if order == 0:
         return np.ones(1), np.empty((0, 0))
     phi, target, _ = lagged_regression(ws, [np.empty((0, w.size)) for w in ws], na=order,
@@ -84,28 +50,20 @@ def fit_armax_gls(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int
     """
     Estimate ``A``, ``B`` by the seed paper's generalised least squares iteration.
 
-    See the module documentation for the steps and the two readings of the paper's
-    eq. (15) that ``filter_by`` selects.
-
     Args:
         segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
         na: Order of ``A``.
         nb: Coefficients of each ``B_i``.
         nk: Input delay in samples.
         nc: Order of the noise polynomial (``filter_by='noise'``); ``na`` when None.
-        filter_by: ``'denominator'`` (divide by ``Â`` as eq. (15) is printed, i.e. by the
-            noise model with ``C = A``) or ``'noise'`` (Clarke: divide by the
-            autoregressive noise model ``1/Ĉ``, i.e. filter by the FIR ``Ĉ``).
+        filter_by: ``'denominator'`` (divide by ``Â``, i.e. ``C = A``) or ``'noise'``
+            (Clarke: filter by the FIR ``Ĉ``).
         max_iter: Most iterations of steps 2–3.
         tol: Relative change of ``a`` and ``b`` that ends the iteration.
 
     Returns:
-        An ``'oe'`` estimate (``filter_by='denominator'``; ``loss`` is the mean squared
-        simulation error), or an ``'ararx'`` estimate with the noise polynomial in ``d``
-        (``filter_by='noise'``; ``loss`` is the mean squared whitened residual
-        ``Ĉ (Â y − B̂ u)``). The covariance of ``a``, ``b`` is that of the last
-        least-squares step on filtered data; that of ``d`` comes from its own regression
-        (no cross terms).
+        An ``'oe'`` estimate (``'denominator'``) or an ``'ararx'`` one with ``Ĉ`` in ``d``
+        (``'noise'``).
 
     Raises:
         IdentError: On bad orders or options, too little data or no excitation.
@@ -161,15 +119,8 @@ def fit_armax_els(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int
     """
     Estimate an ARMAX model ``A y = B q^-nk u + C e`` by extended least squares.
 
-    The innovations are first approximated by the residuals of a long ARX model
-    (Hannan–Rissanen). Each pass solves the pseudo-linear regression with lagged residuals
-    as extra regressors and takes its own residuals (a posteriori, ``ê = y − φ(ê)ᵀθ̂``,
-    zero before a segment's first row) as the next residual estimate; the fixed point is
-    the ARMAX prediction error ``ê = (Â y − B̂ u)/Ĉ``. Pseudo-linear regression is not
-    guaranteed to converge (it needs ``1/C − 1/2`` strictly positive real, which fails when
-    ``C`` has roots near the unit circle, as white output noise at a high sample rate gives):
-    the pass with the smallest residual among those with a stable ``Â`` is returned, with
-    ``converged=False`` if the tolerance was not met.
+    Pseudo-linear regression may not converge: the pass with the smallest residual and a
+    stable ``Â`` is returned (``converged=False`` if the tolerance was not met).
 
     Args:
         segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
@@ -181,13 +132,10 @@ def fit_armax_els(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int
         tol: Relative change of ``a``, ``b`` and ``c`` that ends the iteration.
 
     Returns:
-        The ``'armax'`` estimate (``Ĉ`` reflected into the unit circle); ``loss`` is the
-        mean squared one-step prediction error ``(Â y − B̂ u)/Ĉ`` over all samples; the
-        covariance is ``σ² (ΨᵀΨ)⁻¹`` with the prediction-error gradient ``ψ = φ/Ĉ``.
+        The ``'armax'`` estimate; ``loss`` is the mean squared one-step prediction error.
 
     Raises:
-        IdentError: On bad orders, too little data, no excitation, or when no pass gives a
-            stable ``Â``.
+        IdentError: On bad orders, too little data, no excitation, or no stable ``Â``.
 
     """
     nc = na if nc is None else nc

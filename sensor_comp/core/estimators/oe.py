@@ -1,16 +1,9 @@
 """
 Output-error estimation: minimise the simulation error ``y − B/F q^-nk u``.
 
-Output error is the structure of a sensor whose measurement noise is added after the
-mechanics: it is consistent where ARX is biased. The minimisation is not linear in ``F``, so
-:func:`fit_oe` starts from the Steiglitz–McBride iteration (:func:`steiglitz_mcbride`:
-least squares on ``u/F̂`` and ``y/F̂``, repeated) and then runs Levenberg–Marquardt on the
-simulation error with exact gradients::
-
-    ∂ŷ/∂b_ij = q^-(nk+j) u_i / F        ∂ŷ/∂f_j = −q^-j ŷ / F
-
-Steps that would put a pole on or outside the unit circle are rejected (the damping grows
-instead), so the denominator stays stable. Every segment is simulated from rest.
+Consistent where ARX is biased by output noise. Steiglitz–McBride start, then
+Levenberg–Marquardt with exact gradients and stable-only steps; segments simulated from
+rest. Details: ``doc/estimators.md`` (output error).
 """
 
 from __future__ import annotations
@@ -72,11 +65,6 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
     """
     Iterate least squares on the data prefiltered by ``1/F̂`` (Steiglitz–McBride).
 
-    Each pass filters inputs and output of every segment by the current ``1/F̂`` (from
-    rest), solves ``F ỹ = Σ B_i ũ_i`` by least squares and reflects unstable roots of the
-    new ``F̂``. At the fixed point the equation error of the filtered data equals the
-    simulation error, so the estimate approaches the output-error one.
-
     Args:
         segments: Checked segments.
         nf: Order of ``F``.
@@ -85,10 +73,8 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
         a0: Start denominator; an ARX estimate when None.
         max_iter: Most prefilter passes.
         tol: Relative parameter change that ends the iteration.
-        exact: Solve each pass by QR (the estimate is the result, as in the seed paper's
-            generalised least squares); False solves the normal equations (QR only where
-            they are singular), three times cheaper, for a start value that a
-            Levenberg–Marquardt fit refines; the covariance is then NaN.
+        exact: Solve each pass by QR; False uses the cheaper normal equations (a start value;
+            covariance NaN).
 
     Returns:
         The last estimate.
@@ -134,12 +120,8 @@ class OutputErrorProblem:
     """
     The simulation error of ``y = Σ B_i/F q^-nk u_i + D d`` over segments, and its Jacobian.
 
-    One object per set of windows and orders, shared by :func:`fit_oe` and the extended
-    fits (:mod:`sensor_comp.core.identification.extended`). The parameters are ``θ = (f1..fnf, b
-    row by row, d)``; ``d`` multiplies optional additive regressors (disturbances) that bypass the
-    dynamics. Every segment is simulated from rest. The Jacobian is built column by column
-    into one Fortran-ordered array and the normal equations come from one product, so an
-    evaluation costs a few passes over the samples.
+    Shared by :func:`fit_oe` and the extended fits; ``θ = (f1..fnf, b row by row, d)``, ``d``
+    weighting additive regressors that bypass the dynamics.
 
     Args:
         us: Inputs per segment, ``(n_inputs, n)``.
@@ -188,12 +170,7 @@ class OutputErrorProblem:
                         out[start:stop, col] = 0.0
 
     def regression(self, f: np.ndarray) -> np.ndarray:
-        """
-        Return the regressors at a fixed ``F``: ``q^-(nk+j) u_i/F``, then the extra ones.
-
-        An ``(n, n_inputs·nb + k)`` Fortran-ordered array over all segments; the outputs
-        are :attr:`y`.
-        """
+        """Return the ``(n, n_inputs·nb + k)`` regressors at a fixed ``F`` (Fortran order)."""
         q = self.n_inputs * self.nb
         out = np.empty((self.y.size, q + self.n_extra), order='F')
         self._fill_lags(out, 0, self.filtered(f), self.nk, self.nb)
@@ -202,12 +179,7 @@ class OutputErrorProblem:
         return out
 
     def linear(self, f: np.ndarray) -> np.ndarray:
-        """
-        Return the least-squares numerators and extra coefficients at a fixed ``F``.
-
-        Dependent regressors (an effect channel that is a filtered copy of another, more
-        lags than the data excite) get the minimum-norm solution instead of an error.
-        """
+        """Return the least-squares numerators and extra coefficients at ``F`` (minimum norm)."""
         phi = self.regression(f)
         try:
             return solve_least_squares(phi, self.y).theta
@@ -218,10 +190,9 @@ class OutputErrorProblem:
         """
         Return the least sum of squares over numerators (and extra coefficients) at ``F``.
 
-        The coefficients come from the column-scaled normal equations (Cholesky: the
-        cheapest for the many evaluations of a search), regularised by a ridge of 1e-10
-        where they are singular; the residual is then computed, so round-off and the ridge
-        can only raise the loss, never fake a low one.
+        Cholesky with a 1e-10 ridge where singular; the residual is recomputed, so round-off can
+        only raise the loss.
+
         """
         phi = self.regression(f)
         try:
@@ -235,12 +206,7 @@ class OutputErrorProblem:
         return float(e @ e)
 
     def filtered(self, f: np.ndarray) -> list[np.ndarray]:
-        """
-        Return the inputs of every segment filtered by ``1/F`` (from rest).
-
-        The last result is kept: Levenberg–Marquardt asks for the Jacobian at the trial it
-        has just simulated, and this filter pass is most of an evaluation's cost.
-        """
+        """Return every segment's inputs filtered by ``1/F`` from rest (cached)."""
         key = f.tobytes()
         if self._last is None or self._last[0] != key:
             self._last = (key, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us])
@@ -263,12 +229,7 @@ class OutputErrorProblem:
         return out
 
     def residual(self, theta: np.ndarray, jacobian: bool = False):
-        """
-        Return the simulation error ``e = y − ŷ``; with ``jacobian``, ``(e, ∂ŷ/∂θ)``.
-
-        ``∂ŷ/∂f_j = −q^-j ŷ_u/F`` (``ŷ_u`` the input-driven part), ``∂ŷ/∂b_ij =
-        q^-(nk+j) u_i/F``, ``∂ŷ/∂d = extra``.
-        """
+        """Return the simulation error ``e = y − ŷ``; with ``jacobian``, ``(e, ∂ŷ/∂θ)``."""
         if not jacobian:
             return self.y - self.simulate(theta)
         f, b, d = self.unpack(theta)
@@ -291,12 +252,6 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     """
     Estimate a MISO output-error model ``y = Σ B_i/F q^-nk u_i + e``.
 
-    Steiglitz–McBride gives the start value; Levenberg–Marquardt then minimises the sum of
-    squared simulation errors over all segments (each simulated from rest), rejecting any
-    step that makes ``F`` unstable. The covariance is ``σ² (JᵀJ)⁻¹`` from the Jacobian at
-    the optimum, valid for white output noise (infinite when the structure is
-    over-parameterised so that ``JᵀJ`` is singular).
-
     Args:
         segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
         nf: Order of the common denominator ``F``.
@@ -304,12 +259,11 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
         nk: Input delay in samples.
         max_iter: Most Levenberg–Marquardt iterations.
         tol: Relative decrease of the squared error below which the iteration stops.
-        start: A stable start denominator ``[1, f1..fnf]`` (e.g. the fit of a neighbouring
-            delay): Levenberg–Marquardt from it alone, numerators solved at it, without the
-            Steiglitz–McBride and ARX starts (a local refinement, several times cheaper).
+        start: A stable start denominator: a local refinement from it alone (cheaper).
 
     Returns:
-        The ``'oe'`` estimate; ``loss`` is the mean squared simulation error.
+        The ``'oe'`` estimate; ``loss`` is the mean squared simulation error, covariance
+        ``σ² (JᵀJ)⁻¹`` (infinite when singular).
 
     Raises:
         IdentError: On bad orders, too little data or inputs that do not excite the model.

@@ -1,15 +1,9 @@
 """
 Choose the model structure: orders and input delay, by information criterion and validation.
 
-:func:`estimate_delay` works like MATLAB's ``delayest``: the delay of a range whose
-fixed-order model has the lowest loss (output error is fitted only around the minimum,
-located by the losses of every delay with one denominator held). :func:`select_structure`
-fits a grid of orders and delays, ranks the candidates by an information criterion on the
-calibration segments and, when validation segments are given, keeps only candidates whose
-validation fit comes within ``fit_tolerance`` of the best one; among near-equal criteria
-the simplest structure wins. It returns the choice, the whole table and a sentence that
-says why. Output error is fitted afresh once per order pair and refined from contained
-structures and neighbouring delays elsewhere (:func:`_fit_grid`).
+:func:`estimate_delay` (like MATLAB's ``delayest``, output error by default) and
+:func:`select_structure` (grid, BIC, validation filter, simplest among near-equals).
+Reasons and measured behaviour: ``doc/estimators.md``.
 """
 
 from __future__ import annotations
@@ -68,10 +62,10 @@ class DelayEstimate:
     Attributes:
         nk: The chosen delay in samples.
         delays: Delays tried.
-        losses: Loss of the model at each delay (NaN where the fit failed).
+        losses: Loss at each delay (NaN where the fit failed).
         explanation: One sentence on the choice.
-        fitted: Delays whose loss comes from a fit of their own (every delay, except for
-            output error: there the others hold the denominator of the best fit).
+        fitted: Delays whose loss comes from a fit of their own (output error: the others
+            hold the best fit's denominator).
         estimates: The fits by delay (the ``fitted`` ones), for reuse.
 
     """
@@ -90,10 +84,9 @@ def profile_losses(segments: Sequence[Segment], f: np.ndarray, delays: Sequence[
     """
     Return the mean squared simulation error at each delay with the denominator held at ``f``.
 
-    The numerators are solved by least squares at each delay from one Gram matrix of the
-    inputs filtered by ``1/f`` at every lag (:func:`lag_gram`): one filter pass for all
-    delays. An upper bound of the output-error loss at each delay (equal to it where ``f``
-    was fitted); NaN where the numerators are not determined.
+    One filter pass for all delays; an upper bound of the output-error loss; NaN where the
+    numerators are not determined.
+
     """
     lags = max(delays) + nb
     xs = [signal.lfilter([1.0], f, s.u, axis=-1) for s in segments]
@@ -120,15 +113,8 @@ def lag_gram(xs: Sequence[np.ndarray], ys: Sequence[np.ndarray],
     """
     Return ``(ΦᵀΦ, Φᵀy)`` of the regressors ``x_i(k − l)``, ``l < lags``, over segments.
 
-    Each segment starts from rest (zeros before it). Column ``i·lags + l`` is input ``i``
-    delayed by ``l``. The entries come from one dot product per input pair and lag
-    difference, less the few products a delayed column loses at the segment's end, rather
-    than from the ``(n, inputs·lags)`` matrix: a small fraction of its cost.
-
-    Args:
-        xs: Inputs per segment, ``(n_inputs, n)``.
-        ys: Outputs per segment, ``(n,)``.
-        lags: Lags per input.
+    Segments start from rest; column ``i·lags + l`` is input ``i`` delayed by ``l``. ``xs``
+    are ``(n_inputs, n)`` per segment, ``ys`` ``(n,)``.
 
     """
     m = xs[0].shape[0]
@@ -157,11 +143,8 @@ def _oe_delay_search(segs, delays, na, nb, start):
     """
     Return ``(losses, fits)`` of output error over ``delays``, fitting only where it counts.
 
-    A denominator (of ``start``, else of a full fit at the delay nearest 1) gives the loss
-    of every delay with it held (:func:`profile_losses`), which shows where the minimum
-    lies; the delay with the least held loss and the neighbours of the best fit are fitted
-    from the best denominator so far, until the best fit's neighbours and the held minimum
-    are all fitted. None when no fit succeeds.
+    None when no fit succeeds (see ``doc/estimators.md``, input delay).
+
     """
     fits: dict[int, Estimate | str] = {}
 
@@ -205,20 +188,8 @@ def estimate_delay(segments: Segment | Iterable[Segment], *,
     """
     Estimate the input delay as the one whose fixed-order model has the lowest loss.
 
-    MATLAB's ``delayest`` does this with ARX (``method='arx'``). With white output noise
-    and poles near ``z = 1`` the ARX loss is dominated by its noise bias and its minimum
-    wanders off the true delay (to the end of the range in tests at 200 kS/s and 1 MS/s), so
-    the default is output error, whose loss is the simulation error. The default single
-    numerator coefficient cannot shift its centre to absorb a wrong delay, which makes the
-    loss sharp in ``nk``; the result is then the delay of the numerator's centre, one
-    sample more than the pure delay for a second-order system driven by a sampled
-    continuous input. With ``nb >= 2`` neighbouring delays fit almost equally well.
-
-    Output error is not fitted at every delay: one fit gives a denominator, the loss of
-    every delay with it held (:func:`profile_losses`, one filter pass) shows where the
-    minimum lies, and only the delays around it are fitted (from that denominator), until
-    the best fit's neighbours and the held minimum are fitted. The other delays report the
-    held loss, an upper bound of theirs (``fitted`` says which are which).
+    Output error by default (ARX's minimum wanders at high rates); only delays near the
+    held-denominator minimum are fitted (``doc/estimators.md``).
 
     Args:
         segments: Shot windows, each starting at rest.
@@ -226,9 +197,8 @@ def estimate_delay(segments: Segment | Iterable[Segment], *,
         na: Denominator order of the trial models.
         nb: Numerator coefficients of the trial models.
         method: Estimator, a key of :data:`METHODS`.
-        start: A fit of the same segments with ``na`` poles at any delay and numerator
-            length (e.g. the model about to be fitted, at ``nk = 1``): its denominator
-            starts the output-error search instead of a fit of its own.
+        start: A fit with ``na`` poles on the same segments whose denominator starts the
+            output-error search.
 
     Returns:
         The delay with the lowest loss and the loss of every delay.
@@ -284,7 +254,7 @@ class Candidate:
         nk: Input delay.
         n_parameters: Estimated parameters.
         loss: Estimator loss on the calibration segments.
-        criterion: Value of the selection criterion (NaN when the fit failed).
+        criterion: Selection criterion (NaN when the fit failed).
         calib_fit: Simulation fit in % on the calibration segments.
         valid_fit: Simulation fit in % on the validation segments, or None.
         stable: Whether the denominator is stable.
@@ -354,13 +324,9 @@ def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
     """
     Return the estimate (or why it failed) of every ``(na, nb, nk)`` of ``grid``.
 
-    Output error is fitted afresh (Steiglitz–McBride and ARX starts) at the middle delay of
-    every order pair, and refined from the best fitted structure it contains (``nb − 1``
-    coefficients at ``nk`` or ``nk + 1``: that minimum is a point of the larger model, so
-    the larger one ends no worse); the better of the two is kept. The other delays are
-    refined from the best of the contained structures and the same orders' fits at other
-    delays (the start with the least loss for this structure). ``known`` fits (the delay
-    search's) are reused.
+    Output error is refined from contained structures and neighbouring delays; ``known``
+    fits are reused (``doc/estimators.md``, grid fitting).
+
     """
     centre = sorted({nk for _, _, nk in grid})
     centre = centre[len(centre) // 2]
@@ -396,12 +362,7 @@ def _attempt(fit: Callable[[], Estimate]) -> Estimate | str:
 
 def _candidate(est: Estimate | str, key, segs, valid, method, criterion,
                spread: float) -> Candidate:
-    """
-    Return the table row of one fit.
-
-    The calibration fit of output error is its loss (the mean squared simulation error);
-    ``spread`` is ``Σ (y − ȳ)²`` over the calibration segments.
-    """
+    """Return the table row of one fit (``spread``: ``Σ (y − ȳ)²`` of the calibration)."""
     na, nb, nk = key
     if not isinstance(est, Estimate):
         return Candidate(na, nb, nk, 0, np.nan, np.nan, np.nan, None, False, est)
@@ -426,39 +387,25 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     """
     Fit a grid of structures and choose one.
 
-    1. Unstable or failed fits are dropped.
-    2. With validation segments, candidates whose validation fit is more than
-       ``fit_tolerance`` percentage points below the best validation fit are dropped, so a
-       structure that only fits the calibration shots is not chosen.
-    3. Of the rest, those within ``criterion_margin`` of the lowest ``criterion`` are
-       equivalent (for BIC a difference below 2 is "not worth more than a bare mention",
-       Kass & Raftery); the one with the fewest parameters wins, then the lowest criterion.
-       This matters at high sample rates, where a fast extra pole imitates one sample of
-       delay and ties with the simpler model.
+    Drops unstable or failed fits and, with validation segments, those more than
+    ``fit_tolerance`` points below the best validation fit; among candidates within
+    ``criterion_margin`` of the lowest criterion the fewest parameters win.
 
     Args:
         calib_segments: Calibration shot windows, each starting at rest.
         valid_segments: Validation shot windows, or None.
-        orders: ``(na, nb)`` pairs (``na`` is ``nf`` for output error); all of
-            ``na`` in 1..4 and ``nb`` in 1..3 when None.
-        delays: Delays to try; when None, :func:`estimate_delay` (same method, delays
-            0..20) and the delays one sample either side of its result.
-        criterion: ``'bic'`` (default), ``'aic'``, ``'aicc'`` or ``'fpe'``. BIC is the
-            consistent choice: with tens of thousands of samples AIC and FPE reward the few
-            units of loss an extra pole-zero pair buys from noise and model mismatch, and in
-            tests on a second-order truth AIC picked ``nf = 3`` or ``4`` for most seeds.
-        method: Estimator, a key of :data:`METHODS` (output error by default: it is not
-            biased by output noise).
-        fit_tolerance: Validation fit margin in percentage points (step 2).
-        criterion_margin: Criterion difference below which candidates count as equivalent
-            (step 3); 0 takes the plain minimum.
+        orders: ``(na, nb)`` pairs; ``na`` 1..4 by ``nb`` 1..3 when None.
+        delays: Delays to try; when None, :func:`estimate_delay` over 0..20 and ±1 around it.
+        criterion: ``'bic'`` (default), ``'aic'``, ``'aicc'`` or ``'fpe'``.
+        method: Estimator, a key of :data:`METHODS` (default output error).
+        fit_tolerance: Validation fit margin in percentage points.
+        criterion_margin: Criterion difference counted as equivalent; 0 = plain minimum.
 
     Returns:
         The chosen estimate with the candidate table and an explanation.
 
     Raises:
-        IdentError: On an unknown criterion or method, an empty grid, or when no candidate
-            gives a stable fit.
+        IdentError: On an unknown criterion or method, an empty grid, or no stable fit.
 
     """
     if criterion not in CRITERIA:
