@@ -1,11 +1,8 @@
 """
 Identification data: input/output segments, each recorded from rest.
 
-A shot window is a :class:`Segment`: ``u`` holds the inputs ``(n_inputs, n)`` (the axial
-acceleration in m/s², later further effect channels), ``y`` the output ``(n,)`` (the
-acceleration-induced pressure in Pa). Estimators take several segments and treat each one on
-its own (own initial conditions); they never join segments into one signal, because the jump
-at a joint is not a response of the system.
+A :class:`Segment` is one shot window (inputs ``(n_inputs, n)``, output ``(n,)`` in Pa);
+estimators treat each on its own and never join them (a joint's jump is not a response).
 """
 
 from __future__ import annotations
@@ -88,14 +85,7 @@ class Segment:
 def as_segments(segments: Segment | Iterable[Segment | tuple[np.ndarray, np.ndarray]], *,
                 min_samples: int = 1) -> tuple[Segment, ...]:
     """
-    Return ``segments`` as a checked tuple of :class:`Segment`.
-
-    Args:
-        segments: One segment, or several (segments or ``(u, y)`` pairs).
-        min_samples: Samples each segment needs at least.
-
-    Returns:
-        The segments; pairs become segments labelled ``'segment <index>'``.
+    Return ``segments`` (segments or ``(u, y)`` pairs) as a checked tuple of :class:`Segment`.
 
     Raises:
         IdentError: If there is no segment, the input counts differ or one is too short.

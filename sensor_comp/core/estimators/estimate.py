@@ -1,18 +1,9 @@
 """
 The result of every estimator: polynomials, uncertainty and fit statistics.
 
-Every structure is a special case of ``A(q) y(k) = B(q)/F(q) q^-nk u(k) + C(q)/D(q) e(k)``
-with ``e`` white; :class:`Estimate` stores the input-path denominator in ``a`` (``A`` for the
-equation-error structures, ``F`` for output error), so that ``y = B/a q^-nk u`` always:
-
-=========  ==========================================  ==========================
-structure  model                                       noise model ``H`` (y = … + H e)
-=========  ==========================================  ==========================
-``arx``    ``A y = B q^-nk u + e``                     ``1/A``
-``armax``  ``A y = B q^-nk u + C e``                   ``C/A``
-``ararx``  ``A y = B q^-nk u + e/D`` (generalised LS)  ``1/(A D)``
-``oe``     ``y = B/F q^-nk u + e``                     ``1``
-=========  ==========================================  ==========================
+:class:`Estimate` keeps the input-path denominator in ``a`` (``A``, or ``F`` for output
+error) so that ``y = B/a q^-nk u`` for every structure; the structures and their noise
+models are tabled in ``doc/estimators.md``.
 """
 
 from __future__ import annotations
@@ -42,15 +33,12 @@ class Estimate:
         a: Input-path denominator ``[1, a1, ..., ana]`` (``A`` or ``F``).
         b: Numerators ``(n_inputs, nb)``; ``b[i, j]`` multiplies ``u_i(k − nk − j)``.
         nk: Input delay in samples (common to all inputs).
-        covariance: Parameter covariance over :attr:`parameter_names` (``a1..ana``, then
-            ``b`` row by row, then ``c1..cnc``, then ``d1..dnd``).
-        noise_variance: Variance of the white innovation ``e`` (residuals over degrees of
-            freedom).
-        loss: Mean squared residual over the samples used: the one-step prediction error
-            for the equation-error structures, the simulation error for output error.
+        covariance: Parameter covariance over :attr:`parameter_names`.
+        noise_variance: Variance of the white innovation ``e``.
+        loss: Mean squared residual (prediction or simulation error, by structure).
         n_samples: Number of residuals the loss averages.
         c: Noise numerator ``[1, c1, ...]`` (ARMAX) or None.
-        d: Noise denominator ``[1, d1, ...]`` (ARARX, generalised least squares) or None.
+        d: Noise denominator ``[1, d1, ...]`` (ARARX) or None.
         iterations: Iterations the estimator ran (0 for a direct solution).
         converged: Whether the iteration met its tolerance.
         method: How the estimate was computed, in words.

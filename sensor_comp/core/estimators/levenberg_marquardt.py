@@ -1,12 +1,8 @@
 """
 Levenberg–Marquardt for the output-error fits, with a stable-denominator constraint.
 
-Output-error fits (:func:`~sensor_comp.core.estimators.fit_oe` and the extended fits of
-:mod:`sensor_comp.core.identification.extended`) minimise a sum of squared simulation errors whose
-Jacobian is exact. The steps are taken in column-scaled coordinates (every Jacobian column
-of unit norm, so that coefficients of very different size are damped alike), and a trial
-that is not finite or that puts a pole on or outside the unit circle is rejected: the
-damping grows instead, so the denominator stays stable throughout.
+Column-scaled steps; trials that are not finite or unstable are rejected (the damping
+grows). See ``doc/estimators.md`` (Levenberg–Marquardt).
 """
 
 from __future__ import annotations
@@ -36,8 +32,7 @@ class LevenbergMarquardt(NamedTuple):
         jac: Their Jacobian there.
         iterations: Steps taken.
         evaluations: Error evaluations, the first included.
-        converged: Whether the relative decrease fell below the tolerance (or no step
-            improved the cost) before the iteration limit.
+        converged: Whether it stopped on the tolerance (or no step improved) before the limit.
 
     """
 
@@ -52,12 +47,7 @@ class LevenbergMarquardt(NamedTuple):
 
 def scaled_normal_equations(jac: np.ndarray,
                             e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """
-    Return ``(JsᵀJs, Jsᵀe, scale)`` for the Jacobian scaled to unit column norms.
-
-    One product ``JᵀJ`` (the column norms are the square roots of its diagonal) and one
-    ``Jᵀe``, then scaled: two passes over ``J`` instead of a scaled copy.
-    """
+    """Return ``(JsᵀJs, Jsᵀe, scale)`` for the Jacobian scaled to unit column norms."""
     gram = jac.T @ jac
     scale = np.sqrt(np.diag(gram))
     scale[~(scale > 0)] = 1.0
@@ -65,13 +55,7 @@ def scaled_normal_equations(jac: np.ndarray,
 
 
 def predicted_decrease(gram: np.ndarray, grad: np.ndarray) -> float:
-    """
-    Return ``gᵀG⁺g``: how much the Gauss-Newton model says a full step lowers the cost.
-
-    Scale-invariant and zero exactly at a stationary point; unlike the decrease of one
-    damped step, it does not vanish where the damping only holds the steps back (an
-    ill-conditioned valley, which over-parameterised output-error models have).
-    """
+    """Return ``gᵀG⁺g``: how much the Gauss-Newton model says a full step lowers the cost."""
     step = np.linalg.lstsq(gram, grad, rcond=1e-14)[0]
     return max(float(step @ grad), 0.0)
 
@@ -103,14 +87,8 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
     """
     Minimise ``‖e(θ)‖²`` from ``theta``, rejecting steps to unstable parameters.
 
-    The iteration stops when the Gauss-Newton model predicts less than ``tol`` of the cost
-    to gain (:func:`predicted_decrease`), when no damping improves the cost, or after
-    :data:`STALL` steps in a row that each gained less than ``tol`` (a minimum on the
-    stability boundary).
-
     Args:
-        residual: ``residual(theta, jacobian)``: the errors ``e = y − ŷ(θ)`` (1-D), and
-            with ``jacobian=True`` the pair ``(e, ∂ŷ/∂θ)`` (the model output's Jacobian).
+        residual: ``residual(theta, jacobian)``: ``e = y − ŷ(θ)``, or ``(e, ∂ŷ/∂θ)``.
         theta: The start (stable).
         stable: Whether a trial's denominator has every pole inside the unit circle.
         max_iter: Most steps.

@@ -1,8 +1,7 @@
 """
-Monic polynomials in the backward shift q⁻¹: stability tests and root reflection.
+Monic polynomials ``[1, a1, ..., an]`` in q⁻¹: stability tests and root reflection.
 
-A polynomial ``[1, a1, ..., an]`` means ``1 + a1 q⁻¹ + ... + an q⁻ⁿ``; its roots in ``z``
-are those of ``z^n + a1 z^(n-1) + ... + an`` (``numpy.roots`` of the same coefficients).
+Roots in ``z`` are those of ``z^n + a1 z^(n-1) + ... + an`` (``numpy.roots``).
 """
 
 from __future__ import annotations
@@ -13,16 +12,7 @@ __all__ = ['is_stable', 'max_root_radius', 'reflect_unstable']
 
 
 def max_root_radius(poly: np.ndarray) -> float:
-    """
-    Return the largest root magnitude of ``poly`` (0 for a constant).
-
-    Args:
-        poly: Coefficients ``[1, a1, ..., an]``.
-
-    Returns:
-        ``max |z|`` over the roots.
-
-    """
+    """Return the largest root magnitude of ``poly`` (0 for a constant)."""
     poly = np.asarray(poly, dtype=np.float64)
     if poly.size < 2:
         return 0.0
@@ -30,17 +20,7 @@ def max_root_radius(poly: np.ndarray) -> float:
 
 
 def is_stable(poly: np.ndarray, *, margin: float = 0.0) -> bool:
-    """
-    Return whether every root of ``poly`` lies strictly inside ``|z| < 1 - margin``.
-
-    Args:
-        poly: Coefficients ``[1, a1, ..., an]``.
-        margin: Distance from the unit circle that still counts as unstable.
-
-    Returns:
-        True when stable.
-
-    """
+    """Return whether every root of ``poly`` lies strictly inside ``|z| < 1 - margin``."""
     return bool(np.all(np.isfinite(poly))) and max_root_radius(poly) < 1.0 - margin
 
 
@@ -48,15 +28,8 @@ def reflect_unstable(poly: np.ndarray) -> np.ndarray:
     """
     Return ``poly`` with every root outside the unit circle replaced by ``1/conj(root)``.
 
-    Filtering by the result has the same magnitude response shape (up to a constant) and is
-    stable, which is how an iteration that filters by an estimated polynomial stays bounded.
-
-    Args:
-        poly: Coefficients ``[1, a1, ..., an]``.
-
-    Returns:
-        A monic stable polynomial of the same order (roots on the circle are pulled just
-        inside).
+    Same magnitude response shape, stable (roots on the circle pulled just inside): keeps an
+    iteration that filters by an estimated polynomial bounded.
 
     """
     poly = np.asarray(poly, dtype=np.float64)
