@@ -1,26 +1,10 @@
 """
 The noise floor of shot windows, and how far a residual stands above it.
 
-A model's residual over shot windows is judged against the noise measured before the
-triggers, where the sensor is at rest: the pressure noise plus the accelerometer noise
-passed through the model (coloured by its resonance), plus whatever anti-alias filter
-shaped them. :func:`noise_model` fits that noise with an autoregressive model (order by
-BIC, white noise giving order 0), whose autocovariance continued over many lags gives
-
-- the variance of a product ``eᵀx`` of the noise with any fixed signal ``x``
-  (:meth:`NoiseModel.variance_of`, ``Σ_k R(k) C_x(k)``): coloured noise counts with its
-  effective number of samples, slow signals with the noise's low-frequency density;
-- the scatter of a mean square over ``n`` samples (Bartlett's ``2 Σ ρ(k)²/n``);
-- the noise spectrum, against which a residual's spectrum is compared.
-
-:func:`leftover` measures what a residual holds beyond that noise, overall and per time
-segment of the windows (before the trigger, during the pulse, in the ringing after it,
-in the tail), in noise units: energy over ``N σ²``. A residual is *consistent with the
-noise* when its energy and every segment's energy lie within the statistical tolerance of
-the noise plus a practical allowance (:data:`PRACTICAL_SHARE` of the noise energy of the
-windows): structure smaller than that is a detail no model change is worth, however many
-samples make it statistically visible. The leftover also says what it looks like: where its
-excess lies and its spectrum beyond the noise's (a line, slow drift, broadband).
+:func:`noise_model` fits the pre-trigger noise with an AR model (order by BIC) whose
+autocovariance gives the variances of products, mean squares and autocorrelations;
+:func:`leftover` measures a residual's energy beyond it, overall and per segment, in noise
+units. Reasoning and formulas: ``doc/residual.md`` (the noise floor).
 """
 
 from __future__ import annotations
@@ -56,11 +40,7 @@ _WORDS = {'pre_trigger': 'before the trigger', 'pulse': 'during the pulse',
 
 
 def gram(blocks: Sequence[np.ndarray], max_lag: int) -> np.ndarray:
-    """
-    Return ``out[max_lag + j, a, b] = Σ_w Σ_t x_a(t + j) x_b(t)`` for ``|j| <= max_lag``.
-
-    Each block is one window ``(k, n)``; products never cross windows.
-    """
+    """Return ``out[max_lag + j, a, b] = Σ_w Σ_t x_a(t + j) x_b(t)`` over ``(k, n)`` windows."""
     k = blocks[0].shape[0]
     out = np.zeros((2 * max_lag + 1, k, k))
     for x in blocks:
@@ -83,8 +63,7 @@ class NoiseModel:
     The noise before the triggers: an AR model and its autocovariance.
 
     Attributes:
-        acov: Autocovariance per sample of the model, lags 0..m (Bartlett-tapered beyond
-            the AR order, so that every quadratic form built from it is a valid variance).
+        acov: Autocovariance per sample, lags 0..m (Bartlett-tapered beyond the AR order).
         mean_square: Mean square of the samples the model was fitted on, Pa².
         samples: Their number.
         order: AR order chosen by BIC (0: white).
@@ -113,12 +92,7 @@ class NoiseModel:
         return float(max(self.acov[0] + 2 * np.sum(self.acov[1:]), 1e-300))
 
     def covariance(self, blocks: Sequence[np.ndarray]) -> np.ndarray:
-        """
-        Return ``Cov(Xᵀe)`` for noise ``e`` and fixed regressors ``X``.
-
-        ``X`` holds one ``(k, n)`` block per window; the covariance is
-        ``Σ_j R(j) (G(j) + G(−j))`` with ``G`` the lagged Gram matrices of the regressors.
-        """
+        """Return ``Cov(Xᵀe)`` for noise ``e`` and regressors (a ``(k, n)`` block per window)."""
         m = self.acov.size - 1
         g = gram(blocks, m)
         cov = self.acov[0] * g[m]
@@ -134,14 +108,7 @@ class NoiseModel:
         return float(max(self.covariance(blocks)[0, 0], 0.0))
 
     def autocorrelation_variance(self, max_lag: int) -> np.ndarray:
-        """
-        Return ``N·Var r(k)`` for ``k = 0..max_lag``: Bartlett's formula for this noise.
-
-        ``Σ_j [ρ(j)² + ρ(j+k) ρ(j−k) − 4 ρ(k) ρ(j) ρ(j−k) + 2 ρ(k)² ρ(j)²]`` over all
-        lags ``j``, for the sample autocorrelation ``r(k)`` of ``N`` samples. For white
-        noise it is 1 at every lag but 0; beyond the noise's correlation it tends to
-        ``Σ ρ(j)²``, but at short lags of coloured noise it can be far smaller or larger.
-        """
+        """Return ``N·Var r(k)`` for ``k = 0..max_lag``: Bartlett's formula for this noise."""
         rho = self.acov / self.acov[0] if self.acov[0] > 0 else np.ones(1)
         m = rho.size - 1
         span = m + max_lag
@@ -174,18 +141,10 @@ class NoiseModel:
 
 def noise_model(pre: Sequence[np.ndarray], max_lag: int) -> NoiseModel:
     """
-    Fit the noise of pre-trigger stretches with an AR model (order by BIC).
-
-    A parametric spectrum is far steadier than raw lagged products of a few thousand
-    samples (whose sum over L lags wanders by ±√(4L/3N)); white noise gets order 0 and
-    then exactly ``σ² I``. The autocovariance runs to ``4·max_lag`` lags.
-
-    Args:
-        pre: The noise stretches (one per window; products never cross them).
-        max_lag: Lag range of the analysis, samples.
+    Fit the noise of pre-trigger stretches (one per window) with an AR model (order by BIC).
 
     Returns:
-        The noise model (zero variance when the stretches hold no noise).
+        The noise model, autocovariance to ``4·max_lag`` lags (zero variance without noise).
 
     """
     pre = [np.asarray(p, dtype=np.float64) for p in pre if len(p)]
@@ -227,8 +186,7 @@ def segment_bounds(shot, n: int, ringing: int) -> tuple[int, int, int, int, int]
     Return ``(noise stop, onset, pulse end, ringing end, n)`` of a shot's window, in samples.
 
     Args:
-        shot: A :class:`~sensor_comp.core.shots.detection.Shot` (``start``, ``onset``, ``end``,
-            ``baseline_stop``).
+        shot: A shot (``start``, ``onset``, ``end``, ``baseline_stop``).
         n: Window length, samples.
         ringing: Length of the ringing segment after the pulse, samples.
 
@@ -248,10 +206,8 @@ class SegmentExcess:
         name: One of :data:`SEGMENTS`.
         samples: Samples in the segment.
         rms_ratio: The residual's RMS there over the noise σ (NaN when empty).
-        excess: Its energy beyond the noise, in noise energies of all the windows
-            (``(Σ e² − n σ²)/(N σ²)``): the segment's share of the leftover.
-        limit: The largest ``excess`` noise gives there (statistical, plus the practical
-            allowance).
+        excess: Energy beyond the noise, in noise energies of all the windows.
+        limit: The largest ``excess`` noise gives there (statistical plus allowance).
 
     """
 
@@ -276,16 +232,14 @@ class SegmentExcess:
 @dataclass(frozen=True)
 class Leftover:
     """
-    What a residual holds beyond the noise (see the module docs).
+    What a residual holds beyond the noise.
 
     Attributes:
         energy_ratio: Mean square over the noise variance (1 for noise alone).
-        tolerance: The largest ``energy_ratio`` noise gives (statistical, plus the
-            allowance, :data:`PRACTICAL_SHARE` by default).
+        tolerance: The largest ``energy_ratio`` noise gives (statistical plus allowance).
         segments: Excess per time segment.
         shape: What the excess looks like, in words (empty when there is none).
-        line_hz: The frequency holding most of the excess spectrum, Hz (None without
-            excess).
+        line_hz: The frequency holding most of the excess spectrum, Hz, or None.
         slow_share: Share of the excess spectrum below :data:`SLOW_HZ`.
         consistent: The residual is the noise (overall and in every segment).
         noise_variance: The noise variance it is measured against, Pa².
@@ -358,14 +312,9 @@ def leftover(residual: Sequence[np.ndarray], bounds: Sequence[tuple[int, int, in
         bounds: :func:`segment_bounds` of each window.
         noise: The noise model (its variance is the unit).
         fs: Sample rate, Hz.
-        allowance: Excess energy, in noise energies of all the windows, that is no
-            structure worth naming (overall and per segment), besides the statistical
-            tolerance.
-        noise_samples: Samples the noise variance was estimated from (its own scatter
-            widens the tolerances); default ``noise.samples``.
-
-    Returns:
-        The leftover.
+        allowance: Excess energy, in noise energies of all windows, too small to name.
+        noise_samples: Samples the noise variance came from (widens the tolerances);
+            default ``noise.samples``.
 
     """
     sigma2 = noise.variance
