@@ -1,17 +1,9 @@
 """
 CDR codecs of the three message types sensor_comp puts on topics and into bags.
 
-- Signal blocks travel as ``sensor_msgs/msg/Image`` with encoding ``64FC1``, little-endian,
-  ``height`` = channels, ``width`` = samples, ``step`` = 8·width, ``data`` = float64 samples
-  row by row, ``header.stamp`` = acquisition time of the first sample.
-- Stream metadata travel as ``diagnostic_msgs/msg/DiagnosticArray`` on the latched
-  ``stream_info`` topic: one ``DiagnosticStatus`` per stream, ``name`` = relative topic,
-  ``hardware_id`` = frame, ``values`` = ``sample_rate_hz``, ``channels`` (comma separated),
-  ``unit``, then the sensor metadata keys.
-- Text (e.g. a run log) travels as ``std_msgs/msg/String``.
-
-The bytes are the same rclpy produces and accepts (``rclpy.serialization``), so nodes can
-publish and subscribe them raw without deserializing.
+Blocks as ``64FC1`` ``sensor_msgs/msg/Image``, stream metadata as
+``diagnostic_msgs/msg/DiagnosticArray``, text as ``std_msgs/msg/String``; the bytes are
+rclpy's, so nodes publish and take them raw. Layouts: ``doc/streams.md``.
 """
 
 from __future__ import annotations
@@ -73,15 +65,7 @@ def _read_header(r: CdrReader) -> tuple[int, str]:
 
 def encode_block(data: np.ndarray, *, stamp_ns: int, frame_id: str) -> bytes:
     """
-    Serialize a block of samples as a ``64FC1`` ``sensor_msgs/msg/Image``.
-
-    Args:
-        data: ``(channels, samples)`` array, converted to little-endian float64.
-        stamp_ns: Acquisition time of the block's first sample in integer nanoseconds.
-        frame_id: Sensor frame of the samples.
-
-    Returns:
-        The CDR bytes, encapsulation header included.
+    Serialize a ``(channels, samples)`` block as a ``64FC1`` ``sensor_msgs/msg/Image``.
 
     Raises:
         MessageError: On a block that is not 2-D, has no channel, or a stamp that does not
@@ -109,19 +93,13 @@ def encode_block(data: np.ndarray, *, stamp_ns: int, frame_id: str) -> bytes:
 
 def decode_block(cdr: bytes) -> tuple[int, str, np.ndarray]:
     """
-    Decode a ``64FC1`` ``sensor_msgs/msg/Image`` into a block of samples.
+    Decode a ``64FC1`` ``sensor_msgs/msg/Image`` into ``(stamp_ns, frame_id, data)``.
 
-    Args:
-        cdr: CDR bytes of the message, encapsulation header included.
-
-    Returns:
-        ``(stamp_ns, frame_id, data)`` where ``data`` is a ``(height, width)`` float64 array.
-        It is a **read-only view** into ``cdr`` (no copy); copy it to modify it.
+    ``data`` is a ``(height, width)`` float64 **read-only view** into ``cdr`` (no copy).
 
     Raises:
-        MessageError: If the bytes are not a valid Image, or the image is not a block of the
-            stream contract (encoding, byte order, step, data size); the message names the
-            offending field and value.
+        MessageError: If the bytes are not a valid Image or not a block of the stream
+            contract; the message names the offending field and value.
 
     """
     try:
@@ -160,18 +138,11 @@ def _describe(info: StreamInfo) -> str:
 
 def encode_stream_info(infos: Sequence[StreamInfo], *, stamp_ns: int) -> bytes:
     """
-    Serialize stream metadata as a ``diagnostic_msgs/msg/DiagnosticArray``.
-
-    Args:
-        infos: One entry per stream; each becomes a ``DiagnosticStatus`` (level OK).
-        stamp_ns: Header stamp in integer nanoseconds.
-
-    Returns:
-        The CDR bytes, encapsulation header included.
+    Serialize stream metadata (one ``DiagnosticStatus`` per stream) as a ``DiagnosticArray``.
 
     Raises:
-        MessageError: On duplicate stream names, channel names containing commas, metadata
-            keys that clash with the reserved ones, or non-string metadata values.
+        MessageError: On duplicate stream names, commas in channel names, metadata keys that
+            clash with the reserved ones, or non-string metadata values.
 
     """
     w = CdrWriter()
@@ -209,13 +180,7 @@ def encode_stream_info(infos: Sequence[StreamInfo], *, stamp_ns: int) -> bytes:
 
 def decode_stream_info(cdr: bytes) -> list[StreamInfo]:
     """
-    Decode a ``diagnostic_msgs/msg/DiagnosticArray`` of stream metadata.
-
-    Args:
-        cdr: CDR bytes of the message, encapsulation header included.
-
-    Returns:
-        One :class:`~sensor_comp.streams.StreamInfo` per ``DiagnosticStatus``, in order.
+    Decode a ``diagnostic_msgs/msg/DiagnosticArray`` into one ``StreamInfo`` per status.
 
     Raises:
         MessageError: If the bytes are not a DiagnosticArray or a status lacks
