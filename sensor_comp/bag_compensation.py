@@ -32,16 +32,9 @@ def compensate_bag(model, input_path: str, output_path: str, *,
     """
     Copy a bag and add the model's ``pressure/compensated`` and ``pressure/induced``.
 
-    The model's disturbances (mains hum) are fitted on the whole bag in a first pass over
-    its raw blocks and removed from the first sample on
-    (:func:`~sensor_comp.core.compensation.streaming.fit_recording_disturbances`), as the diagnosis
-    credits them; no tracker has to settle.
-
-    The output is checked first (:func:`~sensor_comp.files.check_output`) and written
-    atomically: a uniquely named temporary file, renamed when complete and removed when the
-    input turns out to be bad half-way or the run is interrupted. Blocks are paired by stamp
-    and compensated in time order with state carried across blocks; a stamp gap restarts
-    the filter from rest.
+    Two passes: disturbances fitted on the whole bag, then blocks paired and compensated in
+    time order with carried state (a stamp gap restarts from rest). The output is checked
+    first and written atomically (temporary file renamed when complete).
 
     Args:
         model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``).
@@ -51,18 +44,13 @@ def compensate_bag(model, input_path: str, output_path: str, *,
         force: Replace an existing output file of another kind (never the input).
 
     Returns:
-        The sample accounting (see
-        :class:`~sensor_comp.core.compensation.streaming.StreamCounters`) plus ``copied_messages``,
-        ``first_unpaired`` (per topic, the first block that found no partner, or None) and
-        ``disturbance_warnings`` (the model's disturbances the recording is too short to remove, as
-        sentences).
+        The sample accounting (``StreamCounters``) plus ``copied_messages``,
+        ``first_unpaired`` (per topic, or None) and ``disturbance_warnings`` (sentences).
 
     Raises:
-        SensorCompError: On a bag cut short, without both raw streams or their
-            description, streams of different rates, a model/bag rate mismatch, blocks
-            that overlap, are out of order or have the wrong shape, pressure and
-            acceleration blocks of which none pair, or an output refused by
-            :func:`~sensor_comp.files.check_output` (e.g. the input itself).
+        SensorCompError: On a bag cut short or without both described raw streams of one
+            rate, a model/bag rate mismatch, overlapping, out-of-order or misshapen blocks,
+            no pair at all, or an output refused by ``check_output``.
 
     """
     check_output(output_path, inputs=(input_path,), kind='bag', force=force)

@@ -74,14 +74,10 @@ class ModelError(SensorCompError, ValueError):
 def sensitivity_problem(mpa_per_g: float, *, what: str = 'the static sensitivity'
                         ) -> tuple[bool, str] | None:
     """
-    Return ``(fatal, why)`` when a static sensitivity looks like a unit mistake, else None.
+    Return ``(fatal, why)`` when a static sensitivity (MPa/g) looks like a unit mistake.
 
-    Outside :data:`PLAUSIBLE_MPA_PER_G` it is fatal, outside :data:`TYPICAL_MPA_PER_G` a
-    warning; the message names the unit mistakes that would explain it.
-
-    Args:
-        mpa_per_g: Peak pressure over peak acceleration of shots, or a model's static gain.
-        what: What it is, to begin the message.
+    Fatal outside :data:`PLAUSIBLE_MPA_PER_G`, a warning outside :data:`TYPICAL_MPA_PER_G`;
+    None when plausible. ``what`` begins the message.
 
     """
     size = abs(mpa_per_g)
@@ -294,17 +290,7 @@ class Model:
                       provenance: Iterable[Source] = (), effects: Iterable[Mapping] = (),
                       created: str | None = None) -> Model:
         """
-        Build a model from an identification result.
-
-        Args:
-            estimate: The estimate.
-            fs: Sample rate of the data it was estimated from, in Hz.
-            inputs: One name per estimate input.
-            charge_sensitivity_pC_per_MPa: The sensor's charge sensitivity, if known.
-            fit: Extra statistics, merged over :meth:`Estimate.statistics`.
-            provenance: Source recordings.
-            effects: Effect descriptions.
-            created: ISO time; now (UTC) when None.
+        Build a model from an identification result (``fit`` merged over its statistics).
 
         Raises:
             ModelError: When the inputs do not match the estimate or a value is bad.
@@ -367,9 +353,10 @@ class Model:
 
     def continuous(self) -> ContinuousView:
         """
-        Return the continuous-time view of the input-0 path (poles map by ``s = fs · ln z``).
+        Return the continuous-time view of the input-0 path (``s = fs · ln z``).
 
         Negative real poles have no continuous counterpart and are left out.
+
         """
         poles = np.roots(self.a) if self.a.size > 1 else np.empty(0)
         pairs = [z for z in poles if z.imag > 1e-12]
@@ -515,8 +502,8 @@ def load(path: str | os.PathLike) -> Model:
     Read a model file written by :meth:`Model.save`; its continuous view is recomputed.
 
     Raises:
-        ModelError: If the file cannot be read or parsed, has another schema or version, lacks
-            a key, or has a wrong type, a non-finite number or inconsistent orders.
+        ModelError: If the file cannot be read or parsed, or is not a valid model file of
+            this schema and version (see ``doc/model-file.md``).
 
     """
     where = f'model file {os.fspath(path)!r}'
@@ -652,12 +639,12 @@ def frequency_response(model: Model, *, n: int = 1024,
 
     Args:
         model: The model.
-        n: Number of log-spaced frequencies from ``fs·1e-5`` to ``fs/2`` (without ``f_hz``).
+        n: Log-spaced frequencies from ``fs·1e-5`` to ``fs/2`` (when ``f_hz`` is None).
         f_hz: Frequencies in Hz to evaluate instead.
 
     Returns:
-        ``(f_hz, h)``: frequencies ``(n,)`` and complex responses ``(n_inputs, n)`` in Pa per
-        input unit, including the delay ``nk``.
+        ``(f_hz, h)``: ``(n,)`` and complex ``(n_inputs, n)`` in Pa per input unit (delay
+        included).
 
     """
     f = (np.geomspace(model.fs * 1e-5, model.fs / 2, n) if f_hz is None
@@ -669,10 +656,7 @@ def frequency_response(model: Model, *, n: int = 1024,
 
 def step_response(model: Model, *, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the response to a unit step on each input, from rest (the paper's Fig. 14).
-
-    Returns:
-        ``(t, y)``: times ``(n,)`` in s and responses ``(n_inputs, n)`` in Pa per input unit.
+    Return ``(t, y)``: the response to a unit step on each input, from rest (Fig. 14).
 
     Raises:
         ModelError: If ``duration_s`` is not positive.
