@@ -34,7 +34,7 @@ def _signed_peak(x: np.ndarray) -> float:
 @dataclass(frozen=True)
 class ShotComparison:
     """
-    One model against one shot window (times in s since the recording start; pressures in Pa).
+    One model against one shot window (times in s from the recording start).
 
     Args:
         index: The shot's index.
@@ -47,8 +47,8 @@ class ShotComparison:
         peak_error_percent: The peak error in % of ``|peak_mpa|``.
         peak_residual_percent: Peak ``|y − ŷ|`` in % of peak ``|y|``.
         t: Sample times (not in :meth:`to_dict`).
-        measured: Measured pressure, baseline removed (denoised if asked).
-        simulated: Simulated induced pressure (plus the model's disturbances, if any).
+        measured: Measured pressure in Pa, baseline removed (denoised if asked).
+        simulated: Simulated induced pressure in Pa (plus the model's disturbances).
 
     """
 
@@ -84,7 +84,7 @@ class Comparison:
         fit_percent: Fit over all windows together.
         peak_residual_percent: Worst peak residual of the shots.
         shots: Per-shot numbers and traces.
-        denoised: Whether the measured pressure was denoised before comparing.
+        denoised: Whether the measured pressure was denoised first.
 
     """
 
@@ -115,24 +115,19 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
             labels: Sequence[str] | None = None,
             denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Comparison]:
     """
-    Compare several models with the measured pressure of the same shots.
+    Compare several models (or one) with the measured pressure of the same shots.
 
     Args:
-        models: Models with ``b``, ``a``, ``nk``, ``inputs`` and ``fs`` (or a single one).
+        models: Models with ``b``, ``a``, ``nk``, ``inputs`` and ``fs``.
         recording: Pressure and acceleration.
-        shots: The shots to compare on (say which: calibration or validation).
-        labels: One name per model; default the model's ``label``/``name``/``structure``
-            attribute or ``'model i'``.
-        denoise: Applied once to each measured window before comparing, e.g. an
-            :class:`~sensor_comp.core.identification.denoise.EmdDenoiser`.
-
-    Returns:
-        One :class:`Comparison` per model, in order.
+        shots: The shots to compare on (calibration or validation).
+        labels: One name per model; default its ``label``/``name``/``structure``.
+        denoise: Applied once to each measured window first (e.g. an ``EmdDenoiser``).
 
     Raises:
-        ShotError: With no shot, a window with missing samples, or labels that do not match.
+        ShotError: With no shot, a window with missing samples, or mismatched labels.
         CompensationError: When a model's sample rate differs from the recording's.
-        UnstableModelError: When a model is unstable (its simulation diverges).
+        UnstableModelError: When a model is unstable.
 
     """
     if hasattr(models, 'a'):

@@ -1,19 +1,11 @@
 """
 System identification of the acceleration-induced pressure (pure numpy/scipy).
 
-The sensor's spurious pressure ``y`` (Pa) follows the axial acceleration ``u`` (m/s²) through
-second-order mechanics; extra "effect" inputs pass through the same mechanics, so every
-estimator is multi-input single-output with one common denominator. Data come as several
-shot windows (:class:`Segment`), each starting at rest and treated on its own.
-
-- :mod:`.data`: :class:`Segment`, :class:`IdentError`.
-- :mod:`.arx`: :func:`fit_arx` (least squares; biased by output noise at high rates).
-- :mod:`.armax`: :func:`fit_armax_gls` (the seed paper's generalised least squares) and
-  :func:`fit_armax_els` (extended least squares).
-- :mod:`.oe`: :func:`fit_oe` (output error: Steiglitz–McBride + Levenberg–Marquardt).
-- :mod:`.selection`: :func:`select_structure`, :func:`estimate_delay`.
-- :mod:`.simulate`, :mod:`.metrics`: :func:`simulate_output`, :func:`fit_percent`.
-- :mod:`.estimate`: :class:`Estimate`, the common result.
+Multi-input single-output estimators with one common denominator, on shot windows
+(:class:`Segment`) each starting at rest: :func:`fit_arx`, :func:`fit_armax_gls`,
+:func:`fit_armax_els`, :func:`fit_oe`, :func:`select_structure`, :func:`estimate_delay`,
+:func:`simulate_output`, :func:`fit_percent`; all return an :class:`Estimate`. See
+``doc/estimators.md``.
 """
 
 from .armax import fit_armax_els, fit_armax_gls

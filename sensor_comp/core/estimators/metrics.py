@@ -22,17 +22,8 @@ def fit_percent(y: np.ndarray | Sequence[np.ndarray],
     """
     Return the normalised fit ``100·(1 − ‖y − ŷ‖/‖y − ȳ‖)`` in percent.
 
-    Over several segments the norms are those of the concatenated segments, and ``ȳ`` is
-    each segment's own mean (so an offset between shots does not inflate the fit). 100 % is
-    a perfect match, 0 % no better than the mean, negative worse than the mean. The value
-    depends on how much quiet pre- and post-trigger data the windows hold.
-
-    Args:
-        y: Measured output, one ``(n,)`` array or one array per segment.
-        yhat: Simulated output with the same shapes.
-
-    Returns:
-        The fit in percent.
+    ``y`` and ``yhat`` are one array or one per segment; norms are over the concatenation and
+    ``ȳ`` is each segment's own mean (an offset between shots does not inflate the fit).
 
     Raises:
         IdentError: If the shapes differ, a value is not finite or ``y`` is constant.

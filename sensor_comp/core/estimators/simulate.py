@@ -15,12 +15,7 @@ __all__ = ['InputOutputModel', 'simulate_output']
 
 
 class InputOutputModel(Protocol):
-    """
-    Anything with an input path ``b`` (``(n_inputs, nb)``), ``a`` and delay ``nk``.
-
-    Both :class:`~sensor_comp.core.estimators.estimate.Estimate` and
-    :class:`~sensor_comp.core.identification.model.Model` qualify.
-    """
+    """Anything with ``b`` ``(n_inputs, nb)``, ``a`` and ``nk``: ``Estimate``, ``Model``."""
 
     a: np.ndarray
     b: np.ndarray
@@ -49,13 +44,8 @@ def simulate_output(model: InputOutputModel,
     """
     Return the simulated output of ``model`` for each input record, from a zero state.
 
-    Args:
-        model: An :class:`Estimate` or :class:`Model` (anything with ``a``, ``b``, ``nk``).
-        inputs: One record (an ``(n_inputs, n)`` or ``(n,)`` array, or a
-            :class:`Segment`), or an iterable of records (one per segment).
-
-    Returns:
-        ``(n,)`` output for one record; a list of them for several.
+    ``inputs`` is one record (``(n_inputs, n)``, ``(n,)`` or a :class:`Segment`) or several;
+    returns one ``(n,)`` output, or a list of them.
 
     Raises:
         IdentError: When a record's input count does not match the model or a sample is not

@@ -1,11 +1,8 @@
 """
 One self-contained HTML report of the diagnosis loop, read top to bottom.
 
-Sections: the shots, the overlay of measured and modelled pressure, the residual, the
-residual tests (whiteness, independence), where the model fails (time segments, spectrum,
-amplitude law, probes), the diagnosis (verdict and ranking of physical effects) and, when
-an extended model is given, before/after. Every figure is embedded as a base64 PNG, so the
-file can be mailed or archived on its own.
+Shots, overlay, residual and its tests, where the model fails, the diagnosis and an
+optional before/after; figures embedded as base64 PNG so the file stands alone.
 """
 
 from __future__ import annotations
@@ -95,13 +92,9 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
         shots: The shots compared (validation shots).
         comparisons: The base model (first) and any others against those shots.
         analysis: Residual analysis of the base model on those shots.
-        diagnosis: The diagnosis as a JSON-ready mapping with ``verdict`` and ``ranking``
-            (``Diagnosis.to_dict()``), or None.
+        diagnosis: ``Diagnosis.to_dict()`` (``verdict``, ``ranking``), or None.
         after: Comparisons of extended models (before/after section), base first.
         sources: Files the report is about, listed at the top.
-
-    Returns:
-        The HTML text.
 
     """
     parts = [f'<!DOCTYPE html><html><head><meta charset="utf-8"><title>{html.escape(title)}'
@@ -145,13 +138,11 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
 
 def verdict_html(diagnosis: Mapping) -> str:
     """
-    Return the verdict paragraph of the report: the verdict, its explanation, the next step.
+    Return the verdict paragraph: verdict, explanation and next step, coloured.
 
-    Every verdict of :data:`~sensor_comp.core.diagnosis.diagnose.VERDICTS` has its colour
-    (:data:`~sensor_comp.core.diagnosis.diagnose.ATTENTION`: green only for ``adequate``; amber for
-    a ``partly_explained`` named effect, red for the others) and its next step
-    (:data:`~sensor_comp.core.diagnosis.diagnose.NEXT_STEP`); an unknown one is shown as such, in
-    red.
+    Green only for ``adequate``, amber for ``partly_explained``, red for the others and for
+    a verdict this version does not know.
+
     """
     verdict = str(diagnosis.get('verdict'))
     if verdict not in VERDICTS:

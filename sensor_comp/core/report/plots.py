@@ -95,12 +95,8 @@ def residual_figure(times: Sequence[np.ndarray], residuals: Mapping[str, Sequenc
     """
     Draw the pressure left after compensation per shot (Fig. 15).
 
-    Args:
-        times: Per shot, sample times in s.
-        residuals: Label → per shot compensated pressure (measured − model) in Pa.
-        measured: Per shot, the uncompensated pressure, drawn thin and first for scale.
-        titles: One panel title per shot; default ``'shot i'``.
-        path: Write a PNG here.
+    ``residuals`` maps labels to per-shot compensated pressure (Pa); ``measured`` (the
+    uncompensated pressure) is drawn thin and first for scale.
 
     Raises:
         PlotError: When the traces do not match the time axes.

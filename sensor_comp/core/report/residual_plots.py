@@ -42,8 +42,8 @@ def whiteness_figure(analysis: ResidualAnalysis, *,
     """
     Draw the residual autocorrelation for lags 1..L with its bands.
 
-    Lines in order: the residual's autocorrelation, the per-lag and family-wise 99 % bands, the
-    pre-trigger noise's autocorrelation.
+    Lines in order: residual, per-lag and family-wise 99 % bands, pre-trigger noise.
+
     """
     fig, (ax,) = _figure(1)
     w = analysis.whiteness
@@ -66,10 +66,10 @@ def whiteness_figure(analysis: ResidualAnalysis, *,
 def cross_correlation_figure(analysis: ResidualAnalysis, *,
                              path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw the residual–acceleration cross-correlations, one panel per channel.
+    Draw the residual–acceleration cross-correlations, panels ``a_z``, ``a_x``, ``a_y``.
 
-    Panels ``a_z``, ``a_x``, ``a_y`` (positive lags: residual after the acceleration), each
-    with the correlation first, then its Bartlett bands.
+    Each: the correlation (positive lags: residual after acceleration), then its bands.
+
     """
     names = list(analysis.cross)
     fig, axes = _figure(len(names), rows_of=len(names))
@@ -88,9 +88,7 @@ def segments_figure(analysis: ResidualAnalysis, *,
     """
     Draw the residual of every shot window, one panel per shot, coloured by segment.
 
-    One line per non-empty segment in the order of
-    :data:`~sensor_comp.core.diagnosis.residual.SEGMENTS` (labelled with name and energy share),
-    then the ±3σ pre-trigger noise lines.
+    Lines: one per non-empty segment in :data:`SEGMENTS` order, then the ±3σ noise lines.
 
     Raises:
         PlotError: When the analysis holds no shot.
@@ -124,12 +122,7 @@ def segments_figure(analysis: ResidualAnalysis, *,
 
 def spectrum_figure(analysis: ResidualAnalysis, *,
                     path: str | os.PathLike | None = None) -> Figure:
-    """
-    Draw the pooled residual spectrum (Pa²/Hz, log) against kHz with its significant peaks.
-
-    Also its median level, the peak threshold, the peaks (red: no model resonance there,
-    green: the model resonates there) and the model's resonances (vertical lines).
-    """
+    """Draw the pooled residual spectrum (Pa²/Hz) against kHz with its peaks and resonances."""
     sp = analysis.spectrum
     fig, (ax,) = _figure(1)
     khz = sp.f / 1e3
@@ -154,12 +147,7 @@ def spectrum_figure(analysis: ResidualAnalysis, *,
 
 def amplitude_figure(analysis: ResidualAnalysis, *,
                      path: str | os.PathLike | None = None) -> Figure:
-    """
-    Draw the excess residual of each shot against its peak acceleration, log-log.
-
-    The fitted shots first (markers), then the fitted power law if any; shots whose residual
-    did not rise above the noise are listed in the title.
-    """
+    """Draw each shot's excess residual against its peak acceleration (log-log), and the law."""
     trend = analysis.amplitude
     fig, (ax,) = _figure(1)
     g = np.array([abs(v) for v, u in zip(trend.peak_g, trend.used) if u])
@@ -187,10 +175,10 @@ def amplitude_figure(analysis: ResidualAnalysis, *,
 def probes_figure(analysis: ResidualAnalysis, *,
                   path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw the share of the residual energy each probe explains, most explaining on top.
+    Draw the residual-energy share each probe explains, most explaining on top.
 
-    Two bar containers: the fraction with a gain correction (red: significant), then the probe
-    alone.
+    Bars: with a gain correction (red: significant), then the probe alone.
+
     """
     names = sorted(analysis.probes, key=lambda n: analysis.probes[n].fraction)
     probes = [analysis.probes[n] for n in names]
