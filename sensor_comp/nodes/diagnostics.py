@@ -25,12 +25,8 @@ def diagnostics(node: Node, *, name: str, level: bytes, message: str,
     """
     Return a ``DiagnosticArray`` with one status of this node (its name the hardware id).
 
-    Args:
-        node: The node.
-        name: Status name, e.g. ``'sensor_comp: compensation'``.
-        level: ``DiagnosticStatus.OK``, ``WARN`` or ``ERROR``.
-        message: One human line.
-        values: Key/value pairs; values are written with ``str`` (floats with ``repr``).
+    ``level`` is ``DiagnosticStatus.OK``, ``WARN`` or ``ERROR``; ``values`` are written with
+    ``str`` (floats with ``repr``).
 
     """
     pairs = [KeyValue(key=key, value=repr(value) if isinstance(value, float) else str(value))

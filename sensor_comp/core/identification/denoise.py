@@ -85,13 +85,9 @@ REFERENCE_SIFTING = Sifting(options=(('svar_thr', 0.0),), log2_imf1=-0.61, log2_
 def white_noise_energy(n_imfs: int, n_samples: int, sigma1: float, *,
                        sifting: Sifting = SIFTING) -> np.ndarray:
     """
-    Return the energy (sum of squares) expected in each of ``n_imfs`` IMFs of white noise.
+    Return the energy expected in each of ``n_imfs`` IMFs of white noise of ``n_samples``.
 
-    Args:
-        n_imfs: Number of IMFs.
-        n_samples: Window length.
-        sigma1: Robust scale of IMF1 (``median|IMF₁| / 0.6745``).
-        sifting: The sifting the IMFs come from.
+    ``sigma1`` is IMF 1's robust scale, ``median|IMF₁| / 0.6745``.
 
     """
     k = np.arange(1, n_imfs + 1, dtype=float)
@@ -156,13 +152,10 @@ def _check(x: np.ndarray, factor: float, max_samples: int) -> np.ndarray:
 def emd_denoise(x: np.ndarray, *, factor: float = DEFAULT_FACTOR,
                 max_samples: int = MAX_SAMPLES, sifting: Sifting = SIFTING) -> DenoiseResult:
     """
-    Denoise one window by EMD partial reconstruction.
+    Denoise one ``(n,)`` window by EMD partial reconstruction.
 
-    Args:
-        x: ``(n,)`` window, e.g. pressure in Pa with its baseline removed.
-        factor: Energy multiple of the white-noise model that marks the first kept IMF.
-        max_samples: Refuse longer windows (cost).
-        sifting: PyEMD settings and their white-noise model.
+    ``factor`` is the multiple of the white-noise energy that marks the first kept IMF;
+    windows longer than ``max_samples`` are refused (cost).
 
     Raises:
         DenoiseError: On a non-1-D or non-finite window, or one longer than ``max_samples``.
@@ -207,10 +200,8 @@ def pool_size(total_samples: int, processes: int | None = None) -> int:
     """
     Return how many processes should share windows of ``total_samples`` (1: this one only).
 
-    Args:
-        total_samples: Samples in all the windows.
-        processes: Wanted processes; default ``SENSOR_COMP_EMD_PROCESSES`` or
-            :data:`PROCESSES`, within the cores the load average leaves free.
+    ``processes`` defaults to ``SENSOR_COMP_EMD_PROCESSES`` or :data:`PROCESSES`, within the
+    cores the load average leaves free.
 
     """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
@@ -235,14 +226,8 @@ def denoise_windows(windows: Sequence[np.ndarray], *, factor: float = DEFAULT_FA
     """
     Denoise many windows, in parallel processes when worth it (``doc/denoising.md``).
 
-    Args:
-        windows: ``(n,)`` windows.
-        factor: As in :func:`emd_denoise`; so are ``max_samples`` and ``sifting``.
-        processes: Processes sharing the windows (see :func:`pool_size`).
-        done: Called once per window denoised (a progress bar), in this thread.
-
-    Returns:
-        One result per window, in order, each as :func:`emd_denoise` gives it.
+    Options as :func:`emd_denoise`; ``processes`` as :func:`pool_size`; ``done`` is called
+    once per window denoised, in this thread. Returns one result per window, in order.
 
     Raises:
         DenoiseError: For the first bad window (in order).
@@ -340,10 +325,10 @@ class _Helper:
 
 class EmdDenoiser:
     """
-    A callable for :func:`sensor_comp.core.shots.detection.segments` that keeps its results.
+    A callable for :func:`~sensor_comp.core.shots.detection.segments` that keeps its results.
 
-    Args are those of :func:`emd_denoise`; ``results`` holds one :class:`DenoiseResult` per
-    window, in call order (for reports).
+    Args as :func:`emd_denoise`; ``results`` holds one :class:`DenoiseResult` per window.
+
     """
 
     def __init__(self, *, factor: float = DEFAULT_FACTOR, max_samples: int = MAX_SAMPLES,

@@ -85,12 +85,10 @@ class LiveShots:
     def add(self, stamp: int, block: np.ndarray, missing: int
             ) -> list[tuple[ShotWindow, str | None]]:
         """
-        Append a block pair; return the shots now complete, each with a reason to skip or None.
+        Append a ``(4, w)`` block pair (pressure row, then acceleration rows).
 
-        Args:
-            stamp: Stamp of the block's first sample.
-            block: ``(4, w)``: the pressure row, then the acceleration rows.
-            missing: Samples missing before the block (a stamp gap).
+        ``missing`` samples before it (a stamp gap) become NaN. Returns the shots now complete,
+        each with a reason to skip it or None.
 
         """
         if missing:
@@ -128,11 +126,7 @@ class LiveShots:
         return found
 
     def _may_hold_shot(self, fresh_axial: np.ndarray) -> bool:
-        """
-        Return whether detection must run on this scan (it is skipped when it cannot find news).
-
-        Why and the thresholds: ``doc/nodes.md``, live shot detection.
-        """
+        """Return whether detection must run on this scan (see ``doc/nodes.md``)."""
         if self._quiet is None:
             return True
         median, level = self._quiet
@@ -193,8 +187,7 @@ def provenance_shots(model: Model, recording: Recording) -> tuple[Shot, ...]:
     """
     Return the shots a live model was fitted and validated on, in a recording's samples.
 
-    Running :func:`~sensor_comp.core.identification.identify.identify` on them offline reproduces
-    the model.
+    ``identify`` run on them offline reproduces the model.
 
     Raises:
         ShotError: If the model has no live provenance, or a window lies outside the

@@ -140,11 +140,7 @@ def needs_rate(names: Sequence[str]) -> bool:
 
 
 def fractional_delay(delay: float) -> np.ndarray:
-    """
-    Return FIR taps delaying by ``delay`` samples (>= 0): ``y = lfilter(taps, 1, x)``.
-
-    Whole samples become leading zeros, the rest a centred Lagrange interpolator.
-    """
+    """Return FIR taps delaying by ``delay >= 0`` samples (whole samples, then Lagrange)."""
     n = LAGRANGE_ORDER
     start = max(0, math.floor(delay - (n - 1) / 2))
     d = delay - start
@@ -235,14 +231,10 @@ def _leaky_peak(tau_ms: float, fs: float):
 def input_channels(names: Sequence[str], acceleration: np.ndarray,
                    state: MutableMapping[str, object], *, fs: float | None = None) -> np.ndarray:
     """
-    Return the ``(len(names), w)`` model input rows for one acceleration block.
+    Return the ``(len(names), w)`` model input rows for one ``(3, w)`` acceleration block.
 
-    Args:
-        names: Input names, e.g. ``('a_z',)``.
-        acceleration: ``(3, w)`` block in m/s²; ``w`` may be 0 or 1.
-        state: Carried across the blocks of one stream, updated in place; start each stream
-            or window with a fresh empty dict.
-        fs: Sample rate in Hz; needed by derivatives, time constants and delays.
+    ``state`` is carried across the blocks of one stream and updated in place (a fresh dict
+    per stream or window); ``fs`` is needed by derivatives, time constants and delays.
 
     Raises:
         InputError: On an unknown name, a block that is not ``(3, w)``, or an input that

@@ -49,12 +49,9 @@ class Window:
 def shot_windows(sources: Sequence, *,
                  denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Window]:
     """
-    Return the windows of every shot of ``sources``.
+    Return the windows of every shot of ``sources`` (``recording`` and ``shots`` each).
 
-    Args:
-        sources: Objects with ``recording`` and ``shots`` (e.g.
-            :class:`~sensor_comp.core.identification.identify.ShotSource`).
-        denoise: Applied to each window's pressure (as in :func:`segments`).
+    ``denoise`` is applied to each window's pressure (as in ``segments``).
 
     Raises:
         ShotError: When a window holds missing samples.
@@ -73,10 +70,11 @@ def shot_windows(sources: Sequence, *,
 
 def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
     """
-    Return the frequency in kHz of the strongest ringing after the pulses (None: no pulse end).
+    Return the kHz of the strongest ringing after the pulses (None: no pulse end).
 
-    The peak of the pooled spectrum over :data:`EARLY_S` after each pulse (quadratic trend
-    removed, Hann window, zero-padded), at two cycles or more in that time.
+    Peak of the pooled spectrum over :data:`EARLY_S` after each pulse (quadratic trend
+    removed, Hann, zero-padded), at two cycles or more in that time.
+
     """
     parts = [w.y[w.end:w.end + round(EARLY_S * fs)] for w in windows
              if w.end is not None and w.y.size - w.end >= 16]
