@@ -16,7 +16,7 @@ import numpy as np
 
 from .data import as_segments, Segment
 from .estimate import Estimate
-from .least_squares import check_orders, lagged_regression, solve_least_squares
+from .least_squares import check_orders, solve_lagged
 
 __all__ = ['fit_arx']
 
@@ -45,9 +45,8 @@ def fit_arx(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int = 2,
     """
     check_orders(na=na, nb=nb, nk=nk)
     segs = as_segments(segments)
-    phi, target, names = lagged_regression([s.y for s in segs], [s.u for s in segs],
-                                           na=na, nb=nb, nk=nk)
-    ls = solve_least_squares(phi, target, names=names)
+    # Block by block: the regressors of millions of calibration samples are never held whole.
+    ls, _ = solve_lagged([s.y for s in segs], [s.u for s in segs], na=na, nb=nb, nk=nk)
     theta = ls.theta
     return Estimate(
         structure='arx', a=np.concatenate([[1.0], theta[:na]]),

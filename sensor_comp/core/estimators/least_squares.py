@@ -4,12 +4,14 @@ Linear least squares over several segments: lagged regressors and a scaled QR so
 Regression rows start only once every lagged sample lies inside its segment, so no row mixes
 two segments and nothing is assumed about the time before a segment. At 1 MS/s the columns
 differ by many orders of magnitude (pressure lags ~1e5 Pa, acceleration lags ~1e4 m/s² with
-coefficients ~1e-5): columns are scaled to unit norm before the QR factorisation.
+coefficients ~1e-5): columns are scaled to unit norm before the QR factorisation. The solves
+run over blocks of rows (:func:`solve_blocks`), so only the ``(p, p)`` factors and one
+block are held beside the data: millions of rows need no ``Q`` of their size.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,13 +19,19 @@ from scipy import linalg, signal
 
 from .data import IdentError
 
-__all__ = ['RANK_TOLERANCE', 'LeastSquares', 'check_orders', 'delayed_numerator', 'equation_error',
-           'filter_each', 'lagged_regression', 'minimum_norm', 'normal_equations', 'scaled_qr',
-           'solve_least_squares', 'triangular_inverse']
+__all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'LeastSquares', 'check_orders',
+           'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
+           'lagged_regression', 'minimum_norm', 'normal_equations', 'scaled_qr', 'solve_blocks',
+           'solve_lagged', 'solve_least_squares', 'triangular_inverse']
 
 #: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
 #: still counts as full rank (below it a column lies within 1e-10 of the others' span).
 RANK_TOLERANCE = 1e-10
+#: Largest ``‖Q₁ᵀQ₁ − I‖₂`` after the first CholeskyQR pass for which the second one is
+#: trusted (the loss grows as the condition squared: 0.5 is a condition of ~1e8).
+ORTHOGONALITY = 0.5
+#: Rows per block of the block-wise solves (a few MB of regressors per block).
+BLOCK_ROWS = 1 << 16
 
 
 def check_orders(**orders: int) -> None:
@@ -89,6 +97,32 @@ def equation_error(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, a: np.
     return out
 
 
+def _lag_layout(ys, us, na: int, nb: int, nk: int, nc: int) -> tuple[int, list[str], list[int]]:
+    """Return the first row ``k0``, the column names and the segments long enough for a row."""
+    n_inputs = us[0].shape[0]
+    k0 = max(na, nk + nb - 1, nc)
+    names = ([f'y(k-{j})' for j in range(1, na + 1)]
+             + [f'u{i}(k-{nk + j})' for i in range(n_inputs) for j in range(nb)]
+             + [f'e(k-{j})' for j in range(1, nc + 1)])
+    used = [index for index, y in enumerate(ys) if y.size > k0]
+    rows = sum(ys[index].size - k0 for index in used)
+    if rows <= len(names):
+        raise IdentError(f'the segments give {rows} regression rows for {len(names)} '
+                         f'parameters (orders na={na} nb={nb} nk={nk} nc={nc}); use longer '
+                         f'segments or lower orders')
+    return k0, names, used
+
+
+def _fill_rows(out: np.ndarray, y: np.ndarray, u: np.ndarray, e, *, first: int, stop: int,
+               na: int, nb: int, nk: int, nc: int) -> None:
+    """Write the regressors of rows ``k = first … stop−1`` of one segment into ``out``."""
+    sources = [-y[first - j:stop - j] for j in range(1, na + 1)]
+    sources += [u[i, first - nk - j:stop - nk - j] for i in range(u.shape[0]) for j in range(nb)]
+    sources += [e[first - j:stop - j] for j in range(1, nc + 1)]
+    for column, values in enumerate(sources):
+        out[:, column] = values
+
+
 def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int,
                       nb: int, nk: int, es: Sequence[np.ndarray] | None = None,
                       nc: int = 0) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -115,30 +149,53 @@ def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na:
         IdentError: If the segments hold fewer rows than parameters.
 
     """
-    n_inputs = us[0].shape[0]
-    k0 = max(na, nk + nb - 1, nc)
-    names = ([f'y(k-{j})' for j in range(1, na + 1)]
-             + [f'u{i}(k-{nk + j})' for i in range(n_inputs) for j in range(nb)]
-             + [f'e(k-{j})' for j in range(1, nc + 1)])
-    used = [index for index, y in enumerate(ys) if y.size > k0]
+    k0, names, used = _lag_layout(ys, us, na, nb, nk, nc)
     rows = sum(ys[index].size - k0 for index in used)
-    if rows <= len(names):
-        raise IdentError(f'the segments give {rows} regression rows for {len(names)} '
-                         f'parameters (orders na={na} nb={nb} nk={nk} nc={nc}); use longer '
-                         f'segments or lower orders')
     # Column by column into one Fortran-ordered array: no per-segment blocks to stack.
     phi = np.empty((rows, len(names)), order='F')
     start = 0
     for index in used:
-        y, u, n = ys[index], us[index], ys[index].size
-        stop = start + n - k0
-        sources = [-y[k0 - j:n - j] for j in range(1, na + 1)]
-        sources += [u[i, k0 - nk - j:n - nk - j] for i in range(n_inputs) for j in range(nb)]
-        sources += [es[index][k0 - j:n - j] for j in range(1, nc + 1)]
-        for column, values in enumerate(sources):
-            phi[start:stop, column] = values
+        stop = start + ys[index].size - k0
+        _fill_rows(phi[start:stop], ys[index], us[index], None if es is None else es[index],
+                   first=k0, stop=ys[index].size, na=na, nb=nb, nk=nk, nc=nc)
         start = stop
     return phi, np.concatenate([ys[index][k0:] for index in used]), names
+
+
+def lagged_blocks(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int, nb: int,
+                  nk: int, rows: int = BLOCK_ROWS
+                  ) -> tuple[Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], list[str]]:
+    """
+    Return the regression of :func:`lagged_regression` as blocks of at most ``rows`` rows.
+
+    Returns:
+        ``(blocks, names)``: ``blocks()`` yields ``(phi, target)`` blocks, in the row order
+        of :func:`lagged_regression`, each built when reached (call it once per pass).
+
+    Raises:
+        IdentError: If the segments hold fewer rows than parameters.
+
+    """
+    k0, names, used = _lag_layout(ys, us, na, nb, nk, 0)
+
+    def blocks() -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        # Rows of consecutive segments share a block: a problem of up to ``rows`` rows is
+        # one block, solved with the arithmetic of the whole matrix.
+        phi, target, filled = np.empty((rows, len(names)), order='F'), np.empty(rows), 0
+        for index in used:
+            y, first = ys[index], k0
+            while first < y.size:
+                take = min(rows - filled, y.size - first)
+                _fill_rows(phi[filled:filled + take], y, us[index], None, first=first,
+                           stop=first + take, na=na, nb=nb, nk=nk, nc=0)
+                target[filled:filled + take] = y[first:first + take]
+                filled, first = filled + take, first + take
+                if filled == rows:
+                    yield phi, target
+                    phi, target, filled = np.empty_like(phi, order='F'), np.empty(rows), 0
+        if filled:
+            yield phi[:filled], target[:filled]
+    return blocks, names
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,6 +227,8 @@ def solve_least_squares(phi: np.ndarray, target: np.ndarray, *,
     """
     Solve ``min ‖target − phi θ‖`` through a QR factorisation of the column-scaled ``phi``.
 
+    Runs :func:`solve_blocks` over row blocks (views) of ``phi``: no copy of its size.
+
     Args:
         phi: ``(rows, p)`` regressors.
         target: ``(rows,)`` targets.
@@ -183,12 +242,116 @@ def solve_least_squares(phi: np.ndarray, target: np.ndarray, *,
             does not excite the model, or the orders are too high).
 
     """
-    names = list(names) or [f'column {j}' for j in range(phi.shape[1])]
-    q, r, scale = scaled_qr(phi, names=names)
+    def blocks() -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        for first in range(0, phi.shape[0], BLOCK_ROWS):
+            yield phi[first:first + BLOCK_ROWS], target[first:first + BLOCK_ROWS]
+    return solve_blocks(blocks, phi.shape[1], names=names)
+
+
+def solve_lagged(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int, nb: int,
+                 nk: int) -> tuple[LeastSquares, list[str]]:
+    """
+    Solve the regression of :func:`lagged_regression` block by block; return it and names.
+
+    The regressor matrix is never built whole: each block of rows is built when a pass
+    over the data reaches it (:func:`lagged_blocks`).
+
+    Raises:
+        IdentError: As :func:`lagged_regression` and :func:`solve_least_squares`.
+
+    """
+    blocks, names = lagged_blocks(ys, us, na=na, nb=nb, nk=nk)
+    return solve_blocks(blocks, len(names), names=names), names
+
+
+def solve_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], p: int, *,
+                 names: Sequence[str] = ()) -> LeastSquares:
+    """
+    Solve a least-squares problem given as row blocks, by CholeskyQR2 accumulated over them.
+
+    The arithmetic of :func:`scaled_qr` and a solve with its ``Q``, with every product over
+    the rows summed block by block: the column norms, the Gram matrix of the unit-norm
+    columns, that of ``Q₁ = Φ R₁⁻¹`` with ``Q₁ᵀ target``, then the residual. Beyond the
+    condition CholeskyQR2 handles, Householder QR of ``[R; block]`` block after block (TSQR)
+    gives ``R`` and ``Qᵀ target`` in one more pass.
+
+    Args:
+        blocks: Returns an iterator of ``(phi, target)`` row blocks, the same on every call.
+        p: Number of columns.
+        names: Column names for error messages.
+
+    Raises:
+        IdentError: When a column is zero or the columns are linearly dependent.
+
+    """
+    names = list(names) or [f'column {j}' for j in range(p)]
+    norms = [np.linalg.norm(phi, axis=0) for phi, _ in blocks()]
+    scale = norms[0] if len(norms) == 1 else np.sqrt(np.sum(np.square(norms), axis=0))
+    zero = np.flatnonzero(~(scale > 0))
+    if zero.size:
+        raise IdentError(f'regressor {names[zero[0]]} is zero on every row: the signal it '
+                         f'comes from is zero (or too short) in all segments')
+    gram = np.zeros((p, p))
+    for phi, _ in blocks():
+        unit = phi / scale
+        gram += unit.T @ unit
+    r1 = _cholesky(gram)
+    r, qt_target = None, None
+    if r1 is not None:
+        r1_inv = triangular_inverse(r1)
+        gram, qt_target = np.zeros((p, p)), np.zeros(p)
+        for phi, target in blocks():
+            # (R⁻ᵀ Φᵀ)ᵀ rather than Φ R⁻¹: see scaled_qr.
+            q1 = (r1_inv.T @ (phi / scale).T).T
+            gram += q1.T @ q1
+            qt_target += q1.T @ target
+        # Q₁ far from orthonormal (condition beyond ~1e8): one more pass does not repair it.
+        r2 = _cholesky(gram) if np.linalg.norm(gram - np.eye(p), 2) < ORTHOGONALITY else None
+        if r2 is not None:
+            r = r2 @ r1
+            _check_rank(r, names)
+            qt_target = triangular_inverse(r2).T @ qt_target
+    if r is None:  # condition beyond ~1e8: Householder is accurate to ~1e15
+        r, qt_target = _householder_blocks(blocks, scale, names)
     r_inv = triangular_inverse(r)
-    theta = r_inv @ (q.T @ target) / scale
+    theta = r_inv @ qt_target / scale
     unit_cov = (r_inv @ r_inv.T) / np.outer(scale, scale)
-    return LeastSquares(theta, target - phi @ theta, unit_cov)
+    residual = np.concatenate([target - phi @ theta for phi, target in blocks()])
+    return LeastSquares(theta, residual, unit_cov)
+
+
+def _cholesky(gram: np.ndarray) -> np.ndarray | None:
+    """Return the upper Cholesky factor of ``gram``, None when it is not positive definite."""
+    factor, info = linalg.lapack.dpotrf(gram, lower=0)
+    return np.triu(factor) if info == 0 else None
+
+
+def _householder_blocks(blocks, scale: np.ndarray,
+                        names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return ``R`` and ``Qᵀ target`` of the scaled blocks by TSQR, refusing a lost rank.
+
+    Each step is a Householder QR of ``[R; block]`` whose ``Q`` carries ``[Qᵀ target;
+    block target]`` along: with one block, the arithmetic of the whole-matrix QR.
+    """
+    r, qt_target = np.zeros((0, scale.size)), np.zeros(0)
+    for phi, target in blocks():
+        q, r = np.linalg.qr(np.vstack([r, phi / scale]))
+        qt_target = q.T @ np.concatenate([qt_target, target])
+    if r.shape[0] < scale.size:
+        raise IdentError(f'{r.shape[0]} regression rows for {scale.size} parameters')
+    _check_rank(r, names)
+    return r, qt_target
+
+
+def _check_rank(r: np.ndarray, names: Sequence[str]) -> None:
+    """Refuse an ``R`` of unit-norm columns whose least diagonal is below the tolerance."""
+    diagonal = np.abs(np.diag(r))
+    worst = int(np.argmin(diagonal))
+    if not diagonal[worst] > RANK_TOLERANCE * diagonal.max():
+        raise IdentError(f'regressor {names[worst]} is (nearly) a linear combination of the '
+                         f'others: the input does not excite this model structure; lower the '
+                         f'orders')
 
 
 def scaled_qr(phi: np.ndarray, *,
@@ -239,12 +402,7 @@ def scaled_qr(phi: np.ndarray, *,
 def _householder(phi: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Return ``(Q, R)`` of the unit-norm columns by Householder QR, refusing a lost rank."""
     q, r = np.linalg.qr(phi)
-    diagonal = np.abs(np.diag(r))
-    worst = int(np.argmin(diagonal))
-    if not diagonal[worst] > RANK_TOLERANCE * diagonal.max():
-        raise IdentError(f'regressor {names[worst]} is (nearly) a linear combination of the '
-                         f'others: the input does not excite this model structure; lower the '
-                         f'orders')
+    _check_rank(r, names)
     return q, r
 
 
