@@ -73,7 +73,6 @@ def fit_shots(recording: Recording, shots: tuple[Shot, ...], options: dict) -> F
 
     ``options`` are :func:`identify` keyword arguments; errors of the core come back in
     :attr:`Fitted.error`.
-
     """
     try:
         result = identify([ShotSource(recording, shots)], **options)

@@ -27,7 +27,6 @@ def diagnostics(node: Node, *, name: str, level: bytes, message: str,
 
     ``level`` is ``DiagnosticStatus.OK``, ``WARN`` or ``ERROR``; ``values`` are written with
     ``str`` (floats with ``repr``).
-
     """
     pairs = [KeyValue(key=key, value=repr(value) if isinstance(value, float) else str(value))
              for key, value in values.items()]

@@ -107,7 +107,6 @@ def join_callbacks(executor: Executor) -> None:
 
     rclpy 7.1's ``shutdown()`` does not; destroying a node under a running callback fails at
     random. Call after ``shutdown()`` and the spinning thread's end, before destroying nodes.
-
     """
     pool = getattr(executor, '_executor', None)  # MultiThreadedExecutor's ThreadPoolExecutor
     if pool is not None:
@@ -120,7 +119,6 @@ def use_fastdds_profile() -> None:
 
     Does nothing for another RMW or when the user set a profile (environment variable or
     ``DEFAULT_FASTRTPS_PROFILES.xml``). Call before the first rclpy context starts.
-
     """
     if os.environ.get('RMW_IMPLEMENTATION', _FASTDDS) != _FASTDDS:
         return

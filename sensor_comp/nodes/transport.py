@@ -181,7 +181,6 @@ def take_queued(handlers: Sequence[tuple[Subscription, Callable[[bytes, dict], N
 
     One of each subscription in turn keeps paired streams in step; ``limit`` caps the
     messages taken in all. Returns the number taken.
-
     """
     taken = 0
     while taken < limit:
@@ -203,7 +202,6 @@ class BlockWaitSet:
 
     The caller takes the messages itself (:func:`take_queued`) and still spins the executor
     now and then for the rest.
-
     """
 
     def __init__(self, node: Node, subscriptions: Sequence[Subscription]):

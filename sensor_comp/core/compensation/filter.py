@@ -154,7 +154,6 @@ class CompensationFilter:
 
         The neglected free response decays as ``r^n`` (slowest pole ``r``); input stages add
         their own memory in series. At least the filter order.
-
         """
         stages = []
         for name in self.inputs:
@@ -440,7 +439,6 @@ def disturbance_removal_warnings(entries: Iterable[Mapping], *, samples: int,
     Left in when its variance inflation against the pressure offset exceeds
     :data:`MAX_INFLATION` (mains hum: below ~0.55 line period). Acceleration-driven entries
     are ignored; empty when all can be removed.
-
     """
     out = []
     n = min(int(samples), _RULE_SAMPLES)

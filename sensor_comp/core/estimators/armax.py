@@ -48,22 +48,12 @@ def fit_armax_gls(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int
                   nk: int = 1, nc: int | None = None, filter_by: str = 'denominator',
                   max_iter: int = 50, tol: float = 1e-6) -> Estimate:
     """
-    Estimate ``A``, ``B`` by the seed paper's generalised least squares iteration.
+    Estimate ``A`` (order ``na``), ``B`` (``nb`` taps from ``nk``) by the paper's GLS iteration.
 
-    Args:
-        segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
-        na: Order of ``A``.
-        nb: Coefficients of each ``B_i``.
-        nk: Input delay in samples.
-        nc: Order of the noise polynomial (``filter_by='noise'``); ``na`` when None.
-        filter_by: ``'denominator'`` (divide by ``Â``, i.e. ``C = A``) or ``'noise'``
-            (Clarke: filter by the FIR ``Ĉ``).
-        max_iter: Most iterations of steps 2–3.
-        tol: Relative change of ``a`` and ``b`` that ends the iteration.
-
-    Returns:
-        An ``'oe'`` estimate (``'denominator'``) or an ``'ararx'`` one with ``Ĉ`` in ``d``
-        (``'noise'``).
+    ``filter_by='denominator'`` divides by ``Â`` (``C = A``; an ``'oe'`` estimate),
+    ``'noise'`` filters by the FIR ``Ĉ`` of order ``nc`` (default ``na``; an ``'ararx'``
+    estimate, ``Ĉ`` in ``d``). Stops after ``max_iter`` passes or a relative change of ``a``,
+    ``b`` below ``tol``.
 
     Raises:
         IdentError: On bad orders or options, too little data or no excitation.
@@ -119,20 +109,9 @@ def fit_armax_els(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int
     """
     Estimate an ARMAX model ``A y = B q^-nk u + C e`` by extended least squares.
 
-    Pseudo-linear regression may not converge: the pass with the smallest residual and a
-    stable ``Â`` is returned (``converged=False`` if the tolerance was not met).
-
-    Args:
-        segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
-        na: Order of ``A``.
-        nb: Coefficients of each ``B_i``.
-        nk: Input delay in samples.
-        nc: Order of ``C``; ``na`` when None.
-        max_iter: Most regression passes.
-        tol: Relative change of ``a``, ``b`` and ``c`` that ends the iteration.
-
-    Returns:
-        The ``'armax'`` estimate; ``loss`` is the mean squared one-step prediction error.
+    ``C`` has order ``nc`` (default ``na``). Pseudo-linear regression may not converge: the
+    pass with the smallest residual and a stable ``Â`` is returned (``converged=False`` if the
+    relative change never fell below ``tol`` in ``max_iter`` passes).
 
     Raises:
         IdentError: On bad orders, too little data, no excitation, or no stable ``Â``.

@@ -85,18 +85,10 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
                         stable: Callable[[np.ndarray], bool], max_iter: int,
                         tol: float) -> LevenbergMarquardt:
     """
-    Minimise ``‖e(θ)‖²`` from ``theta``, rejecting steps to unstable parameters.
+    Minimise ``‖e(θ)‖²`` from a stable ``theta``, rejecting steps to unstable parameters.
 
-    Args:
-        residual: ``residual(theta, jacobian)``: ``e = y − ŷ(θ)``, or ``(e, ∂ŷ/∂θ)``.
-        theta: The start (stable).
-        stable: Whether a trial's denominator has every pole inside the unit circle.
-        max_iter: Most steps.
-        tol: Relative decrease of the cost below which the iteration stops.
-
-    Returns:
-        The minimum found, with the errors and Jacobian there.
-
+    ``residual(theta, jacobian)`` returns ``e = y − ŷ(θ)``, or ``(e, ∂ŷ/∂θ)``; ``stable``
+    tells whether a trial's denominator is stable. Stops as ``doc/estimators.md`` says.
     """
     e, jac = residual(theta, True)
     cost = float(e @ e)

@@ -65,19 +65,9 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
     """
     Iterate least squares on the data prefiltered by ``1/F̂`` (Steiglitz–McBride).
 
-    Args:
-        segments: Checked segments.
-        nf: Order of ``F``.
-        nb: Coefficients per numerator.
-        nk: Input delay.
-        a0: Start denominator; an ARX estimate when None.
-        max_iter: Most prefilter passes.
-        tol: Relative parameter change that ends the iteration.
-        exact: Solve each pass by QR; False uses the cheaper normal equations (a start value;
-            covariance NaN).
-
-    Returns:
-        The last estimate.
+    Starts from ``a0`` (default an ARX estimate), stops after ``max_iter`` passes or a
+    relative change below ``tol``. ``exact=False`` solves the cheaper normal equations (a start
+    value; covariance NaN).
 
     Raises:
         IdentError: On too little data or regressors without excitation.
@@ -192,7 +182,6 @@ class OutputErrorProblem:
 
         Cholesky with a 1e-10 ridge where singular; the residual is recomputed, so round-off can
         only raise the loss.
-
         """
         phi = self.regression(f)
         try:
@@ -252,18 +241,9 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     """
     Estimate a MISO output-error model ``y = Σ B_i/F q^-nk u_i + e``.
 
-    Args:
-        segments: Shot windows (:class:`Segment` or ``(u, y)`` pairs), each starting at rest.
-        nf: Order of the common denominator ``F``.
-        nb: Coefficients of each numerator ``B_i`` (lags ``nk`` … ``nk+nb−1``).
-        nk: Input delay in samples.
-        max_iter: Most Levenberg–Marquardt iterations.
-        tol: Relative decrease of the squared error below which the iteration stops.
-        start: A stable start denominator: a local refinement from it alone (cheaper).
-
-    Returns:
-        The ``'oe'`` estimate; ``loss`` is the mean squared simulation error, covariance
-        ``σ² (JᵀJ)⁻¹`` (infinite when singular).
+    ``nf`` is the order of ``F``, ``nb`` the taps of each ``B_i`` from lag ``nk``. A stable
+    ``start`` denominator runs a cheaper local refinement from it alone. The ``loss`` is the
+    mean squared simulation error, the covariance ``σ² (JᵀJ)⁻¹`` (infinite when singular).
 
     Raises:
         IdentError: On bad orders, too little data or inputs that do not excite the model.

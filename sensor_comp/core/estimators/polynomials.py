@@ -30,7 +30,6 @@ def reflect_unstable(poly: np.ndarray) -> np.ndarray:
 
     Same magnitude response shape, stable (roots on the circle pulled just inside): keeps an
     iteration that filters by an estimated polynomial bounded.
-
     """
     poly = np.asarray(poly, dtype=np.float64)
     if poly.size < 2:

@@ -86,7 +86,6 @@ def profile_losses(segments: Sequence[Segment], f: np.ndarray, delays: Sequence[
 
     One filter pass for all delays; an upper bound of the output-error loss; NaN where the
     numerators are not determined.
-
     """
     lags = max(delays) + nb
     xs = [signal.lfilter([1.0], f, s.u, axis=-1) for s in segments]
@@ -115,7 +114,6 @@ def lag_gram(xs: Sequence[np.ndarray], ys: Sequence[np.ndarray],
 
     Segments start from rest; column ``i·lags + l`` is input ``i`` delayed by ``l``. ``xs``
     are ``(n_inputs, n)`` per segment, ``ys`` ``(n,)``.
-
     """
     m = xs[0].shape[0]
     upper = np.zeros((m * lags, m * lags))
@@ -144,7 +142,6 @@ def _oe_delay_search(segs, delays, na, nb, start):
     Return ``(losses, fits)`` of output error over ``delays``, fitting only where it counts.
 
     None when no fit succeeds (see ``doc/estimators.md``, input delay).
-
     """
     fits: dict[int, Estimate | str] = {}
 
@@ -186,22 +183,11 @@ def estimate_delay(segments: Segment | Iterable[Segment], *,
                    delays: Iterable[int] = range(0, 21), na: int = 2, nb: int = 1,
                    method: str = 'oe', start: Estimate | None = None) -> DelayEstimate:
     """
-    Estimate the input delay as the one whose fixed-order model has the lowest loss.
+    Estimate the input delay as the one of ``delays`` whose fixed-order model fits best.
 
-    Output error by default (ARX's minimum wanders at high rates); only delays near the
-    held-denominator minimum are fitted (``doc/estimators.md``).
-
-    Args:
-        segments: Shot windows, each starting at rest.
-        delays: Delays in samples to try.
-        na: Denominator order of the trial models.
-        nb: Numerator coefficients of the trial models.
-        method: Estimator, a key of :data:`METHODS`.
-        start: A fit with ``na`` poles on the same segments whose denominator starts the
-            output-error search.
-
-    Returns:
-        The delay with the lowest loss and the loss of every delay.
+    Trial models have ``na`` poles and ``nb`` coefficients, fitted by ``method`` (a key of
+    :data:`METHODS`, output error by default); ``start``, a fit with ``na`` poles on the same
+    segments, seeds the output-error search (``doc/estimators.md``).
 
     Raises:
         IdentError: If no delay is given or every fit fails.
@@ -326,7 +312,6 @@ def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
 
     Output error is refined from contained structures and neighbouring delays; ``known``
     fits are reused (``doc/estimators.md``, grid fitting).
-
     """
     centre = sorted({nk for _, _, nk in grid})
     centre = centre[len(centre) // 2]
@@ -385,24 +370,13 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
                      method: str = 'oe', fit_tolerance: float = 0.1,
                      criterion_margin: float = 2.0) -> Selection:
     """
-    Fit a grid of structures and choose one.
+    Fit a grid of ``(na, nb, nk)`` on ``calib_segments`` and choose one structure.
 
-    Drops unstable or failed fits and, with validation segments, those more than
-    ``fit_tolerance`` points below the best validation fit; among candidates within
-    ``criterion_margin`` of the lowest criterion the fewest parameters win.
-
-    Args:
-        calib_segments: Calibration shot windows, each starting at rest.
-        valid_segments: Validation shot windows, or None.
-        orders: ``(na, nb)`` pairs; ``na`` 1..4 by ``nb`` 1..3 when None.
-        delays: Delays to try; when None, :func:`estimate_delay` over 0..20 and ±1 around it.
-        criterion: ``'bic'`` (default), ``'aic'``, ``'aicc'`` or ``'fpe'``.
-        method: Estimator, a key of :data:`METHODS` (default output error).
-        fit_tolerance: Validation fit margin in percentage points.
-        criterion_margin: Criterion difference counted as equivalent; 0 = plain minimum.
-
-    Returns:
-        The chosen estimate with the candidate table and an explanation.
+    Drops unstable or failed fits and, with ``valid_segments``, those more than
+    ``fit_tolerance`` points below the best validation fit; of candidates within
+    ``criterion_margin`` of the lowest ``criterion`` (``'bic'``, ``'aic'``, ``'aicc'``,
+    ``'fpe'``) the fewest parameters win. ``orders`` default to ``na`` 1..4 by ``nb`` 1..3,
+    ``delays`` to :func:`estimate_delay` ±1; ``method`` is a key of :data:`METHODS`.
 
     Raises:
         IdentError: On an unknown criterion or method, an empty grid, or no stable fit.

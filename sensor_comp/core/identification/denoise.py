@@ -88,7 +88,6 @@ def white_noise_energy(n_imfs: int, n_samples: int, sigma1: float, *,
     Return the energy expected in each of ``n_imfs`` IMFs of white noise of ``n_samples``.
 
     ``sigma1`` is IMF 1's robust scale, ``median|IMF₁| / 0.6745``.
-
     """
     k = np.arange(1, n_imfs + 1, dtype=float)
     energy = n_samples * sigma1 ** 2 * 2.0 ** (sifting.log2_scale - sifting.log2_decay * k)
@@ -202,7 +201,6 @@ def pool_size(total_samples: int, processes: int | None = None) -> int:
 
     ``processes`` defaults to ``SENSOR_COMP_EMD_PROCESSES`` or :data:`PROCESSES`, within the
     cores the load average leaves free.
-
     """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
     cpus = cpus or 1
@@ -328,7 +326,6 @@ class EmdDenoiser:
     A callable for :func:`~sensor_comp.core.shots.detection.segments` that keeps its results.
 
     Args as :func:`emd_denoise`; ``results`` holds one :class:`DenoiseResult` per window.
-
     """
 
     def __init__(self, *, factor: float = DEFAULT_FACTOR, max_samples: int = MAX_SAMPLES,

@@ -89,7 +89,6 @@ class LiveShots:
 
         ``missing`` samples before it (a stamp gap) become NaN. Returns the shots now complete,
         each with a reason to skip it or None.
-
         """
         if missing:
             self._gap(missing)

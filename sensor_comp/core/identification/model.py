@@ -78,7 +78,6 @@ def sensitivity_problem(mpa_per_g: float, *, what: str = 'the static sensitivity
 
     Fatal outside :data:`PLAUSIBLE_MPA_PER_G`, a warning outside :data:`TYPICAL_MPA_PER_G`;
     None when plausible. ``what`` begins the message.
-
     """
     size = abs(mpa_per_g)
     if TYPICAL_MPA_PER_G[0] <= size <= TYPICAL_MPA_PER_G[1]:
@@ -356,7 +355,6 @@ class Model:
         Return the continuous-time view of the input-0 path (``s = fs · ln z``).
 
         Negative real poles have no continuous counterpart and are left out.
-
         """
         poles = np.roots(self.a) if self.a.size > 1 else np.empty(0)
         pairs = [z for z in poles if z.imag > 1e-12]

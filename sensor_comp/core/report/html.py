@@ -142,7 +142,6 @@ def verdict_html(diagnosis: Mapping) -> str:
 
     Green only for ``adequate``, amber for ``partly_explained``, red for the others and for
     a verdict this version does not know.
-
     """
     verdict = str(diagnosis.get('verdict'))
     if verdict not in VERDICTS:

@@ -43,7 +43,6 @@ def whiteness_figure(analysis: ResidualAnalysis, *,
     Draw the residual autocorrelation for lags 1..L with its bands.
 
     Lines in order: residual, per-lag and family-wise 99 % bands, pre-trigger noise.
-
     """
     fig, (ax,) = _figure(1)
     w = analysis.whiteness
@@ -69,7 +68,6 @@ def cross_correlation_figure(analysis: ResidualAnalysis, *,
     Draw the residual–acceleration cross-correlations, panels ``a_z``, ``a_x``, ``a_y``.
 
     Each: the correlation (positive lags: residual after acceleration), then its bands.
-
     """
     names = list(analysis.cross)
     fig, axes = _figure(len(names), rows_of=len(names))
@@ -178,7 +176,6 @@ def probes_figure(analysis: ResidualAnalysis, *,
     Draw the residual-energy share each probe explains, most explaining on top.
 
     Bars: with a gain correction (red: significant), then the probe alone.
-
     """
     names = sorted(analysis.probes, key=lambda n: analysis.probes[n].fraction)
     probes = [analysis.probes[n] for n in names]

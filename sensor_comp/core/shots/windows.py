@@ -74,7 +74,6 @@ def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
 
     Peak of the pooled spectrum over :data:`EARLY_S` after each pulse (quadratic trend
     removed, Hann, zero-padded), at two cycles or more in that time.
-
     """
     parts = [w.y[w.end:w.end + round(EARLY_S * fs)] for w in windows
              if w.end is not None and w.y.size - w.end >= 16]
