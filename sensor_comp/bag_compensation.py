@@ -30,27 +30,17 @@ __all__ = ['compensate_bag']
 def compensate_bag(model, input_path: str, output_path: str, *,
                    namespace: str | None = None, force: bool = False) -> dict:
     """
-    Copy a bag and add the model's ``pressure/compensated`` and ``pressure/induced``.
+    Copy the bag at ``input_path`` to ``output_path`` with the compensated streams added.
 
-    Two passes: disturbances fitted on the whole bag, then blocks paired and compensated in
-    time order with carried state (a stamp gap restarts from rest). The output is checked
-    first and written atomically (temporary file renamed when complete).
-
-    Args:
-        model: The model (``b``, ``a``, ``nk``, ``inputs``, ``fs``).
-        input_path: The bag to read.
-        output_path: The bag to write (not the input).
-        namespace: Rig namespace; found from the ``stream_info`` topic when None.
-        force: Replace an existing output file of another kind (never the input).
-
-    Returns:
-        The sample accounting (``StreamCounters``) plus ``copied_messages``,
-        ``first_unpaired`` (per topic, or None) and ``disturbance_warnings`` (sentences).
+    Two passes (disturbances fitted on the whole bag, then compensation in time order); the
+    output is checked first (``force`` replaces a file of another kind, never the input) and
+    written atomically. ``namespace`` is found from ``stream_info`` when None. Returns the
+    sample accounting plus ``copied_messages``, ``first_unpaired`` and
+    ``disturbance_warnings``.
 
     Raises:
         SensorCompError: On a bag cut short or without both described raw streams of one
-            rate, a model/bag rate mismatch, overlapping, out-of-order or misshapen blocks,
-            no pair at all, or an output refused by ``check_output``.
+            rate, a model/bag rate mismatch, bad or unpairable blocks, or a refused output.
 
     """
     check_output(output_path, inputs=(input_path,), kind='bag', force=force)

@@ -80,11 +80,8 @@ class Compensation(Node):
     """
     Compensate the live pressure stream (parameters: module docstring).
 
-    Spin it with any executor and destroy it when done, or call :meth:`run`.
-
-    Args:
-        node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace`` default ``/rig``).
+    Spin it with any executor and destroy it when done, or call :meth:`run`. ``kwargs`` go to
+    :class:`rclpy.node.Node` (``namespace`` default ``/rig``).
 
     Attributes:
         model: The model in use, or None.

@@ -94,12 +94,9 @@ class Identification(Node):
     """
     Find shots in the live streams and identify the model (parameters: module docstring).
 
-    Spin it with a ``MultiThreadedExecutor`` (so blocks flow while ``~/fit`` waits) and
-    destroy it when done; :meth:`fit` runs a fit from Python.
-
-    Args:
-        node_name: Name of the node.
-        **kwargs: Further :class:`rclpy.node.Node` arguments (``namespace`` default ``/rig``).
+    Spin it with a ``MultiThreadedExecutor`` (blocks flow while ``~/fit`` waits), destroy it
+    when done; :meth:`fit` fits from Python. ``kwargs`` go to :class:`rclpy.node.Node`
+    (``namespace`` default ``/rig``).
 
     Attributes:
         model: The latest identified model, or None.

@@ -63,15 +63,9 @@ def spin_until(executor: Executor, stop: threading.Event, *,
     """
     Spin ``executor`` until ``stop`` is set, then take what had arrived before the stop.
 
-    Args:
-        executor: The executor with the node(s) added.
-        stop: Set it (from a signal handler or another thread) to stop.
-        progress: A count that grows while messages are handled: after the stop, spinning
-            goes on while it grows, at most 10 s.
-        wait: With ``take``, ``wait(timeout)`` waits for the busy subscriptions' messages;
-            the executor then runs one round every :data:`ROUND_S`.
-        take: Handle the messages queued on those subscriptions.
-
+    After the stop, spinning goes on while ``progress`` grows (at most 10 s). With ``wait``
+    and ``take`` (a node's busy subscriptions) it waits for and takes their messages itself
+    and runs one executor round every :data:`ROUND_S`.
     """
     context = executor.context
     if wait is None or take is None:
@@ -137,16 +131,10 @@ def use_fastdds_profile() -> None:
 def run_main(args: Sequence[str] | None, make_node: Callable[[], Node],
              run: Callable[[Node, threading.Event], None]) -> int:
     """
-    Run a node as a process, the way ``ros2 run`` starts it.
+    Run a node made by ``make_node`` as a process, the way ``ros2 run`` starts it.
 
-    Args:
-        args: Command-line arguments (``None``: ``sys.argv``), ``--ros-args`` included.
-        make_node: Create the node (after ``rclpy.init``).
-        run: Do the node's work until it is done or the event is set (SIGINT, SIGTERM).
-
-    Returns:
-        The exit code: 0, or 1 after a :class:`SensorCompError` (logged, no traceback).
-
+    ``run`` does the node's work until done or the event is set (SIGINT, SIGTERM). Returns the
+    exit code: 0, or 1 after a :class:`SensorCompError` (logged, no traceback).
     """
     use_fastdds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)

@@ -69,18 +69,11 @@ def message_class(msgtype: str, *, topic: str = ''):
 def merge_stream_infos(node: Node, known: dict[str, StreamInfo],
                        infos: Sequence[StreamInfo]) -> StreamInfo | None:
     """
-    Merge the raw streams' descriptions from a ``stream_info`` message into ``known``.
+    Merge the raw streams' descriptions ``infos`` into ``known`` (by topic, in place).
 
-    The first description of each raw stream stays in use; a later one with another rate is
-    logged as an error and ignored.
-
-    Args:
-        node: The node (for the log).
-        known: Descriptions by relative topic name, updated in place.
-        infos: The message's descriptions (other streams are ignored).
-
-    Returns:
-        The description of ``pressure/raw`` once both raw streams are described, else None.
+    The first description of each raw stream stays in use; a later one at another rate is
+    logged on ``node`` and ignored. Returns the ``pressure/raw`` description once both raw
+    streams are described, else None.
 
     Raises:
         NodeError: If the two raw streams are described at different rates.
@@ -228,17 +221,10 @@ class BlockWaitSet:
 def subscribe_blocks(node: Node, topics: Sequence[str], on_block: Callable[[str, bytes], None],
                      take: Callable[[str, bytes, dict], None]):
     """
-    Subscribe raw and keep-all to block topics; return the subscriptions and their takers.
+    Subscribe raw and keep-all to block ``topics``; return ``({topic: subscription}, takers)``.
 
-    Args:
-        node: The subscribing node.
-        topics: Block topics (``sensor_msgs/msg/Image``), relative to the node namespace.
-        on_block: Executor callback, ``on_block(topic, data)``.
-        take: Handler for messages taken directly, ``take(topic, data, info)``.
-
-    Returns:
-        ``({topic: subscription}, takers)``; takers are what :func:`take_queued` takes.
-
+    ``on_block(topic, data)`` is the executor callback, ``take(topic, data, info)`` handles
+    messages taken directly (the takers are what :func:`take_queued` takes).
     """
     image = message_class(IMAGE)
     subscriptions = {topic: node.create_subscription(

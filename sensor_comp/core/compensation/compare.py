@@ -117,12 +117,9 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     """
     Compare several models (or one) with the measured pressure of the same shots.
 
-    Args:
-        models: Models with ``b``, ``a``, ``nk``, ``inputs`` and ``fs``.
-        recording: Pressure and acceleration.
-        shots: The shots to compare on (calibration or validation).
-        labels: One name per model; default its ``label``/``name``/``structure``.
-        denoise: Applied once to each measured window first (e.g. an ``EmdDenoiser``).
+    ``models`` have ``b``, ``a``, ``nk``, ``inputs`` and ``fs``; ``labels`` default to each
+    model's ``label``/``name``/``structure``; ``denoise`` (e.g. an ``EmdDenoiser``) is applied
+    once to each measured window first.
 
     Raises:
         ShotError: With no shot, a window with missing samples, or mismatched labels.

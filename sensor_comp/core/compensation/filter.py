@@ -65,15 +65,10 @@ class CompensationFilter:
     """
     Streaming induced-pressure filter with state carried across blocks.
 
-    Args:
-        b: ``(n_inputs, nb)`` numerators (or 1-D for one input); ``b[i, 0]`` multiplies
-            ``q^-nk``.
-        a: Denominator ``[a0, a1, ..., ana]``, ``a0 ≠ 0`` (normalised to 1).
-        nk: Input delay in samples.
-        inputs: One input name per row of ``b``.
-        fs: Sample rate in Hz; needed by derivative inputs.
-        disturbances: Streaming disturbance trackers (``tracker(residual)``, ``reset()``),
-            whose estimate is removed from the compensated pressure.
+    ``b`` is ``(n_inputs, nb)`` (1-D: one input), ``b[i, 0]`` multiplying ``q^-nk``; ``a`` is
+    normalised to ``a0 = 1``; ``inputs`` name the rows of ``b``; ``fs`` is needed by derivative
+    inputs; ``disturbances`` are trackers (``tracker(residual)``, ``reset()``) whose estimate is
+    removed from the compensated pressure.
 
     Raises:
         CompensationError: On mismatched shapes or non-finite coefficients.
@@ -290,15 +285,10 @@ class CompensationFilter:
     def process(self, acceleration: np.ndarray,
                 pressure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """
-        Compensate one block of raw pressure.
+        Compensate one block: ``(3, w)`` acceleration (m/s²), ``(w,)`` or ``(1, w)`` pressure (Pa).
 
-        Args:
-            acceleration: ``(3, w)`` block in m/s².
-            pressure: ``(w,)`` (or ``(1, w)``) raw pressure in Pa.
-
-        Returns:
-            ``(compensated, induced)`` in Pa; ``compensated`` has disturbances removed and is NaN
-            wherever not finite.
+        Returns ``(compensated, induced)`` in Pa; ``compensated`` has disturbances removed and is
+        NaN wherever not finite.
 
         Raises:
             CompensationError: When the blocks do not have the same number of samples.
@@ -341,12 +331,8 @@ def compensate_recording(model: LinearModel,
     """
     Compensate a whole recording offline, from rest, disturbances fitted on all of it.
 
-    The acceleration is used as recorded (an offset becomes a pressure offset through the
-    static gain); a disturbance the recording is too short for is left in with a
-    :class:`DisturbanceWarning`.
-
-    Returns:
-        ``(compensated, induced)`` pressure in Pa, ``(N,)`` each.
+    Returns ``(compensated, induced)`` in Pa. The acceleration is used as recorded; a
+    disturbance the recording is too short for is left in with a :class:`DisturbanceWarning`.
 
     Raises:
         CompensationError: When the model's and the recording's sample rates differ.
@@ -555,15 +541,9 @@ def window_disturbances(model, starts: Sequence[int], baselines: Sequence[int],
     """
     Return the model's disturbances in shot windows of one recording, as the diagnosis does.
 
-    Least squares on the windows' residuals (measured minus simulated, Pa) with each window's
-    pre-trigger mean removed; zeros without disturbance effects.
-
-    Args:
-        model: The model (``fs`` and ``effects``).
-        starts: Recording sample index of each window's first sample.
-        baselines: Pre-trigger samples of each window.
-        residuals: Each window's residual.
-
+    Least squares on the windows' ``residuals`` (measured minus simulated, Pa), windows
+    starting at recording index ``starts`` with ``baselines`` pre-trigger samples whose mean
+    is removed; zeros without disturbance effects.
     """
     parts = _disturbances(getattr(model, 'effects', ()))
     if not parts:

@@ -353,15 +353,9 @@ class BlockCompensator:
     """
     Pair blocks by stamp and compensate them, with state carried across blocks.
 
-    Args:
-        compensation: The filter to run.
-        fs: Sample rate in Hz.
-        max_wait: See :class:`BlockPairer`.
-        log: Called with one line per event.
-        names: How the log lines name the pressure and the acceleration topics.
-        disturbances: Disturbances fitted on the whole recording (offline second pass),
-            subtracted from every block.
-        fitting: Disturbances to fit (offline first pass) from every block's residual.
+    ``fs``, ``max_wait``, ``log`` and ``names`` as :class:`BlockPairer`. Offline, ``fitting``
+    collects every block's residual (first pass) and ``disturbances`` are subtracted from every
+    block (second pass); the filter must then have no trackers of its own.
 
     Attributes:
         counters: The sample accounting (:class:`StreamCounters`).
@@ -499,15 +493,8 @@ def fit_recording_disturbances(model, blocks: Iterable[tuple[str, int, np.ndarra
     """
     Fit a model's disturbances on a whole recording: the first pass of offline compensation.
 
-    Args:
-        model: The model (its ``effects`` name the disturbances).
-        blocks: ``(kind, stamp_ns, data)`` in stream order (``PRESSURE_RAW`` or
-            ``ACCELERATION``); unpairable blocks are skipped.
-        fs: Sample rate in Hz.
-
-    Returns:
-        The fitted disturbances, or None when the model has none.
-
+    ``blocks`` are ``(kind, stamp_ns, data)`` in stream order (``PRESSURE_RAW`` or
+    ``ACCELERATION``); unpairable ones are skipped. None when the model has no disturbance.
     """
     disturbances = RecordingDisturbances.of(model)
     if disturbances is None:

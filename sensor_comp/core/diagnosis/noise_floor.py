@@ -305,17 +305,12 @@ def leftover(residual: Sequence[np.ndarray], bounds: Sequence[tuple[int, int, in
              noise: NoiseModel, fs: float, *, allowance: float = PRACTICAL_SHARE,
              noise_samples: int | None = None) -> Leftover:
     """
-    Measure a residual against the noise: overall, per segment, and its excess spectrum.
+    Measure a residual (one array per window) against the noise: overall, per segment, spectrum.
 
-    Args:
-        residual: One residual array per window.
-        bounds: :func:`segment_bounds` of each window.
-        noise: The noise model (its variance is the unit).
-        fs: Sample rate, Hz.
-        allowance: Excess energy, in noise energies of all windows, too small to name.
-        noise_samples: Samples the noise variance came from (widens the tolerances);
-            default ``noise.samples``.
-
+    ``bounds`` are :func:`segment_bounds` per window; the noise variance is the unit;
+    ``allowance`` is the excess (in noise energies of all windows) too small to name;
+    ``noise_samples`` (default ``noise.samples``) widens the tolerances by the noise
+    estimate's own scatter.
     """
     sigma2 = noise.variance
     total = sum(r.size for r in residual)

@@ -208,8 +208,8 @@ class Model:
         a: Common monic denominator ``[1, a1, ..., ana]``.
         nk: Input delay in samples.
         c: Noise numerator or None; ``d``: noise denominator or None.
-        b_std: Standard deviations of ``b`` (``a_std``, ``c_std``, ``d_std`` likewise), or None.
-        charge_sensitivity_pC_per_MPa: The pressure sensor's charge sensitivity, if known.
+        b_std: Standard deviations of ``b`` (``a_std``, ``c_std``, ``d_std`` alike), or None.
+        charge_sensitivity_pC_per_MPa: The sensor's charge sensitivity, if known.
         fit: Fit statistics (names to numbers, booleans or strings).
         provenance: The recordings and shots the model comes from.
         effects: Extra physical effects, each a dict with at least an ``'id'``.
@@ -633,17 +633,10 @@ def _source(entry, where: str) -> Source:
 def frequency_response(model: Model, *, n: int = 1024,
                        f_hz: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the frequency response of every input path (the seed paper's Fig. 13).
+    Return ``(f_hz, h)``: each input path's complex response in Pa per unit (Fig. 13).
 
-    Args:
-        model: The model.
-        n: Log-spaced frequencies from ``fs·1e-5`` to ``fs/2`` (when ``f_hz`` is None).
-        f_hz: Frequencies in Hz to evaluate instead.
-
-    Returns:
-        ``(f_hz, h)``: ``(n,)`` and complex ``(n_inputs, n)`` in Pa per input unit (delay
-        included).
-
+    At ``f_hz`` if given, else ``n`` log-spaced frequencies from ``fs·1e-5`` to ``fs/2``;
+    ``h`` is ``(n_inputs, n)``, the delay included.
     """
     f = (np.geomspace(model.fs * 1e-5, model.fs / 2, n) if f_hz is None
          else np.asarray(f_hz, dtype=np.float64))

@@ -87,15 +87,10 @@ def html_report(*, title: str, shots: Sequence[Shot], comparisons: Sequence[Comp
     """
     Return the report as one HTML document.
 
-    Args:
-        title: Heading, e.g. the bag name.
-        shots: The shots compared (validation shots).
-        comparisons: The base model (first) and any others against those shots.
-        analysis: Residual analysis of the base model on those shots.
-        diagnosis: ``Diagnosis.to_dict()`` (``verdict``, ``ranking``), or None.
-        after: Comparisons of extended models (before/after section), base first.
-        sources: Files the report is about, listed at the top.
-
+    ``comparisons`` are the base model (first) and others on the validation ``shots``;
+    ``analysis`` is the base model's residual analysis; ``diagnosis`` is
+    ``Diagnosis.to_dict()`` or None; ``after`` compares extended models (base first);
+    ``sources`` are listed at the top.
     """
     parts = [f'<!DOCTYPE html><html><head><meta charset="utf-8"><title>{html.escape(title)}'
              f'</title><style>{_STYLE}</style></head><body>',

@@ -60,14 +60,10 @@ def overlay_figure(times: Sequence[np.ndarray], measured: Sequence[np.ndarray],
                    titles: Sequence[str] | None = None,
                    path: str | os.PathLike | None = None) -> Figure:
     """
-    Draw measured and simulated pressure per shot, one panel per shot (Fig. 12).
+    Draw measured and simulated pressure (Pa) per shot, one panel per shot (Fig. 12).
 
-    Args:
-        times: Per shot, sample times in s.
-        measured: Per shot, measured pressure in Pa (the first line of each panel).
-        simulated: Model label → per shot simulated pressure in Pa.
-        titles: One panel title per shot; default ``'shot i'``.
-        path: Write a PNG here.
+    ``times`` per shot in s; ``measured`` is each panel's first line, then ``simulated`` by
+    model label; ``titles`` default ``'shot i'``; a PNG goes to ``path`` if given.
 
     Raises:
         PlotError: When the traces do not match the time axes.
