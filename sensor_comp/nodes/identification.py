@@ -14,10 +14,9 @@ Parameters (read once at start):
 - ``delay`` (-1): input delay in samples; -1 = estimated.
 - ``emd`` (true): EMD-denoise the calibration windows.
 - ``effects`` (``[]``): extra effect ids to fit (``core.effects.EFFECTS``).
-- ``min_shots`` (4): fit automatically once this many shots are kept.
-- ``refit_shots`` (0): fit again after this many more; 0 = never.
-- ``max_shots`` (20): keep at most the latest this many shot windows.
-- ``threshold_g`` (0): trigger level in g; 0 = automatic per buffer.
+- ``min_shots`` (4), ``refit_shots`` (0 = never), ``max_shots`` (20): shots kept before
+  the first fit, new shots before a refit, latest shots kept.
+- ``threshold_g`` (0 = automatic per buffer): trigger level in g.
 - ``pre_ms``, ``post_ms`` (5, 20): window before the onset and after the pulse end.
 - ``max_pulse_ms`` (10): longest pulse expected; sizes the buffer.
 - ``model_file`` (empty): also write each model to this file (atomically).
@@ -335,12 +334,10 @@ class Identification(Node):
 
     def fit(self) -> Future:
         """
-        Fit on the shots kept now, in the worker.
+        Fit on the shots kept now, in the worker; return a future of the outcome.
 
-        Returns:
-            A future of the outcome (``success``, ``message``, ``model``); done at once,
-            unsuccessful, with fewer than 2 shots kept.
-
+        The outcome has ``success``, ``message`` and ``model``; it is done at once, unsuccessful,
+        with fewer than 2 shots kept.
         """
         return self._submit()
 

@@ -399,13 +399,7 @@ class BlockCompensator:
         return self.pairer.fs
 
     def set_filter(self, compensation: CompensationFilter) -> int:
-        """
-        Use a new filter from the next block on, its state taken over from recent history.
-
-        Returns:
-            The number of history samples the new state was computed from.
-
-        """
+        """Use a new filter from the next block on; return the history length its state used."""
         history = self._recent(self._keep)
         compensation.take_over(history, previous=self.compensation)
         self.compensation = compensation

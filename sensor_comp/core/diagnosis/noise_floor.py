@@ -143,9 +143,7 @@ def noise_model(pre: Sequence[np.ndarray], max_lag: int) -> NoiseModel:
     """
     Fit the noise of pre-trigger stretches (one per window) with an AR model (order by BIC).
 
-    Returns:
-        The noise model, autocovariance to ``4·max_lag`` lags (zero variance without noise).
-
+    Its autocovariance runs to ``4·max_lag`` lags; zero variance when there is no noise.
     """
     pre = [np.asarray(p, dtype=np.float64) for p in pre if len(p)]
     total = sum(p.size for p in pre)
