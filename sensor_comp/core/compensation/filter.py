@@ -178,14 +178,9 @@ class CompensationFilter:
         """
         Start this filter mid-stream as if it had been running on the stream all along.
 
-        The state comes from filtering ``history`` from rest, so a model change moves the output
-        by the change of the induced estimate only; trackers matching one of ``previous``'s take
-        it over with its state (``doc/compensation.md``).
-
-        Args:
-            history: ``(3, n)`` acceleration in m/s² just before the next block (``n`` may be 0).
-            previous: The filter being replaced.
-
+        The state comes from filtering ``history`` (``(3, n)`` acceleration in m/s² just before
+        the next block, ``n`` may be 0) from rest; trackers matching one of ``previous``'s (the
+        filter being replaced) take it over with its state (``doc/compensation.md``).
         """
         self.reset()
         history = np.asarray(history, dtype=np.float64)

@@ -321,11 +321,7 @@ class NonFiniteRuns:
     """
     Log runs of blocks holding non-finite samples: one line where a run starts and ends.
 
-    Args:
-        log: Called with each line.
-        where: The stream, as the lines name it.
-        effect: What the non-finite samples do, for the line at the start of a run.
-
+    ``where`` names the stream in the lines; ``effect`` says what the samples do.
     """
 
     def __init__(self, log: Callable[[str], None] | None, *, where: str, effect: str):

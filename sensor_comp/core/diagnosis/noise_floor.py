@@ -183,11 +183,8 @@ def segment_bounds(shot, n: int, ringing: int) -> tuple[int, int, int, int, int]
     """
     Return ``(noise stop, onset, pulse end, ringing end, n)`` of a shot's window, in samples.
 
-    Args:
-        shot: A shot (``start``, ``onset``, ``end``, ``baseline_stop``).
-        n: Window length, samples.
-        ringing: Length of the ringing segment after the pulse, samples.
-
+    ``shot`` has ``start``, ``onset``, ``end`` and ``baseline_stop``; ``n`` is the window
+    length and ``ringing`` the length of the ringing segment after the pulse.
     """
     onset = min(max(shot.onset - shot.start, 0), n)
     end = min(max(shot.end - shot.start, onset), n)
