@@ -21,8 +21,9 @@ from .data import IdentError
 
 __all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'LeastSquares', 'check_orders',
            'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
-           'lagged_regression', 'minimum_norm', 'normal_equations', 'scaled_qr', 'solve_blocks',
-           'solve_lagged', 'solve_least_squares', 'triangular_inverse']
+           'lagged_regression', 'minimum_norm', 'normal_equations', 'normal_equations_blocks',
+           'scaled_qr', 'solve_blocks', 'solve_lagged', 'solve_least_squares',
+           'triangular_inverse']
 
 #: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
 #: still counts as full rank (below it a column lies within 1e-10 of the others' span).
@@ -425,7 +426,11 @@ def normal_equations(phi: np.ndarray, target: np.ndarray, *, ridge: float = 0.0)
         IdentError: When the scaled Gram matrix is not positive definite.
 
     """
-    gram = phi.T @ phi
+    return _solve_normal(phi.T @ phi, phi.T @ target, ridge)
+
+
+def _solve_normal(gram: np.ndarray, moment: np.ndarray, ridge: float) -> np.ndarray:
+    """Solve ``gram θ = moment`` scaled to a unit diagonal, by Cholesky (plus ``ridge``)."""
     scale = np.sqrt(np.diag(gram))
     scale[~(scale > 0)] = 1.0
     gram = gram / np.outer(scale, scale)
@@ -435,7 +440,26 @@ def normal_equations(phi: np.ndarray, target: np.ndarray, *, ridge: float = 0.0)
         factor = linalg.cho_factor(gram)
     except linalg.LinAlgError:
         raise IdentError('singular normal equations') from None
-    return linalg.cho_solve(factor, (phi.T @ target) / scale) / scale
+    return linalg.cho_solve(factor, moment / scale) / scale
+
+
+def normal_equations_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]],
+                            p: int, *, ridge: float = 0.0) -> np.ndarray:
+    """
+    Return :func:`normal_equations`' solution of a problem given as row blocks.
+
+    ``ΦᵀΦ`` and ``Φᵀ target`` are summed block by block (``blocks`` as in
+    :func:`solve_blocks`): one pass, no matrix of the rows' size.
+
+    Raises:
+        IdentError: When the scaled Gram matrix is not positive definite.
+
+    """
+    gram, moment = np.zeros((p, p)), np.zeros(p)
+    for phi, target in blocks():
+        gram += phi.T @ phi
+        moment += phi.T @ target
+    return _solve_normal(gram, moment, ridge)
 
 
 def minimum_norm(phi: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -85,3 +85,16 @@ def test_dependent_or_zero_columns_are_refused():
         ls.solve_least_squares(np.column_stack([phi, phi[:, 0] - phi[:, 1]]), target)
     with pytest.raises(IdentError, match='zero on every row'):
         ls.solve_least_squares(np.column_stack([phi, np.zeros(400)]), target)
+
+
+def test_normal_equations_by_blocks_equal_the_whole_matrix():
+    rng = np.random.default_rng(7)
+    ys, us = _segments(rng)
+    phi, target, _ = ls.lagged_regression(ys, us, na=2, nb=3, nk=1)
+    blocks, _ = ls.lagged_blocks(ys, us, na=2, nb=3, nk=1, rows=333)
+    for ridge in (0.0, 1e-10):
+        whole = ls.normal_equations(phi, target, ridge=ridge)
+        got = ls.normal_equations_blocks(blocks, phi.shape[1], ridge=ridge)
+        scale = np.linalg.norm(phi, axis=0)
+        np.testing.assert_allclose(got * scale, whole * scale, rtol=0,
+                                   atol=1e-10 * np.abs(whole * scale).max())
