@@ -1,11 +1,9 @@
 """
 Live block streams: pair pressure and acceleration blocks, compensate them, keep count.
 
-:class:`BlockPairer` pairs blocks by stamp and accounts for every sample (gaps, overlaps,
-mismatched and unpaired blocks, one log line per event); :class:`BlockCompensator` runs the
-compensation filter over the pairs, restarting at gaps and taking over at model changes.
-Shared by the compensation node and ``sensor-comp compensate``; see
-``doc/compensation.md`` (live block streams).
+:class:`BlockPairer` pairs blocks by stamp and accounts for every sample;
+:class:`BlockCompensator` runs the filter over the pairs (restart at gaps, take-over at
+model changes). Rules and memory bounds: ``doc/compensation.md`` (live block streams).
 """
 
 from __future__ import annotations

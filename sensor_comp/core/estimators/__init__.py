@@ -1,11 +1,9 @@
 """
 System identification of the acceleration-induced pressure (pure numpy/scipy).
 
-Multi-input single-output estimators with one common denominator, on shot windows
-(:class:`Segment`) each starting at rest: :func:`fit_arx`, :func:`fit_armax_gls`,
-:func:`fit_armax_els`, :func:`fit_oe`, :func:`select_structure`, :func:`estimate_delay`,
-:func:`simulate_output`, :func:`fit_percent`; all return an :class:`Estimate`. See
-``doc/estimators.md``.
+MISO estimators with one common denominator on shot windows (:class:`Segment`), each from
+rest: ARX, GLS/ELS, output error, delay and structure selection; all return an
+:class:`Estimate`. See ``doc/estimators.md``.
 """
 
 from .armax import fit_armax_els, fit_armax_gls

@@ -46,14 +46,10 @@ class DenoiseError(SensorCompError, ValueError):
 @dataclass(frozen=True)
 class Sifting:
     """
-    PyEMD settings and the white-noise IMF energies calibrated for them.
+    PyEMD settings (``options``) and the white-noise IMF energies calibrated for them.
 
-    Args:
-        options: Keyword arguments of ``PyEMD.EMD``.
-        log2_imf1: ``log2 c₁``: IMF 1's energy over ``N σ₁²``.
-        log2_scale: ``log2 c``: the scale of the later IMFs' energies.
-        log2_decay: ``log2 ρ``: how fast the energies fall per IMF.
-
+    ``log2_imf1`` is ``log2 c₁`` (IMF 1's energy over ``N σ₁²``), ``log2_scale`` ``log2 c``
+    and ``log2_decay`` ``log2 ρ`` (the later IMFs' scale and fall per IMF).
     """
 
     options: tuple[tuple[str, object], ...]

@@ -91,8 +91,8 @@ def residual_figure(times: Sequence[np.ndarray], residuals: Mapping[str, Sequenc
     """
     Draw the pressure left after compensation per shot (Fig. 15).
 
-    ``residuals`` maps labels to per-shot compensated pressure (Pa); ``measured`` (the
-    uncompensated pressure) is drawn thin and first for scale.
+    ``residuals``: label → per-shot compensated pressure (Pa); ``measured`` is drawn thin and
+    first for scale.
 
     Raises:
         PlotError: When the traces do not match the time axes.
