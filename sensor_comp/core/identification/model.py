@@ -241,45 +241,40 @@ class Model:
     version: str = __version__
 
     def __post_init__(self):
-        if not _is_number(self.fs) or not self.fs > 0:
-            raise ModelError(f'model sample rate fs must be a positive finite number of Hz, '
-                             f'got {self.fs!r}')
-        if self.structure not in STRUCTURES:
-            raise ModelError(f'model structure must be one of {", ".join(STRUCTURES)}, got '
-                             f'{self.structure!r}')
+        _check_header(self.fs, self.structure, self.nk)
         inputs = _check_inputs(self.inputs)
-        b = _numerators(self.b, inputs, 'model numerators')
-        if isinstance(self.nk, bool) or not isinstance(self.nk, (int, np.integer)) \
-                or self.nk < 0:
-            raise ModelError(f'model delay nk must be an integer >= 0, got {self.nk!r}')
-        values = {'fs': float(self.fs), 'inputs': inputs, 'b': b, 'nk': int(self.nk),
-                  'a': _poly(self.a, 'model denominator', monic=True),
-                  'c': _optional_poly(self.c, 'model noise numerator c', monic=True),
-                  'd': _optional_poly(self.d, 'model noise denominator d', monic=True)}
-        for name in ('a', 'c', 'd'):
-            values[f'{name}_std'] = _optional_poly(getattr(self, f'{name}_std'),
-                                                   f'standard deviations of {name}',
-                                                   monic=False)
-            if values[f'{name}_std'] is not None and (
-                    values[name] is None or values[f'{name}_std'].shape != values[name].shape):
-                raise ModelError(f'standard deviations of {name} do not match its shape')
-        if self.b_std is not None:
-            values['b_std'] = _numerators(self.b_std, inputs,
-                                          'standard deviations of the numerators')
-            if values['b_std'].shape != b.shape:
-                raise ModelError(f'standard deviations of the numerators must have shape '
-                                 f'{b.shape}, got {values["b_std"].shape}')
+        values = {'fs': float(self.fs), 'inputs': inputs, 'nk': int(self.nk),
+                  **self._polynomials(inputs),
+                  'fit': _check_fit(self.fit), 'provenance': tuple(self.provenance),
+                  'effects': _check_effects(self.effects)}
         cs = self.charge_sensitivity_pC_per_MPa
         if cs is not None:
             if not _is_number(cs) or cs <= 0:
                 raise ModelError(f'charge sensitivity must be a positive number of pC/MPa, '
                                  f'got {cs!r}')
             values['charge_sensitivity_pC_per_MPa'] = float(cs)
-        values['fit'] = _check_fit(self.fit)
-        values['provenance'] = tuple(self.provenance)
-        values['effects'] = _check_effects(self.effects)
         for name, value in values.items():
             object.__setattr__(self, name, value)
+
+    def _polynomials(self, inputs: tuple[str, ...]) -> dict:
+        """Return the checked polynomials and their standard deviations."""
+        b = _numerators(self.b, inputs, 'model numerators')
+        values = {'b': b, 'a': _poly(self.a, 'model denominator', monic=True),
+                  'c': _optional_poly(self.c, 'model noise numerator c', monic=True),
+                  'd': _optional_poly(self.d, 'model noise denominator d', monic=True)}
+        for name in ('a', 'c', 'd'):
+            std = _optional_poly(getattr(self, f'{name}_std'), f'standard deviations of {name}',
+                                 monic=False)
+            if std is not None and (values[name] is None or std.shape != values[name].shape):
+                raise ModelError(f'standard deviations of {name} do not match its shape')
+            values[f'{name}_std'] = std
+        if self.b_std is not None:
+            values['b_std'] = _numerators(self.b_std, inputs,
+                                          'standard deviations of the numerators')
+            if values['b_std'].shape != b.shape:
+                raise ModelError(f'standard deviations of the numerators must have shape '
+                                 f'{b.shape}, got {values["b_std"].shape}')
+        return values
 
     @classmethod
     def from_estimate(cls, estimate: Estimate, *, fs: float,
@@ -583,6 +578,18 @@ def _read_document(path: str | os.PathLike, where: str) -> dict:
     if missing:
         raise ModelError(f'{where} lacks the key(s) {", ".join(map(repr, missing))}')
     return doc
+
+
+def _check_header(fs, structure, nk) -> None:
+    """Raise ModelError unless the rate, structure and delay are valid."""
+    if not _is_number(fs) or not fs > 0:
+        raise ModelError(f'model sample rate fs must be a positive finite number of Hz, '
+                         f'got {fs!r}')
+    if structure not in STRUCTURES:
+        raise ModelError(f'model structure must be one of {", ".join(STRUCTURES)}, got '
+                         f'{structure!r}')
+    if isinstance(nk, bool) or not isinstance(nk, (int, np.integer)) or nk < 0:
+        raise ModelError(f'model delay nk must be an integer >= 0, got {nk!r}')
 
 
 def _check_inputs(names) -> tuple[str, ...]:
