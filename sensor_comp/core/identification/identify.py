@@ -1,65 +1,11 @@
 """
 The identification workflow: recordings → shots → EMD denoising → structure → model.
 
-This is the seed paper's method (EMD denoising, then a 2nd-order input–output model) done
-so that its result can be trusted:
+Fits on calibration shots and reports the fit on validation shots; falls back (and says
+so) where a fit fails, refuses or warns where the data cannot support the model (defective
+shots, poor excitation at the resonance, implausible units). Method, fallbacks and the
+excitation and units checks with their numbers: ``doc/identification.md``.
 
-- shots are detected on the axial acceleration and clipped shots are left out;
-- the model is fitted on calibration shots and its fit is reported on *validation* shots
-  (other shots of the same bag, alternate ones by default, or the shots of other bags);
-- EMD denoises the calibration pressure only: validation compares the simulated model with
-  the pressure as measured, so its fit is not flattered by the denoiser;
-- ``structure='auto'`` fits output-error models over a grid of orders and delays and
-  chooses by BIC plus validation fit (see :func:`~sensor_comp.core.estimators.select_structure`);
-  ``'arx'``, ``'armax'`` (extended least squares), ``'gls'`` (the paper's generalised least
-  squares) and ``'oe'`` fit one structure, with the delay from a ``delayest``-style search
-  unless given;
-- ``effects=('nonlinear_sensitivity', ...)`` extends the chosen structure with catalogued
-  physical effects (:mod:`sensor_comp.core.effects`), fitted as an output-error model by
-  :func:`~sensor_comp.core.identification.extended.fit_extended`; the model's inputs, orders and
-  ``effects`` entries (physical parameters with standard deviations) describe the
-  extension. The deviations hold for coloured residuals and for scatter between shots
-  (:func:`~sensor_comp.core.identification.extended.robust_uncertainty`), with the residual of the
-  measured, not the denoised, pressure. Without effects the workflow is unchanged.
-
-What fails on valid data falls back, and says so (``Identification.notes``, the model's
-``fit['notes']``, a ``note:`` line of the CLI): a fit to the EMD-denoised pressure that
-fails is made on the measured pressure; orders that cannot be fitted are lowered (``na``,
-then ``nb``); an unstable equation-error estimate (ARX, ARMAX) is replaced by output error;
-effects on a base of more than two poles are also fitted on the sensor's own two (poles
-chosen without the effects imitate them) and the lower BIC kept, two poles when the larger
-base cannot be fitted. An effect that cannot be fitted at all is one :class:`EffectError`
-line saying why.
-
-What the data cannot support is refused or warned about, never silently fitted:
-
-- a shot with a defect (:attr:`~sensor_comp.core.shots.detection.Shot.defects`: clipped, NaN/Inf in
-  its window, no shock, dead pressure) is left out with a line in ``excluded``; a recording
-  whose pressure is constant throughout is refused, as are too few usable shots.
-- **excitation**: the model's dynamics (its dominant resonance ``fn``, or its slowest real
-  pole) can only be identified where the calibration acceleration carries signal above its
-  own noise. The accelerometer's noise is in the regressors but drives no pressure, so a
-  least-squares or output-error fit shrinks the gain at ``fn`` by ``S/(S + N)`` (regression
-  dilution), ``S/N`` the input's signal-to-noise power ratio around ``fn``
-  (±:data:`EXCITATION_BAND`), and the damping ratio comes out about ``(1 + N/S)`` times too
-  large; at 1 MS/s the broadband input noise weighs more and a poorly excited resonance
-  collapses into fast real poles. Below :data:`MIN_EXCITATION` the dynamics are not
-  identified: the explanation warns that they come from noise and names the order the data
-  support (how many of the model's poles lie where the input is excited); below
-  :data:`WEAK_EXCITATION` it warns of the bias. Both are warnings, not errors: a sensor
-  whose resonance lies far above the shocks' band (100 kHz and more is common) is
-  compensated by such a model just as well, only its fn and ζ are not measured. A
-  lag-domain persistent-excitation order does not tell this: the Toeplitz covariance of a
-  1 ms shock at 1 MS/s has only two eigenvalues above the accelerometer noise, yet such
-  shots identify the resonance to 0.1 %; what matters is the spectrum at ``fn``.
-- **units**: the shots' peak pressure per peak acceleration (median, the MPa/g column of
-  the shot table) outside :data:`~sensor_comp.core.identification.model.PLAUSIBLE_MPA_PER_G` is
-  refused, outside :data:`~sensor_comp.core.identification.model.TYPICAL_MPA_PER_G` warned about,
-  with the likely unit mistake
-  (:func:`~sensor_comp.core.identification.model.sensitivity_problem`). The shots, not the model's
-  static gain, are used: a model without a hidden effect (an amplifier high-pass) can have an
-  absurd gain at DC on data in the right units. A factor that stays within the typical range (g for
-  m/s² on a sensor of 1e-5 MPa/g) cannot be told from the data.
 """
 
 from __future__ import annotations
@@ -121,11 +67,8 @@ class ShotSource:
     """
     A recording, where it came from, and the shots used from it.
 
-    Args:
-        recording: Pressure and acceleration.
-        shots: Its shots (detected or from manual windows).
-        path: The bag or CSV file, hashed into the model's provenance; None for data made
-            in memory.
+    ``path`` (the bag or CSV file) is hashed into the model's provenance; None for data made
+    in memory.
 
     """
 
@@ -179,14 +122,11 @@ class ShotSource:
         Check the shots' peak pressure per acceleration against pressure sensors' range.
 
         Returns:
-            A warning naming the likely unit mistake when the median over the usable shots
-            lies outside :data:`~sensor_comp.core.identification.model.TYPICAL_MPA_PER_G`, else
-            None.
+            A warning naming the likely unit mistake when the median lies outside
+            ``TYPICAL_MPA_PER_G``, else None.
 
         Raises:
-            ShotError: When it lies outside
-            :data:`~sensor_comp.core.identification.model.PLAUSIBLE_MPA_PER_G`
-                (see :func:`~sensor_comp.core.identification.model.sensitivity_problem`).
+            ShotError: When it lies outside ``PLAUSIBLE_MPA_PER_G``.
 
         """
         ratios = [abs(s.mpa_per_g) for s in self.shots if s.usable and math.isfinite(s.mpa_per_g)]
@@ -215,11 +155,9 @@ class Identification:
         selection: The structure selection table (``structure='auto'``), else None.
         delay: The delay search, when the delay was estimated, else None.
         denoising: One EMD result per calibration window (empty without EMD).
-        excluded: Why shots were left out (clipped), one line each.
+        excluded: Why shots were left out, one line each.
         explanation: Why this structure, orders and delay.
-        notes: What identification did instead of what was asked, because that failed on
-            these data (lower orders, another start, the measured pressure instead of the
-            denoised one), one line each; also in the model's ``fit['notes']``.
+        notes: Fallbacks taken because what was asked failed, one line each.
 
     """
 
@@ -262,19 +200,11 @@ def prepare_sources(calibration: Sequence[ShotSource],
     """
     Leave defective shots out, hold out validation shots and check units and sample rates.
 
-    Args:
-        calibration: Recordings with shots to fit on.
-        validation: Recordings with shots to report on; when empty, every second shot of
-            each calibration recording is held out.
-
-    Returns:
-        The usable calibration and validation shots with what was left out and why.
+    Without ``validation``, every second shot of each calibration recording is held out.
 
     Raises:
-        IdentError: Without a calibration recording, without a usable shot in a role, or
-            on mixed sample rates.
-        ShotError: On a dead pressure channel, implausible units, or too few shots to hold
-            some out.
+        IdentError: Without a calibration recording or usable shots, or on mixed rates.
+        ShotError: On a dead pressure channel, implausible units, or too few shots.
 
     """
     if not calibration:
@@ -442,25 +372,10 @@ def _attempt(fit):
 def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
                 fitted: Estimate | None = None) -> tuple[Estimate, int, int, list[str]]:
     """
-    Fit ``structure`` to the fit windows; fall back where it fails, saying so.
+    Fit ``structure`` to the fit windows; fall back where it fails, one note each.
 
-    In turn: the EMD-denoised pressure as asked; the measured pressure (denoising can make
-    the output lags too collinear); lower orders (``na``, then ``nb``, down to 1); output
-    error when an equation-error estimate is unstable. Each fallback is one note.
-
-    Args:
-        structure: A key of :data:`_FITTERS`.
-        data: The windows.
-        na: Denominator order asked for.
-        nb: Numerator length asked for.
-        nk: Delay.
-        fitted: The fit as asked, when already made (the delay search's start).
-
-    Returns:
-        ``(estimate, na, nb, notes)``.
-
-    Raises:
-        IdentError: When every fallback fails too (naming the first failure).
+    The order of fallbacks is in ``doc/identification.md``. Returns ``(estimate, na, nb,
+    notes)``; raises IdentError when every fallback fails (naming the first failure).
 
     """
     notes: list[str] = []
@@ -558,21 +473,10 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
 def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _Base, *,
                  compare: bool):
     """
-    Fit the base structure plus ``effects`` on the calibration windows.
+    Fit the base structure plus ``effects``; return ``(extended fit, notes)``.
 
-    With ``compare`` (orders chosen by the selection, without the effects) a base of other
-    than two poles is compared with the sensor's own two, and the structure with the lower
-    BIC (the searched parameters counted) kept: a pole that imitated a missing effect (a
-    slow real one for a high-pass or a zero shift) competes with the effect and bends its
-    parameters, and one pole chosen for data whose mode lay beyond the shocks' band may not
-    hold it once an effect needs it. Orders that cannot be fitted fall back to two poles.
-
-    Returns:
-        ``(extended fit, notes)``.
-
-    Raises:
-        EffectError: One line, when no structure can be fitted with the effects, or an
-            effect does not apply to the recordings.
+    With ``compare``, a base of other than two poles competes with two by BIC (why:
+    ``doc/identification.md``). Raises EffectError when nothing fits or an effect does not apply.
 
     """
     measured = shot_windows([s for s in sources.calibration if s.shots])
@@ -677,15 +581,10 @@ def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: 
 def excitation(sources: Sequence[ShotSource], f_hz: float | np.ndarray
                ) -> float | np.ndarray | None:
     """
-    Return the signal-to-noise power ratio of the axial acceleration of the shots around ``f_hz``.
+    Return the input signal-to-noise power ratio of the shots around ``f_hz``.
 
-    The power of every shot window (baseline removed) in the band ``f·(1 ±``
-    :data:`EXCITATION_BAND```)`` over the power the accelerometer noise alone would put there
-    (white, its σ from the window's pre-trigger), minus one; pooled over all windows.
-
-    Returns:
-        ``S/N`` at each frequency (``inf`` for noise-free data), or None when the windows
-        hold too little pre-trigger (16 samples in all) to measure the noise.
+    Measured in ``f·(1 ±`` :data:`EXCITATION_BAND` ``)`` and pooled over the windows
+    (``doc/identification.md``); ``inf`` for noise-free data, None with too little pre-trigger.
 
     """
     shots = [(s.recording, shot) for s in sources for shot in s.shots]
