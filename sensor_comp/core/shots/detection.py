@@ -1,59 +1,10 @@
 """
 Shots: find the shocks of a drop-hammer recording and cut one window around each.
 
-Detection runs on the axial acceleration ``a_z`` in g, after removing its median:
+Detection thresholds the axial acceleration with hysteresis, times each pulse as a
+half-sine, and marks shots that must not be fitted (clipped, non-finite, no shock, dead
+pressure) in :attr:`Shot.defects`. Rules and numbers: ``doc/shots.md``.
 
-- Noise floor: σ from the median absolute deviation (``1.4826 · MAD``), robust to the shots
-  themselves as long as they fill less than half of the recording.
-- Threshold with hysteresis: a shot starts where the signal reaches the threshold and ends
-  where it falls below ``hysteresis × threshold``. The default threshold is the larger of
-  :data:`DEFAULT_THRESHOLD_FRACTION` of the largest peak (Table 2 of the seed paper spans
-  180–2185 g, 8 %, in one series) and :data:`NOISE_FACTOR` σ (no false triggers from
-  Gaussian noise). Crossings less than ``holdoff_ms`` apart (ringing, rebound) are one shot.
-- Polarity: the sign of the largest excursion unless given.
-
-Pulse timing models the shock as a half-sine ``A sin(π t / T)``: its width at half amplitude
-is ``2T/3`` (it crosses ``A/2`` at ``T/6`` and ``5T/6``), so the base width is
-``T = 1.5 × FWHM``, with the half-amplitude crossings interpolated between samples. At half
-amplitude the slope is steep (``0.87 Aπ/T``), so noise moves the crossings little, while a
-low-level threshold crossing would depend on the threshold and the baseline. The onset is
-``T/6`` before the rising crossing and the end of pulse ``T`` after the onset.
-
-Windows run from ``pre_ms`` before the onset to ``post_ms`` after the end of pulse: the
-pre-trigger holds the quiet baseline (and keeps EMD end effects away from the shock), the
-post-trigger holds the sensor's ringing and the slow tail (amplifier high-pass undershoot).
-Windows are clipped at the recording ends and never overlap: when two shots are closer than
-their windows, the windows meet half-way between the end of one pulse and the onset of the
-next, and both shots carry a note saying so. The baseline (mean of the pre-trigger, up to
-a guard of a tenth of the pulse width before the onset) is removed from pressure and
-acceleration inside each window.
-
-A shot that cannot be fitted or compared carries its reasons in :attr:`Shot.defects` (and
-the table's mode column says so); :func:`~sensor_comp.core.identification.identify.identify`,
-``compare``
-and the diagnosis leave such shots out with a warning naming the reason:
-
-- non-finite samples (a stream gap becomes NaN; a NaN or Inf in the data) anywhere in the
-  window, named by channel, count and first sample. Outside the windows they do not matter:
-  detection ignores them.
-- clipping: the acceleration or the pressure sits flat at its extreme, at an ADC rail or an
-  amplifier limit. The flat top is told from a smooth crest by its length. A half-sine
-  crest of amplitude ``A`` and base width ``T`` (``T`` = 1.5 × the crest's half-amplitude
-  width, measured per channel) stays within ``r`` of its top for
-  ``(2T/π)·arccos(1 − r/A)`` samples; a run of samples within a band ``δ`` of the extreme
-  that lasts :data:`CLIP_MARGIN` times that (and at least 3 samples, 2 % of ``T``), mostly
-  inside the band, is a flat top. Two bands are tried: ``δ = 0`` (an ADC rail repeats one
-  code exactly, however noisy the signal; a smooth crest holds its top code only within
-  ``r = 2q``, ``q`` the quantisation step seen in the window: an 8-bit scope holds it for a
-  few samples on any crest), and ``δ = max(q, CLIP_NOISE_Z σ)`` (an amplifier limit with
-  the channel's pre-trigger noise ``σ`` on top; noise raises the extreme by about 3σ, so a
-  smooth crest's noisy samples stay within ``r = δ + q + 3σ``).
-- no shock: a manual window whose axial acceleration stays within :data:`NOISE_FACTOR`
-  noise σ of its baseline.
-- a dead channel: the pressure constant throughout the window.
-
-A recording whose axial acceleration is constant throughout (a dead or disconnected
-accelerometer) is refused outright: there is nothing to trigger on.
 """
 
 from __future__ import annotations
@@ -126,7 +77,7 @@ class Shot:
     """
     One shock and its analysis window (sample indices into the recording).
 
-    Args:
+    Attributes:
         index: Position of the shot in its list, from 0.
         fs: Sample rate in Hz.
         start: First sample of the window.
@@ -135,20 +86,16 @@ class Shot:
         end: One past the last sample of the pulse (half-sine end).
         peak: Sample of the acceleration peak.
         peak_g: Axial acceleration at the peak, baseline removed, in g (sign kept).
-        width_ms: Half-sine base width in ms (1.5 × the half-amplitude width).
-        peak_pressure_mpa: Largest-magnitude pressure from the onset to the window end,
-            baseline removed, in MPa (sign kept).
-        charge_pc: ``peak_pressure_mpa`` × the charge sensitivity in pC, or None when the
-            recording's metadata does not give it.
+        width_ms: Half-sine base width in ms.
+        peak_pressure_mpa: Largest-magnitude pressure after the onset, in MPa (sign kept).
+        charge_pc: ``peak_pressure_mpa`` × the charge sensitivity in pC, or None.
         mpa_per_g: ``peak_pressure_mpa / peak_g``.
-        clipped: The acceleration or the pressure sits flat at its extreme (saturated
-            amplifier or ADC; see the module docs).
+        clipped: The acceleration or the pressure sits flat at its extreme.
         baseline_stop: One past the last pre-trigger sample used for the baseline.
         baseline_pa: Pre-trigger mean pressure in Pa.
         baseline_acceleration: Pre-trigger mean acceleration (x, y, z) in m/s².
         notes: Anything a user should know: shortened windows, merged crossings, gaps.
-        defects: Why the shot must not be fitted or compared (clipped, non-finite samples,
-            no shock, a dead pressure channel), one sentence each; empty for a usable shot.
+        defects: Why the shot must not be fitted or compared, one sentence each.
 
     """
 
@@ -405,14 +352,10 @@ def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: 
 
 def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
     """
-    Return why the recording's axial acceleration (or its pressure) is dead, or None.
+    Return why the axial acceleration (or, with ``pressure``, the pressure) is dead, or None.
 
     A channel is dead when every finite sample has one value (a disconnected sensor, an
     amplifier in reset or overload, a channel mapped to nothing).
-
-    Args:
-        recording: The recording.
-        pressure: Check the pressure too.
 
     """
     channels = [('axial acceleration (row z)', recording.axial, 'm/s²')]
@@ -516,24 +459,19 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
 
     Args:
         recording: Pressure and acceleration.
-        threshold_g: Trigger level in g above the median; default: the larger of
-            :data:`DEFAULT_THRESHOLD_FRACTION` of the largest peak and :data:`NOISE_FACTOR`
-            noise σ.
+        threshold_g: Trigger level in g above the median; default in ``doc/shots.md``.
         hysteresis: A shot ends below ``hysteresis × threshold`` (0 < hysteresis ≤ 1).
         pre_ms: Window length before the pulse onset in ms.
         post_ms: Window length after the end of pulse in ms.
         holdoff_ms: Threshold crossings closer than this are one shot.
-        polarity: 1 for positive pulses, -1 for negative ones, None to follow the largest
-            excursion.
+        polarity: 1 or -1, None to follow the largest excursion.
 
     Returns:
-        The shots in time order (empty when nothing reaches the threshold:
-        :func:`no_shot_message` says why). NaN and Inf samples never trigger; a shot whose
-        window holds one has it in its :attr:`Shot.defects`.
+        The shots in time order; empty when nothing reaches the threshold
+        (:func:`no_shot_message` says why).
 
     Raises:
-        ShotError: On bad options, or a recording whose axial acceleration is constant or
-            holds no finite sample.
+        ShotError: On bad options, or a constant or all-non-finite axial acceleration.
 
     """
     _check_ms(pre_ms=pre_ms, post_ms=post_ms, holdoff_ms=holdoff_ms)
@@ -591,20 +529,7 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
 def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, float]], *,
                        polarity: int | None = None) -> list[Shot]:
     """
-    Build shots from given windows instead of detecting them.
-
-    Inside each window the pulse is the largest excursion of the axial acceleration from
-    the window's median; its timing and the baseline follow the same rules as
-    :func:`detect_shots`.
-
-    Args:
-        recording: Pressure and acceleration.
-        windows_s: ``(start, stop)`` pairs in seconds since the recording start, in time
-            order, not overlapping.
-        polarity: As in :func:`detect_shots`.
-
-    Returns:
-        One shot per window.
+    Build shots from ``(start, stop)`` windows in seconds instead of detecting them.
 
     Raises:
         ShotError: On a window outside the recording, empty, overlapping or out of order.
@@ -637,24 +562,10 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
              denoise: Callable[[np.ndarray], np.ndarray] | None = None
              ) -> list[tuple[np.ndarray, np.ndarray]]:
     """
-    Return identification data per shot window, baselines removed.
+    Return ``(u, y)`` per shot window, baselines removed: inputs ``(len(inputs), n)``, Pa.
 
-    Each window starts at rest (quiet pre-trigger), so a model simulated from a zero state
-    at the window start can be compared with it.
-
-    Args:
-        recording: Pressure and acceleration.
-        shots: Shots with their windows.
-        inputs: Model input names (see :mod:`sensor_comp.core.shots.inputs`), in m/s² based units.
-        denoise: Applied to each window's pressure, e.g. an
-            :class:`~sensor_comp.core.identification.denoise.EmdDenoiser`; None keeps the measured
-            pressure.
-
-    Returns:
-        ``(u, y)`` per shot: inputs ``(len(inputs), n)`` and pressure ``(n,)`` in Pa.
-
-    Raises:
-        ShotError: When a window holds a NaN or Inf sample or lies outside the recording.
+    ``denoise`` is applied to each window's pressure (e.g. an ``EmdDenoiser``); None keeps the
+    measured pressure. Raises ShotError on a non-finite sample or a window outside the recording.
 
     """
     out = []
@@ -678,18 +589,11 @@ def split_calibration(shots: Sequence[Shot], *,
                       validation: str | Iterable[int] = 'alternate'
                       ) -> tuple[list[Shot], list[Shot]]:
     """
-    Split shots into a calibration set (to fit on) and a validation set (to report on).
+    Split shots into ``(calibration, validation)``, both non-empty.
 
-    Args:
-        shots: All shots.
-        validation: ``'alternate'`` holds out every second shot (indices 1, 3, 5, ...);
-            otherwise the :attr:`Shot.index` values of the validation shots.
-
-    Returns:
-        ``(calibration, validation)``, both non-empty.
-
-    Raises:
-        ShotError: With fewer than two shots, an unknown index, or an empty side.
+    ``validation='alternate'`` holds out every second shot (indices 1, 3, 5, ...); otherwise
+    it lists the :attr:`Shot.index` values to hold out. Raises ShotError with fewer than two
+    shots, an unknown index, or an empty side.
 
     """
     shots = list(shots)
