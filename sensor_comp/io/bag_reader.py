@@ -1,23 +1,10 @@
 """
 Read rosbag2-layout MCAP bags, including bags without summary and bags cut short.
 
-:class:`BagReader` reads any ROS 2 MCAP file (ours, ``rosbags``', rosbag2's; a rosbag2 bag
-directory through its ``metadata.yaml``): it takes topics, types and counts from the summary
-when the file has a complete one with a correct CRC, and otherwise scans the data section. A
-file whose writer was killed has no footer: the scan keeps every complete record before the
-cut (complete chunks, and the complete messages at the start of the chunk being written when
-the cut happened), sets :attr:`BagReader.truncated` and explains in :attr:`BagReader.warning`
-what was lost. Damage is never read past silently: a chunk whose CRC, size or compression
-does not check out raises :class:`BagError`, or is skipped and listed with ``skip_damaged``
-(what :mod:`sensor_comp.io.repair` does).
+:class:`BagReader` reads the records; :func:`read_streams` and :func:`read_recording` turn
+the ``64FC1`` Image blocks back into streams and recordings. Summary use, truncation,
+damage and memory: ``doc/recording.md``.
 
-The MCAP format itself (records, chunks, decompression) is parsed by
-:mod:`sensor_comp.io.mcap_records`; the rosbag2 layout is :mod:`sensor_comp.io.rosbag2_layout`.
-
-:func:`read_streams` turns the ``64FC1`` Image blocks of a bag back into
-:class:`~sensor_comp.streams.Stream` objects, using the rate, channels and units announced on
-the latched ``<namespace>/stream_info`` topic; :func:`read_recording` joins acceleration and
-raw pressure into a :class:`~sensor_comp.streams.Recording`.
 """
 
 from __future__ import annotations
@@ -89,25 +76,11 @@ RELEASE_BYTES = 16 << 20
 
 class BagReader:
     """
-    Read the topics and messages of a ROS 2 MCAP bag.
+    Read the topics and messages of a ROS 2 MCAP bag (a context manager).
 
-    Use it as a context manager::
-
-        with BagReader('run.mcap') as bag:
-            print(bag.topics)
-            for msg in bag.messages(['/rig/acceleration']):
-                ...
-
-    A usable summary (complete, CRC correct) gives topics and counts at once; otherwise the
-    data section is scanned. When the summary is used, a data section that does not parse
-    up to it is an error (the file was damaged, not cut).
-
-    Args:
-        path: An ``.mcap`` file, or a rosbag2 bag directory holding exactly one (its
-            ``metadata.yaml`` is honoured).
-        skip_damaged: Skip chunks that do not decompress or fail their CRC (and a damaged
-            record that ends the readable part) and list them in :attr:`damaged`, instead
-            of raising :class:`BagError` (what ``sensor-comp repair`` does).
+    ``path`` is an ``.mcap`` file or a rosbag2 directory holding exactly one; with
+    ``skip_damaged`` damaged chunks are skipped and listed in ``damaged`` instead of raising
+    (summary, truncation and damage rules: ``doc/recording.md``).
 
     Attributes:
         path: The file read.
@@ -116,18 +89,14 @@ class BagReader:
         topics: ``{topic: TopicInfo}`` of every channel in the file.
         schemas: ``{schema id: SchemaRecord}``.
         channels: ``{channel id: ChannelRecord}``.
-        truncated: ``True`` when the writer did not finish the file (no footer or an
-            unfinished summary).
-        cut_in_data: ``True`` when the cut fell in the data section, so that messages may
-            be lost (a file cut in its summary only lost nothing).
-        warning: What was recovered and lost when ``truncated`` (or that a damaged summary
-            was ignored), else ``''``.
+        truncated: The writer did not finish the file (no footer or an unfinished summary).
+        cut_in_data: The cut fell in the data section, so messages may be lost.
+        warning: What was recovered and lost (or that a damaged summary was ignored), or ``''``.
         damaged: The parts skipped with ``skip_damaged``, in file order, once read.
 
     Raises:
-        BagError: If the file is missing, unreadable, empty, not MCAP (the message shows
-            its first bytes), not the ``ros2`` profile, or has a channel that is not CDR
-            with a ``ros2msg``/``ros2idl`` schema.
+        BagError: If the file is missing, unreadable, empty, not MCAP, not the ``ros2``
+            profile, or has a channel that is not CDR with a ``ros2msg``/``ros2idl`` schema.
 
     """
 
@@ -382,16 +351,9 @@ class BagReader:
 
     def _release(self, start: int, stop: int) -> int:
         """
-        Unmap the pages of ``[start, stop)`` that a pass over the records has left behind.
+        Unmap the pages of ``[start, stop)`` a pass has left behind; return where that ends.
 
-        Every page of the file read stays in the process's resident set until unmapped
-        (the kernel has no reason to drop clean page-cache pages from a mapping), so a
-        pass over a 1 GB bag would end with 1 GB resident. Dropping them costs nothing:
-        the mapping stays valid and a page read again comes back from the page cache.
-        Done per :data:`RELEASE_BYTES` at least.
-
-        Returns:
-            Where the released part now ends.
+        Keeps a long pass from holding the whole file resident (``doc/recording.md``).
 
         """
         stop -= stop % mmap.PAGESIZE
@@ -498,17 +460,11 @@ class BagReader:
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
         """
-        Iterate over the messages in file order (time order for bags written by us).
-
-        Args:
-            topics: Absolute topic names to read; all topics when ``None``.
-
-        Yields:
-            :class:`RawMessage` with the serialized CDR bytes.
+        Iterate over the raw CDR messages of ``topics`` (all when None) in file order.
 
         Raises:
-            BagError: If a requested topic is not in the bag, or the data are damaged (and
-                not ``skip_damaged``).
+            BagError: If a requested topic is not in the bag, or the data are damaged (and not
+                ``skip_damaged``).
 
         """
         wanted = None
@@ -622,14 +578,9 @@ def block_topics(bag: BagReader, *, namespace: str,
     """
     Return ``{relative name: absolute topic}`` of the block streams under ``namespace``.
 
-    Args:
-        bag: The open bag.
-        namespace: Rig namespace, e.g. ``'/rig'``.
-        names: Streams that must be there, e.g. ``('acceleration', 'pressure/raw')``; every
-            Image topic with messages when ``None``.
-
-    Raises:
-        BagError: If a named stream's topic carries another type, or has no blocks.
+    ``names`` (e.g. ``('acceleration', 'pressure/raw')``) must all be there; None takes every
+    Image topic with messages. Raises BagError on a named stream of another type or without
+    blocks.
 
     """
     prefix = topic_name(namespace, '')
@@ -672,17 +623,8 @@ class _StreamFiller:
     """
     Assemble one stream's blocks as they are read, into one array sized up front.
 
-    The same stream as :func:`~sensor_comp.blocks.assemble` of all the blocks, without
-    holding them: each block is copied into place at once and its message freed, so reading
-    a bag needs the stream's samples once, not twice (blocks, then their concatenation).
-    The array is sized from the topic's message count times the first block's width; gaps
-    (NaN) beyond that grow it. Capacity never written is never touched, so it costs no
-    memory.
-
-    Args:
-        info: The stream's description (rate and channels).
-        name: The stream's name in error messages (the absolute topic).
-        messages: The number of messages on its topic (0: unknown).
+    Holds the samples once, not twice (``doc/recording.md``); ``messages`` is the topic's
+    message count (0: unknown).
 
     """
 
@@ -743,32 +685,18 @@ def _fill(fillers: dict, pending: dict, infos: dict, bag: BagReader, topics: dic
 def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | None = None,
                  on_truncated: str = 'warn') -> dict[str, Stream]:
     """
-    Read the block streams of a bag.
-
-    Every ``sensor_msgs/msg/Image`` topic under the namespace that carries blocks is decoded
-    with the rate and channels its ``stream_info`` entry announces (entries of several
-    ``stream_info`` messages are merged by stream name), and assembled: gaps become NaN plus
-    :class:`~sensor_comp.streams.Gap` entries.
+    Read the block streams of a bag as ``{relative topic: Stream}``.
 
     Args:
         path: The ``.mcap`` file (or rosbag2 directory holding one).
-        namespace: Rig namespace, e.g. ``'/rig'``; found from the ``.../stream_info`` topic
-            when ``None``.
-        names: Relative topics to read, e.g. ``('acceleration',)``; all when ``None``.
-        on_truncated: For a bag cut short, ``'warn'`` (read up to the cut with a
-            :class:`TruncatedBagWarning`), ``'ignore'`` (read up to the cut) or ``'raise'``
-            (:class:`TruncatedBagError` when the cut fell in the data section; a bag that
-            only lacks its summary is read, nothing of it is lost).
-
-    Returns:
-        ``{relative topic: Stream}``, e.g. keys ``'acceleration'``, ``'pressure/raw'``.
+        namespace: Rig namespace, e.g. ``'/rig'``; found from ``stream_info`` when None.
+        names: Relative topics to read, e.g. ``('acceleration',)``; all when None.
+        on_truncated: ``'warn'``, ``'ignore'`` or ``'raise'`` (``doc/recording.md``).
 
     Raises:
-        BagError: If the bag has no (or several) ``stream_info`` topics, blocks on a topic
-            ``stream_info`` does not describe, a requested stream without blocks or of
-            another type, or a block that does not decode.
-        StreamError: If blocks of a stream overlap, are out of order or have the wrong
-            number of rows.
+        BagError: On missing or several ``stream_info`` topics, undescribed or missing block
+            streams, or a block that does not decode.
+        StreamError: If blocks of a stream overlap, are out of order or have the wrong rows.
 
     """
     if on_truncated not in ('warn', 'ignore', 'raise'):
@@ -822,15 +750,8 @@ def read_recording(path, *, namespace: str | None = None,
     """
     Read the ``acceleration`` and ``pressure/raw`` streams of a bag as one recording.
 
-    Args:
-        path: The ``.mcap`` file (or rosbag2 directory holding one).
-        namespace: Rig namespace; found from the ``.../stream_info`` topic when ``None``.
-        on_truncated: What to do with a bag cut short; see :func:`read_streams`.
-
-    Raises:
-        BagError: See :func:`read_streams`.
-        StreamError: If the two streams differ in rate, do not overlap in time or are not on
-            one sample grid.
+    Arguments and errors as :func:`read_streams`; StreamError also when the two streams differ
+    in rate, do not overlap in time or are not on one sample grid.
 
     """
     streams = read_streams(path, namespace=namespace, names=(ACCELERATION, PRESSURE_RAW),
