@@ -1,12 +1,9 @@
 """
 Linear least squares over several segments: lagged regressors and a scaled QR solve.
 
-Regression rows start only once every lagged sample lies inside its segment, so no row mixes
-two segments and nothing is assumed about the time before a segment. At 1 MS/s the columns
-differ by many orders of magnitude (pressure lags ~1e5 Pa, acceleration lags ~1e4 m/s² with
-coefficients ~1e-5): columns are scaled to unit norm before the QR factorisation. The solves
-run over blocks of rows (:func:`solve_blocks`), so only the ``(p, p)`` factors and one
-block are held beside the data: millions of rows need no ``Q`` of their size.
+Columns are scaled to unit norm and solves run over row blocks, so millions of rows need
+no ``Q`` of their size; the methods and their accuracy: ``doc/estimators.md``.
+
 """
 
 from __future__ import annotations
@@ -57,18 +54,7 @@ def delayed_numerator(b: np.ndarray, nk: int) -> np.ndarray:
 
 def filter_each(num: np.ndarray, den: np.ndarray,
                 signals: Sequence[np.ndarray]) -> list[np.ndarray]:
-    """
-    Filter every array of ``signals`` along its last axis by ``num/den``, from rest.
-
-    Args:
-        num: Numerator coefficients in q⁻¹.
-        den: Denominator coefficients in q⁻¹ (leading coefficient non-zero).
-        signals: One array per segment.
-
-    Returns:
-        The filtered arrays, each started from a zero state at its own first sample.
-
-    """
+    """Filter every array of ``signals`` along its last axis by ``num/den``, each from rest."""
     return [signal.lfilter(num, den, x, axis=-1) for x in signals]
 
 
@@ -77,15 +63,7 @@ def equation_error(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, a: np.
     """
     Return ``A(q) y − Σ B_i(q) q^-nk u_i`` for every segment, computed from rest.
 
-    Args:
-        ys: Outputs, one ``(n,)`` array per segment.
-        us: Inputs, one ``(n_inputs, n)`` array per segment.
-        a: ``[1, a1, ..., ana]``.
-        b: ``(n_inputs, nb)`` numerator coefficients.
-        nk: Input delay in samples.
-
-    Returns:
-        One ``(n,)`` array per segment.
+    ``a`` is ``[1, a1, ..., ana]``, ``b`` the ``(n_inputs, nb)`` numerators.
 
     """
     bk = delayed_numerator(b, nk)
@@ -128,23 +106,14 @@ def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na:
                       nb: int, nk: int, es: Sequence[np.ndarray] | None = None,
                       nc: int = 0) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """
-    Stack the regression ``y(k) = φ(k)ᵀθ`` of every segment.
+    Stack the regression ``y(k) = φ(k)ᵀθ`` of every segment (layout: ``doc/estimators.md``).
 
-    ``φ(k) = [−y(k−1) … −y(k−na), u_i(k−nk) … u_i(k−nk−nb+1) for each input i,
-    e(k−1) … e(k−nc)]``, rows ``k`` from ``max(na, nk+nb−1, nc)`` to the segment end.
-
-    Args:
-        ys: Outputs, one ``(n,)`` array per segment.
-        us: Inputs, one ``(n_inputs, n)`` array per segment.
-        na: Output lags.
-        nb: Input lags per input.
-        nk: Input delay in samples.
-        es: Extra lagged signals (residuals of a pseudo-linear regression), one per segment.
-        nc: Lags of ``es``.
+    ``es`` are extra lagged signals (residuals of a pseudo-linear regression), ``nc`` lags
+    each.
 
     Returns:
-        ``(phi, target, names)``: the ``(rows, p)`` regressor matrix, the ``(rows,)``
-        targets and one name per column (``'y(k-1)'``, ``'u0(k-2)'``, ``'e(k-1)'``).
+        ``(phi, target, names)``: the ``(rows, p)`` regressor matrix, the ``(rows,)`` targets
+        and one name per column (``'y(k-1)'``, ``'u0(k-2)'``, ``'e(k-1)'``).
 
     Raises:
         IdentError: If the segments hold fewer rows than parameters.
@@ -169,12 +138,8 @@ def lagged_blocks(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int
     """
     Return the regression of :func:`lagged_regression` as blocks of at most ``rows`` rows.
 
-    Returns:
-        ``(blocks, names)``: ``blocks()`` yields ``(phi, target)`` blocks, in the row order
-        of :func:`lagged_regression`, each built when reached (call it once per pass).
-
-    Raises:
-        IdentError: If the segments hold fewer rows than parameters.
+    Returns ``(blocks, names)``; ``blocks()`` yields ``(phi, target)`` built when reached
+    (call it once per pass). Raises IdentError with fewer rows than parameters.
 
     """
     k0, names, used = _lag_layout(ys, us, na, nb, nk, 0)
@@ -207,8 +172,7 @@ class LeastSquares:
     Attributes:
         theta: Parameters ``(p,)``.
         residual: Target minus fit ``(rows,)``.
-        unit_covariance: ``(ΦᵀΦ)⁻¹``; times the noise variance it is the parameter
-            covariance.
+        unit_covariance: ``(ΦᵀΦ)⁻¹``; times the noise variance, the parameter covariance.
 
     """
 
@@ -226,17 +190,7 @@ class LeastSquares:
 def solve_least_squares(phi: np.ndarray, target: np.ndarray, *,
                         names: Sequence[str] = ()) -> LeastSquares:
     """
-    Solve ``min ‖target − phi θ‖`` through a QR factorisation of the column-scaled ``phi``.
-
-    Runs :func:`solve_blocks` over row blocks (views) of ``phi``: no copy of its size.
-
-    Args:
-        phi: ``(rows, p)`` regressors.
-        target: ``(rows,)`` targets.
-        names: Column names for error messages.
-
-    Returns:
-        The solution with residual and unit covariance.
+    Solve ``min ‖target − phi θ‖`` by :func:`solve_blocks` over row views of ``phi``.
 
     Raises:
         IdentError: When a column is zero or the columns are linearly dependent (the input
@@ -254,9 +208,6 @@ def solve_lagged(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int,
     """
     Solve the regression of :func:`lagged_regression` block by block; return it and names.
 
-    The regressor matrix is never built whole: each block of rows is built when a pass
-    over the data reaches it (:func:`lagged_blocks`).
-
     Raises:
         IdentError: As :func:`lagged_regression` and :func:`solve_least_squares`.
 
@@ -270,16 +221,8 @@ def solve_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], 
     """
     Solve a least-squares problem given as row blocks, by CholeskyQR2 accumulated over them.
 
-    The arithmetic of :func:`scaled_qr` and a solve with its ``Q``, with every product over
-    the rows summed block by block: the column norms, the Gram matrix of the unit-norm
-    columns, that of ``Q₁ = Φ R₁⁻¹`` with ``Q₁ᵀ target``, then the residual. Beyond the
-    condition CholeskyQR2 handles, Householder QR of ``[R; block]`` block after block (TSQR)
-    gives ``R`` and ``Qᵀ target`` in one more pass.
-
-    Args:
-        blocks: Returns an iterator of ``(phi, target)`` row blocks, the same on every call.
-        p: Number of columns.
-        names: Column names for error messages.
+    ``blocks()`` returns the same ``(phi, target)`` blocks on every call; ``p`` is the number
+    of columns (method: ``doc/estimators.md``).
 
     Raises:
         IdentError: When a column is zero or the columns are linearly dependent.
@@ -360,20 +303,7 @@ def scaled_qr(phi: np.ndarray, *,
     """
     Return ``(Q, R, scale)`` with ``phi / scale = Q R``, columns scaled to unit norm.
 
-    Uses Cholesky QR applied twice (CholeskyQR2: ``R₁ = chol(ΦᵀΦ)``, ``Q₁ = Φ R₁⁻¹``, then
-    the same on ``Q₁``), which is as accurate as Householder QR for condition numbers below
-    ~1e8 and runs on matrix products only: LAPACK's Householder QR of a tall matrix costs
-    10–100× more when OpenBLAS threads compete for busy cores. Beyond that condition (the
-    lags of a smooth output at a high sample rate, nearly collinear but not dependent) it
-    falls back to Householder QR, which is accurate to a condition of ~1e15.
-
-    Args:
-        phi: ``(rows, p)`` matrix.
-        names: Column names for error messages.
-
-    Returns:
-        ``Q`` ``(rows, p)`` with orthonormal columns, upper triangular ``R`` ``(p, p)`` and
-        the column norms ``scale`` ``(p,)``.
+    CholeskyQR2, with Householder QR beyond a condition of ~1e8 (``doc/estimators.md``).
 
     Raises:
         IdentError: When a column is zero or the columns are linearly dependent to within
@@ -411,16 +341,8 @@ def normal_equations(phi: np.ndarray, target: np.ndarray, *, ridge: float = 0.0)
     """
     Return the least-squares solution from the column-scaled normal equations (Cholesky).
 
-    About one pass over ``phi``: the cheapest solve for the many evaluations of a search,
-    accurate while ``phi`` is conditioned better than ~1e6 (callers recompute the residual,
-    so round-off can only raise their loss).
-
-    Args:
-        phi: ``(rows, p)`` regressors.
-        target: ``(rows,)`` targets.
-        ridge: Added to the unit diagonal of the scaled Gram matrix (Tikhonov
-            regularisation): a solution for nearly dependent columns, whose residual is at
-            most that much above the least one.
+    Cheap and accurate below a condition of ~1e6; ``ridge`` is added to the unit diagonal
+    (``doc/estimators.md``).
 
     Raises:
         IdentError: When the scaled Gram matrix is not positive definite.
@@ -446,10 +368,7 @@ def _solve_normal(gram: np.ndarray, moment: np.ndarray, ridge: float) -> np.ndar
 def normal_equations_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]],
                             p: int, *, ridge: float = 0.0) -> np.ndarray:
     """
-    Return :func:`normal_equations`' solution of a problem given as row blocks.
-
-    ``ΦᵀΦ`` and ``Φᵀ target`` are summed block by block (``blocks`` as in
-    :func:`solve_blocks`): one pass, no matrix of the rows' size.
+    Return :func:`normal_equations`' solution of a problem given as row blocks (one pass).
 
     Raises:
         IdentError: When the scaled Gram matrix is not positive definite.
@@ -466,10 +385,8 @@ def minimum_norm(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
     """
     Return the minimum-norm least-squares solution of the column-scaled ``phi`` (SVD).
 
-    For regressors that are linearly dependent (an input and a filtered copy of it, more
-    lags than the data excite): the fit is the least-squares one, the parameters along the
-    dependent directions are set to zero rather than refused. Singular values below
-    :data:`RANK_TOLERANCE` of the largest count as zero.
+    For dependent regressors: parameters along the dependent directions are zero, not refused.
+
     """
     scale = np.linalg.norm(phi, axis=0)
     scale[~(scale > 0)] = 1.0
@@ -479,10 +396,7 @@ def minimum_norm(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 def triangular_inverse(r: np.ndarray) -> np.ndarray:
     """
-    Return the inverse of the upper triangular ``r``.
-
-    LAPACK's ``trtri`` on the small ``(p, p)`` factor; ``scipy.linalg.solve_triangular``
-    costs milliseconds per call here when OpenBLAS threads compete for busy cores.
+    Return the inverse of the upper triangular ``r`` (LAPACK ``trtri``).
 
     Raises:
         IdentError: If ``r`` is singular.
