@@ -1,28 +1,10 @@
 """
 The interface of a switchable physical effect, and the checks of its parameters.
 
-An effect is a frozen, keyword-only dataclass whose fields are its physical parameters
-(declared with :func:`param`, which records unit, meaning and valid range). Subclassing
-:class:`Effect` with a class attribute ``id`` registers it (as in the diagnosis's catalogue,
-:mod:`sensor_comp.core.effects`, which has an effect of the same id, parameter names and
-units for every one here; ``identified=False`` marks a simulation setting it does not fit).
-The simulator calls every hook on every enabled effect, in ascending ``order``, along the
-signal path of the pressure channel:
+An effect is a frozen dataclass of :func:`param` fields registered by its ``id``; the
+simulator calls its hooks in ``order`` along the pressure channel's signal path
+(``doc/simulator.md``, effects).
 
-1. :meth:`Effect.delay_s` — the channel's time shift; the anvil motion is evaluated at the
-   shifted instants, so the delay is exact and continuous.
-2. :meth:`Effect.drive` — maps the axial acceleration to the force per unit mass driving the
-   sensing element (m/s²).
-3. :meth:`Effect.modes` — further mechanical modes driven by that force.
-4. :meth:`Effect.element` — further acceleration-driven pressure at the element (Pa).
-5. :meth:`Effect.transient` — shock-locked additive disturbance (Pa).
-6. :meth:`Effect.channel` — a linear system filtering the whole channel (the simulator
-   integrates it from rest for shock-driven signals and applies its frequency response to
-   stationary lines).
-7. :meth:`Effect.lines` — stationary sinusoidal pickup (Pa), rendered analytically.
-
-Hooks 2, 4 and 5 see the signal in consecutive pieces of the time grid, so they must be
-memoryless (or compute from ``motion.t`` and ``motion.touches`` alone).
 """
 
 from __future__ import annotations
@@ -55,10 +37,7 @@ class Mode:
     """
     A mechanical mode ``gain * S * wn**2 / (s**2 + 2 zeta wn s + wn**2)``.
 
-    Args:
-        fn_hz: Natural frequency in Hz.
-        zeta: Damping ratio.
-        gain: Static gain relative to the sensor's acceleration sensitivity ``S``.
+    ``gain`` is relative to the sensor's acceleration sensitivity ``S``.
 
     """
 
@@ -93,11 +72,7 @@ def param(default: float | int, *, unit: str, doc: str, low: float = -math.inf,
         high_open: Exclude ``high`` itself.
         choices: The only valid values, if the parameter is a choice.
         allow_inf: Accept ``inf`` (e.g. "no saturation").
-        identified: The diagnosis fits it (its effect declares the parameter); False for a
-            simulation setting (e.g. the number of harmonics).
-
-    Returns:
-        The dataclass field.
+        identified: The diagnosis fits it; False for a simulation setting.
 
     """
     return field(default=default, metadata={
