@@ -51,15 +51,9 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
     Check that ``path`` can take an output of ``kind`` before any work; return the path to write.
 
     Refuses one of ``inputs`` (by inode), an existing file of another kind (unless ``force``),
-    a folder where a file is due and a folder that does not take files; changes nothing.
-
-    Args:
-        path: The output as the user gave it.
-        inputs: The files and folders the command reads.
-        kind: One of :data:`KINDS`; a ``'png'`` plot may end in another image suffix and gets
-            ``.png`` appended without one.
-        force: Replace an existing file of another kind.
-        forceable: Whether the caller offers ``--force`` (a node does not), for the message.
+    a folder where a file is due and a folder that does not take files; changes nothing. A
+    ``'png'`` plot may end in another image suffix, else gets ``.png``; ``forceable`` says
+    whether the caller offers ``--force`` (a node does not), for the message.
 
     Raises:
         OutputError: If the output is refused; the message names the path and the fix.

@@ -51,16 +51,15 @@ class StreamInfo:
     """
     Metadata of one block stream, as published on the latched ``stream_info`` topic.
 
-    Args:
+    A non-positive or non-finite rate or an empty channel list raises StreamError.
+
+    Attributes:
         topic: Topic name relative to the rig namespace, e.g. ``'acceleration'``.
         fs: Sample rate in Hz.
         channels: One name per row, e.g. ``('x', 'y', 'z')``.
         unit: SI unit of every channel, e.g. ``'Pa'`` or ``'m/s^2'``.
         frame_id: Sensor frame of the samples.
         metadata: Further sensor facts as strings.
-
-    Raises:
-        StreamError: On a non-positive or non-finite rate or an empty channel list.
 
     """
 
@@ -92,16 +91,10 @@ class Gap:
 @dataclass(frozen=True)
 class Stream:
     """
-    A uniformly sampled ``(channels, samples)`` stream assembled from blocks.
+    A uniformly sampled ``(channels, samples)`` float64 stream assembled from blocks.
 
-    Args:
-        info: The stream's metadata.
-        t0_ns: Acquisition time of sample 0 in integer nanoseconds.
-        data: ``(channels, samples)`` float64 array.
-        gaps: Runs of samples that no block delivered; they hold NaN in ``data``.
-
-    Raises:
-        StreamError: When ``data`` does not have one row per channel.
+    ``t0_ns`` is the acquisition time of sample 0; ``gaps`` are runs of samples no block
+    delivered (NaN in ``data``). ``data`` without one row per channel raises StreamError.
 
     """
 
@@ -149,16 +142,9 @@ class Recording:
     """
     Pressure (Pa) and triaxial acceleration (m/s², rows x, y, z; z the sensor axis) of one rig.
 
-    Args:
-        fs: Sample rate in Hz.
-        t0_ns: Acquisition time of sample 0 in integer nanoseconds.
-        pressure: ``(samples,)`` raw pressure.
-        acceleration: ``(3, samples)`` acceleration.
-        frame_id: Sensor frame.
-        metadata: Sensor facts, e.g. ``{'charge_sensitivity_pC_per_MPa': '100.0'}``.
-
-    Raises:
-        StreamError: On shapes that do not match.
+    ``pressure`` is ``(samples,)``, ``acceleration`` ``(3, samples)`` (else StreamError),
+    ``t0_ns`` the time of sample 0; ``metadata`` holds sensor facts, e.g.
+    ``{'charge_sensitivity_pC_per_MPa': '100.0'}``.
 
     """
 

@@ -34,16 +34,14 @@ class BagWriter:
     """
     Write one rosbag2-layout MCAP file; use it as a context manager.
 
-    Args:
-        path: The ``.mcap`` file to create (replaced if it exists); its directory must exist.
-        compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
-        chunk_size: Uncompressed bytes after which a chunk is closed and written.
-        atomic: Write a temporary file beside ``path``, renamed to it only when :meth:`close`
-            succeeds and removed on any exception.
+    ``path`` is replaced if it exists (its directory must exist); ``compression`` is
+    ``'zstd'``, ``'lz4'`` or ``'none'``; a chunk is closed after ``chunk_size`` uncompressed
+    bytes. With ``atomic`` a temporary file beside ``path`` is renamed to it only when
+    :meth:`close` succeeds, and removed on any exception.
 
     Raises:
-        BagError: On an unknown compression, a bad chunk size or a folder that does not
-            take the file.
+        BagError: On an unknown compression, a bad chunk size or a folder that does not take
+            the file.
 
     """
 
@@ -102,12 +100,9 @@ class BagWriter:
 
     def add_topic(self, topic: str, msgtype: str, *, latched: bool = False) -> None:
         """
-        Declare a topic before writing to it.
+        Declare an absolute topic of installed type ``msgtype`` before writing to it.
 
-        Args:
-            topic: Absolute topic name, e.g. ``'/rig/acceleration'``.
-            msgtype: ``pkg/msg/Type``; its definition must be installed.
-            latched: Offer the topic transient-local on replay (e.g. ``stream_info``).
+        ``latched`` offers it transient-local on replay (e.g. ``stream_info``).
 
         Raises:
             BagError: If the writer is closed, the name is not absolute or already added.
@@ -172,14 +167,10 @@ class BagWriter:
     def write(self, topic: str, data: bytes, *, log_time_ns: int,
               publish_time_ns: int | None = None, sequence: int | None = None) -> None:
         """
-        Append one serialized (CDR) message.
+        Append one serialized (CDR) message to a topic declared with :meth:`add_topic`.
 
-        Args:
-            topic: A topic declared with :meth:`add_topic`.
-            data: CDR bytes of the message.
-            log_time_ns: Receive time in integer nanoseconds (rosbag2's ``recv_timestamp``).
-            publish_time_ns: Send time; defaults to ``log_time_ns``.
-            sequence: Sequence number; defaults to counting the topic's messages from 0.
+        ``log_time_ns`` is the receive time (rosbag2's ``recv_timestamp``); ``publish_time_ns``
+        defaults to it and ``sequence`` to counting the topic's messages from 0.
 
         Raises:
             BagError: If the writer is closed, the topic unknown or a time negative.
@@ -252,13 +243,8 @@ def write_streams(path, streams: Sequence[Stream], *, namespace: str = '/rig',
     """
     Write streams as a bag that looks like a live recording of the rig (``doc/recording.md``).
 
-    Args:
-        path: The ``.mcap`` file to write.
-        streams: Streams with distinct relative topics (``info.topic``).
-        namespace: Rig namespace of the topics.
-        block_width: Samples per block.
-        atomic: As in :class:`BagWriter`.
-        compression: Chunk compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
+    Streams need distinct relative topics (``info.topic``), cut into blocks of
+    ``block_width`` samples; ``atomic`` and ``compression`` as in :class:`BagWriter`.
 
     Raises:
         BagError: On no streams, duplicate topics, absolute stream topics or negative stamps.

@@ -141,14 +141,9 @@ def read_csv(path, *, frame_id: str | None = None,
     """
     Read an oscilloscope or transient-recorder CSV export (``doc/csv-import.md``).
 
-    Args:
-        path: The CSV file.
-        frame_id: Sensor frame; default the file's ``# frame_id:`` line, else ``'sensor'``.
-        time_tolerance_s: Largest accepted deviation in s of an interval from the median one
-            and of a stamp from the uniform grid; default from the printed precision.
-
-    Returns:
-        The recording in SI units: pressure in Pa, acceleration in m/s² (rows x, y, z).
+    Returns the recording in SI units (Pa; m/s², rows x, y, z). ``frame_id`` defaults to the
+    file's ``# frame_id:`` line, else ``'sensor'``; ``time_tolerance_s`` (largest deviation of
+    an interval from the median one and of a stamp from the grid) to the printed precision.
 
     Raises:
         CsvError: If the file cannot be read or is malformed.

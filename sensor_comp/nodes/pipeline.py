@@ -238,17 +238,14 @@ def pipeline(*, namespace: str = DEFAULT_NAMESPACE,
              parameters: Mapping[str, Mapping[str, object]] | None = None,
              context: Context | None = None) -> Pipeline:
     """
-    Start the rig's nodes in this process; use the result in a ``with`` block.
+    Start the rig's nodes (a subset of :data:`NODES`) in this process; use it in a ``with``.
 
-    Args:
-        namespace: Namespace of every node and its topics.
-        nodes: The nodes to run, a subset of :data:`NODES`.
-        parameters: ``{node name: {parameter: value}}``.
-        context: The rclpy context; None: a new one (``ROS_DOMAIN_ID``), shut down on stop.
+    ``parameters`` is ``{node name: {parameter: value}}``; without ``context`` a new one
+    (``ROS_DOMAIN_ID``) is made and shut down on stop.
 
     Raises:
-        NodeError: On an unknown node, a bad parameter, or a recorder that does not
-            subscribe in time.
+        NodeError: On an unknown node, a bad parameter, or a recorder that does not subscribe
+            in time.
 
     """
     return Pipeline(namespace=namespace, nodes=tuple(nodes), parameters=parameters or {},
