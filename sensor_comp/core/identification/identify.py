@@ -81,9 +81,8 @@ class ShotSource:
         """
         Detect the shots of ``recording`` (``options`` go to ``detect_shots``).
 
-        Raises:
-            ShotError: Naming the file, when no shot is found (with the threshold used and
-                the largest acceleration seen) or the acceleration cannot be scanned.
+        Raises ShotError naming the file when no shot is found or the acceleration cannot be
+        scanned.
 
         """
         where = path or '<memory>'
@@ -105,8 +104,7 @@ class ShotSource:
         """
         Return this source without its defective shots, and one line per shot left out.
 
-        Raises:
-            ShotError: When the recording's pressure is constant throughout (a dead channel).
+        Raises ShotError when the recording's pressure is constant throughout (a dead channel).
 
         """
         dead = dead_channel(self.recording)
@@ -302,11 +300,10 @@ class _Base:
 def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
               delay: int | None, criterion: str, progress: ProgressFactory) -> _Base:
     """
-    Choose the structure and delay on the measured pressure and fit the base model.
+    Choose structure and delay on the measured pressure, then fit the base model.
 
-    Structure and delay are chosen on the measured pressure: information criteria assume
-    white residuals, and EMD leaves coloured ones (BIC then rewards spurious poles). The
-    chosen structure is then fitted to the denoised pressure (:func:`_robust_fit`).
+    Why the measured pressure: ``doc/identification.md``.
+
     """
     na, nb = orders or DEFAULT_ORDERS
     selection = search = provisional = None
@@ -346,13 +343,7 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
 
 
 def _search_delay(data: _Data, start: Estimate | None) -> DelayEstimate:
-    """
-    Search the delay from ``start`` and from a fit of its own; keep the lower loss.
-
-    A start whose denominator is far from the sensor's (a base missing an effect can fit
-    an overdamped pair) leads the search into another minimum: on the tutorial's case f it
-    chose nk = 18 (validation fit 83 %) where the search's own start gives nk = 0 (95 %).
-    """
+    """Search the delay from ``start`` and from a fit of its own; keep the lower loss."""
     search = estimate_delay(data.measured, start=start)
     if start is None:
         return search
@@ -412,33 +403,24 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
              effects: Sequence[str] = (),
              progress: ProgressFactory | None = None) -> Identification:
     """
-    Identify the acceleration-induced pressure model of a sensor.
+    Identify the acceleration-induced pressure model of a sensor (``doc/identification.md``).
 
     Args:
         calibration: Recordings with shots to fit on.
-        validation: Recordings with shots to report on; when empty, every second shot of
-            each calibration recording is held out for validation.
+        validation: Recordings with shots to report on; default every second calibration shot.
         structure: One of :data:`STRUCTURE_CHOICES`.
-        orders: ``(na, nb)`` (``na`` is the output-error ``nf``); for ``'auto'`` it fixes
-            the orders and leaves the delay to the search; default :data:`DEFAULT_ORDERS`
+        orders: ``(na, nb)`` (``na`` is the output-error ``nf``); default :data:`DEFAULT_ORDERS`
             for a fixed structure, the full grid for ``'auto'``.
         delay: Input delay ``nk`` in samples; estimated when None.
         denoise: EMD-denoise the calibration pressure per shot window (paper step 1).
-        criterion: Information criterion for ``'auto'``: ``'bic'``, ``'aic'``, ``'aicc'``,
-            ``'fpe'``.
-        effects: Catalogued effect ids to add to the chosen structure (fitted as output
-            error whatever the structure); empty for the base model.
+        criterion: ``'bic'``, ``'aic'``, ``'aicc'`` or ``'fpe'``, for ``'auto'``.
+        effects: Catalogued effect ids to add to the chosen structure (as output error).
         progress: Progress bar factory ``progress(label, total)`` for the long steps.
 
-    Returns:
-        The model with what it was fitted and validated on, why this structure, and the
-        fallbacks taken (``notes``).
-
     Raises:
-        IdentError: On an unknown structure, bad orders, mixed sample rates, no usable
-            shots, or when no stable model is found even at lower orders.
+        IdentError: On bad options, mixed sample rates, no usable shots, or no stable model.
         ShotError: On too few shots to hold some out for validation.
-        EffectError: On an unknown effect or one the data cannot support (one line: why).
+        EffectError: On an unknown effect or one the data cannot support.
 
     """
     if structure not in STRUCTURE_CHOICES:
@@ -615,12 +597,7 @@ def excitation(sources: Sequence[ShotSource], f_hz: float | np.ndarray
 
 
 def _dynamics(model: Model) -> tuple[str, float] | None:
-    """
-    Return the dynamics the model claims, ``(description, frequency in Hz)``, or None.
-
-    The dominant resonance (see :meth:`Model.continuous`), else the slowest positive real
-    pole; faster extra poles are numerical detail of the discretisation.
-    """
+    """Return the dynamics the model claims, ``(description, frequency in Hz)``, or None."""
     view = model.continuous()
     if view.natural_frequency_hz is not None:
         fn = view.natural_frequency_hz
