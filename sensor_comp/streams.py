@@ -95,7 +95,6 @@ class Stream:
 
     ``t0_ns`` is the acquisition time of sample 0; ``gaps`` are runs of samples no block
     delivered (NaN in ``data``). ``data`` without one row per channel raises StreamError.
-
     """
 
     info: StreamInfo
@@ -145,7 +144,6 @@ class Recording:
     ``pressure`` is ``(samples,)``, ``acceleration`` ``(3, samples)`` (else StreamError),
     ``t0_ns`` the time of sample 0; ``metadata`` holds sensor facts, e.g.
     ``{'charge_sensitivity_pC_per_MPa': '100.0'}``.
-
     """
 
     fs: float

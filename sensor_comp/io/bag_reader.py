@@ -4,7 +4,6 @@ Read rosbag2-layout MCAP bags, including bags without summary and bags cut short
 :class:`BagReader` reads the records; :func:`read_streams` and :func:`read_recording` turn
 the ``64FC1`` Image blocks back into streams and recordings. Summary use, truncation,
 damage and memory: ``doc/recording.md``.
-
 """
 
 from __future__ import annotations
@@ -168,14 +167,7 @@ class BagReader:
         return [self._damaged[k] for k in sorted(self._damaged)]
 
     def check_complete(self) -> None:
-        """
-        Refuse a bag cut short in its data section.
-
-        Raises:
-            TruncatedBagError: If :attr:`cut_in_data`; the message says what survived and
-                to run ``sensor-comp repair``.
-
-        """
+        """Refuse a bag cut short in its data section with TruncatedBagError (advising repair)."""
         if self.cut_in_data:
             raise TruncatedBagError(f'{self.warning}; run `sensor-comp repair {self.path}` '
                                     f'to save them in a finalised bag, then use that bag')
@@ -280,9 +272,8 @@ class BagReader:
         """
         Yield the messages of the data section in file order.
 
-        With ``counts``, also register schemas and channels, count messages per channel and
-        note where the data section ends (the scan of a file without usable summary). With
-        ``extras``, also yield metadata records and attachments.
+        ``counts`` also registers schemas and channels and counts messages per channel (the scan
+        without a usable summary); ``extras`` also yields metadata records and attachments.
         """
         scanning = counts is not None
         try:
@@ -327,10 +318,9 @@ class BagReader:
         """
         Yield ``(opcode, body, offset, cut)`` of the data section's records.
 
-        A record cut by the end of the file ends the iteration; a cut chunk is still yielded
-        (``cut=True``, with the bytes that exist) so that its first messages can be kept.
-        When the summary is used, the data section must parse up to it: a record that does
-        not is damage, not a cut.
+        A record cut by the end of the file ends the iteration; a cut chunk is yielded with the
+        bytes that exist (``cut=True``). With the summary used, a record that does not parse is
+        damage.
         """
         buf = self._buf
         released = 0
@@ -354,7 +344,6 @@ class BagReader:
         Unmap the pages of ``[start, stop)`` a pass has left behind; return where that ends.
 
         Keeps a long pass from holding the whole file resident (``doc/recording.md``).
-
         """
         stop -= stop % mmap.PAGESIZE
         if stop - start < RELEASE_BYTES or not hasattr(mmap, 'MADV_DONTNEED'):
@@ -462,10 +451,8 @@ class BagReader:
         """
         Iterate over the raw CDR messages of ``topics`` (all when None) in file order.
 
-        Raises:
-            BagError: If a requested topic is not in the bag, or the data are damaged (and not
-                ``skip_damaged``).
-
+        Raises BagError if a requested topic is not in the bag, or the data are damaged (and not
+        ``skip_damaged``).
         """
         wanted = None
         if topics is not None:
@@ -481,9 +468,7 @@ class BagReader:
         """
         Iterate over messages, metadata records and attachments in file order.
 
-        Raises:
-            BagError: If the data are damaged (and not ``skip_damaged``).
-
+        Raises BagError if the data are damaged (and not ``skip_damaged``).
         """
         yield from self._data(extras=True)
 
@@ -492,9 +477,7 @@ def find_namespace(bag: BagReader) -> str:
     """
     Return the rig namespace of a bag: the one with a ``<namespace>/stream_info`` topic.
 
-    Raises:
-        BagError: When the bag has no stream_info topic of the right type, or several rigs.
-
+    Raises BagError when there is no stream_info topic of the right type, or several rigs.
     """
     suffix = '/' + STREAM_INFO
     candidates = {t: info for t, info in bag.topics.items() if t.endswith(suffix)}
@@ -555,10 +538,8 @@ def read_stream_infos(bag: BagReader, *, namespace: str) -> dict[str, StreamInfo
     """
     Return what the bag's ``<namespace>/stream_info`` messages announce, by stream name.
 
-    Raises:
-        BagError: If the topic is missing, of another type or empty, or a message does not
-            decode or contradicts another.
-
+    Raises BagError if the topic is missing, of another type or empty, or a message does not
+    decode or contradicts another.
     """
     info_topic = _stream_info_topic(bag, namespace)
     infos: dict[str, StreamInfo] = {}
@@ -578,10 +559,8 @@ def block_topics(bag: BagReader, *, namespace: str,
     """
     Return ``{relative name: absolute topic}`` of the block streams under ``namespace``.
 
-    ``names`` (e.g. ``('acceleration', 'pressure/raw')``) must all be there; None takes every
-    Image topic with messages. Raises BagError on a named stream of another type or without
-    blocks.
-
+    ``names`` must all be there (BagError on another type or no blocks); None takes every
+    Image topic with messages.
     """
     prefix = topic_name(namespace, '')
     carrying = {t[len(prefix):]: t for t, info in bag.topics.items()
@@ -607,9 +586,7 @@ def require_described(path, infos: dict[str, StreamInfo], topics: dict[str, str]
     """
     Check that ``stream_info`` described every block stream of ``topics``.
 
-    Raises:
-        BagError: Naming the undescribed topics, since their rate would be a guess.
-
+    Raises BagError naming the undescribed topics, since their rate would be a guess.
     """
     unknown = [topic for name, topic in topics.items() if name not in infos]
     if unknown:
@@ -625,7 +602,6 @@ class _StreamFiller:
 
     Holds the samples once, not twice (``doc/recording.md``); ``messages`` is the topic's
     message count (0: unknown).
-
     """
 
     def __init__(self, info: StreamInfo, *, name: str, messages: int):
@@ -750,9 +726,8 @@ def read_recording(path, *, namespace: str | None = None,
     """
     Read the ``acceleration`` and ``pressure/raw`` streams of a bag as one recording.
 
-    Arguments and errors as :func:`read_streams`; StreamError also when the two streams differ
-    in rate, do not overlap in time or are not on one sample grid.
-
+    As :func:`read_streams`; StreamError also when the streams differ in rate, do not overlap
+    or are not on one sample grid.
     """
     streams = read_streams(path, namespace=namespace, names=(ACCELERATION, PRESSURE_RAW),
                            on_truncated=on_truncated)

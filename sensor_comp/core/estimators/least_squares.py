@@ -3,7 +3,6 @@ Linear least squares over several segments: lagged regressors and a scaled QR so
 
 Columns are scaled to unit norm and solves run over row blocks, so millions of rows need
 no ``Q`` of their size; the methods and their accuracy: ``doc/estimators.md``.
-
 """
 
 from __future__ import annotations
@@ -64,7 +63,6 @@ def equation_error(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, a: np.
     Return ``A(q) y − Σ B_i(q) q^-nk u_i`` for every segment, computed from rest.
 
     ``a`` is ``[1, a1, ..., ana]``, ``b`` the ``(n_inputs, nb)`` numerators.
-
     """
     bk = delayed_numerator(b, nk)
     out = []
@@ -140,7 +138,6 @@ def lagged_blocks(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int
 
     Returns ``(blocks, names)``; ``blocks()`` yields ``(phi, target)`` built when reached
     (call it once per pass). Raises IdentError with fewer rows than parameters.
-
     """
     k0, names, used = _lag_layout(ys, us, na, nb, nk, 0)
 
@@ -386,7 +383,6 @@ def minimum_norm(phi: np.ndarray, target: np.ndarray) -> np.ndarray:
     Return the minimum-norm least-squares solution of the column-scaled ``phi`` (SVD).
 
     For dependent regressors: parameters along the dependent directions are zero, not refused.
-
     """
     scale = np.linalg.norm(phi, axis=0)
     scale[~(scale > 0)] = 1.0

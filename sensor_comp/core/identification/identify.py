@@ -5,7 +5,6 @@ Fits on calibration shots and reports the fit on validation shots; falls back (a
 so) where a fit fails, refuses or warns where the data cannot support the model (defective
 shots, poor excitation at the resonance, implausible units). Method, fallbacks and the
 excitation and units checks with their numbers: ``doc/identification.md``.
-
 """
 
 from __future__ import annotations
@@ -69,7 +68,6 @@ class ShotSource:
 
     ``path`` (the bag or CSV file) is hashed into the model's provenance; None for data made
     in memory.
-
     """
 
     recording: Recording
@@ -83,7 +81,6 @@ class ShotSource:
 
         Raises ShotError naming the file when no shot is found or the acceleration cannot be
         scanned.
-
         """
         where = path or '<memory>'
         try:
@@ -105,7 +102,6 @@ class ShotSource:
         Return this source without its defective shots, and one line per shot left out.
 
         Raises ShotError when the recording's pressure is constant throughout (a dead channel).
-
         """
         dead = dead_channel(self.recording)
         if dead is not None:
@@ -303,7 +299,6 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     Choose structure and delay on the measured pressure, then fit the base model.
 
     Why the measured pressure: ``doc/identification.md``.
-
     """
     na, nb = orders or DEFAULT_ORDERS
     selection = search = provisional = None
@@ -367,7 +362,6 @@ def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
 
     The order of fallbacks is in ``doc/identification.md``. Returns ``(estimate, na, nb,
     notes)``; raises IdentError when every fallback fails (naming the first failure).
-
     """
     notes: list[str] = []
     tries = [(data.fit, na, nb, None)]
@@ -459,7 +453,6 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
 
     With ``compare``, a base of other than two poles competes with two by BIC (why:
     ``doc/identification.md``). Raises EffectError when nothing fits or an effect does not apply.
-
     """
     measured = shot_windows([s for s in sources.calibration if s.shots])
     windows = [replace(w, y=y) for w, (_, y) in zip(measured, data.fit)]
@@ -567,7 +560,6 @@ def excitation(sources: Sequence[ShotSource], f_hz: float | np.ndarray
 
     Measured in ``f·(1 ±`` :data:`EXCITATION_BAND` ``)`` and pooled over the windows
     (``doc/identification.md``); ``inf`` for noise-free data, None with too little pre-trigger.
-
     """
     shots = [(s.recording, shot) for s in sources for shot in s.shots]
     quiet = [recording.axial[shot.baseline_window] for recording, shot in shots]

@@ -4,7 +4,6 @@ Shots: find the shocks of a drop-hammer recording and cut one window around each
 Detection thresholds the axial acceleration with hysteresis, times each pulse as a
 half-sine, and marks shots that must not be fitted (clipped, non-finite, no shock, dead
 pressure) in :attr:`Shot.defects`. Rules and numbers: ``doc/shots.md``.
-
 """
 
 from __future__ import annotations
@@ -356,7 +355,6 @@ def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
 
     A channel is dead when every finite sample has one value (a disconnected sensor, an
     amplifier in reset or overload, a channel mapped to nothing).
-
     """
     channels = [('axial acceleration (row z)', recording.axial, 'm/s²')]
     if pressure:
@@ -566,7 +564,6 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
 
     ``denoise`` is applied to each window's pressure (e.g. an ``EmdDenoiser``); None keeps the
     measured pressure. Raises ShotError on a non-finite sample or a window outside the recording.
-
     """
     out = []
     for shot in shots:
@@ -594,7 +591,6 @@ def split_calibration(shots: Sequence[Shot], *,
     ``validation='alternate'`` holds out every second shot (indices 1, 3, 5, ...); otherwise
     it lists the :attr:`Shot.index` values to hold out. Raises ShotError with fewer than two
     shots, an unknown index, or an empty side.
-
     """
     shots = list(shots)
     if len(shots) < 2:

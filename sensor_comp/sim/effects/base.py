@@ -4,7 +4,6 @@ The interface of a switchable physical effect, and the checks of its parameters.
 An effect is a frozen dataclass of :func:`param` fields registered by its ``id``; the
 simulator calls its hooks in ``order`` along the pressure channel's signal path
 (``doc/simulator.md``, effects).
-
 """
 
 from __future__ import annotations
@@ -38,7 +37,6 @@ class Mode:
     A mechanical mode ``gain * S * wn**2 / (s**2 + 2 zeta wn s + wn**2)``.
 
     ``gain`` is relative to the sensor's acceleration sensitivity ``S``.
-
     """
 
     fn_hz: float
