@@ -36,14 +36,9 @@ class BlockError(CompensationError):
 @dataclass(frozen=True)
 class BlockPair:
     """
-    A pressure block and the acceleration block of the same stamp.
+    A pressure block ``(w,)`` in Pa and the ``(3, w)`` acceleration block of the same stamp.
 
-    Attributes:
-        stamp_ns: Acquisition time of the blocks' first sample.
-        pressure: ``(w,)`` raw pressure, Pa.
-        acceleration: ``(3, w)`` acceleration, m/s².
-        missing: Samples missing before this pair (a stamp gap); 0 when it follows on.
-
+    ``missing`` counts samples missing before this pair (a stamp gap); 0 when it follows on.
     """
 
     stamp_ns: int
@@ -54,15 +49,7 @@ class BlockPair:
 
 @dataclass(frozen=True)
 class CompensatedBlock:
-    """
-    One compensated block.
-
-    Attributes:
-        stamp_ns: Acquisition time of the block's first sample.
-        compensated: ``(w,)`` raw pressure minus the induced estimate, Pa.
-        induced: ``(w,)`` the acceleration-induced pressure estimate, Pa.
-
-    """
+    """One compensated block: raw minus ``induced`` (the induced estimate), both ``(w,)`` in Pa."""
 
     stamp_ns: int
     compensated: np.ndarray
@@ -132,17 +119,10 @@ class BlockPairer:
     """
     Pair pressure and acceleration blocks by stamp and check their continuity.
 
-    Args:
-        fs: Sample rate in Hz.
-        max_wait: Seconds of data a block waits for its partner at most (safety net).
-        log: Called with one line per event.
-        gap_note: What a stamp gap does to the consumer, appended to its log line.
-        names: How the log lines name the pressure and the acceleration topics.
-
-    Attributes:
-        counters: The sample accounting.
-        pair_name: How the log lines name the two topics together.
-
+    A block waits at most ``max_wait`` seconds of data for its partner; ``log`` gets one line
+    per event, ``gap_note`` (what a gap does to the consumer) appended to gap lines; ``names``
+    name the pressure and acceleration topics, ``pair_name`` both. ``counters`` holds the
+    sample accounting.
     """
 
     def __init__(self, *, fs: float, max_wait: float = MAX_WAIT_S,
@@ -172,9 +152,7 @@ class BlockPairer:
         """
         Take a raw pressure block ``(w,)`` or ``(1, w)``; return the pairs now complete.
 
-        Raises:
-            BlockError: When the block is not one channel or holds no sample.
-
+        Raises BlockError when the block is not one channel or holds no sample.
         """
         block = np.asarray(block, dtype=np.float64)
         if block.ndim == 2 and block.shape[0] == 1:
@@ -190,9 +168,7 @@ class BlockPairer:
         """
         Take an acceleration block ``(3, w)`` in m/s²; return the pairs now complete.
 
-        Raises:
-            BlockError: When the block does not have three rows or holds no sample.
-
+        Raises BlockError when the block does not have three rows or holds no sample.
         """
         block = np.asarray(block, dtype=np.float64)
         if block.ndim != 2 or block.shape[0] != 3:
@@ -349,16 +325,9 @@ class BlockCompensator:
 
     ``fs``, ``max_wait``, ``log`` and ``names`` as :class:`BlockPairer`. Offline, ``fitting``
     collects every block's residual (first pass) and ``disturbances`` are subtracted from every
-    block (second pass); the filter must then have no trackers of its own.
-
-    Attributes:
-        counters: The sample accounting (:class:`StreamCounters`).
-        samples_since_restart: Samples compensated since the start or the latest stamp gap.
-
-    Raises:
-        CompensationError: With ``disturbances`` or ``fitting`` and a filter that tracks
-            disturbances itself (they would be removed twice).
-
+    block (second pass); the filter must then have no trackers of its own (else
+    CompensationError: they would be removed twice). ``samples_since_restart`` counts samples
+    since the start or the latest stamp gap.
     """
 
     def __init__(self, compensation: CompensationFilter, *, fs: float,
@@ -411,9 +380,7 @@ class BlockCompensator:
         """
         Take a raw pressure block ``(w,)`` or ``(1, w)``; return the blocks now complete.
 
-        Raises:
-            BlockError: When the block is not one channel or holds no sample.
-
+        Raises BlockError when the block is not one channel or holds no sample.
         """
         return self._compensate(self.pairer.add_pressure(stamp_ns, block))
 
@@ -421,9 +388,7 @@ class BlockCompensator:
         """
         Take an acceleration block ``(3, w)`` in m/s²; return the blocks now complete.
 
-        Raises:
-            BlockError: When the block does not have three rows or holds no sample.
-
+        Raises BlockError when the block does not have three rows or holds no sample.
         """
         return self._compensate(self.pairer.add_acceleration(stamp_ns, block))
 
