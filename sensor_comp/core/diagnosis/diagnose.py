@@ -821,29 +821,14 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
         IdentError: When the base model cannot be fitted.
 
     """
-    progress = progress or Silent
     notes: list[str] = []
-    calib, valid = _sources(calibration, validation, notes)
-    rates = {s.recording.fs for s in calib + valid}
-    if len(rates) != 1:
-        raise DiagnosisError(f'recordings have different sample rates '
-                             f'({", ".join(f"{r:g} Hz" for r in sorted(rates))}); diagnose '
-                             f'one rate at a time')
-    fs = rates.pop()
-    if base is not None:
-        base.check_rate(fs, model_name='the base model', data_name='every recording given')
-    if not any(s.shots for s in calib) or not any(s.shots for s in valid):
-        raise DiagnosisError('the diagnosis needs calibration and validation shots'
-                             + (f' ({"; ".join(notes)})' if notes else ''))
+    calib, valid, fs = _prepare(calibration, validation, base, notes)
     orders3, base_effects = _base_structure(
         base, orders, delay, shot_windows([s for s in calib if s.shots]), notes)
-    ids = list(candidates) if candidates is not None else [
-        e for e in EFFECTS if e not in base_effects]
-    for effect_id in ids:
-        get_effect(effect_id)
+    ids = _candidate_ids(candidates, base_effects)
     ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
-                   residual_analysis, progress, notes)
-    ranked, skipped = _candidates(ids, ctx, progress, notes)
+                   residual_analysis, progress or Silent, notes)
+    ranked, skipped = _candidates(ids, ctx, progress or Silent, notes)
     base_left = ctx.leftover(ctx.residual, named=False)
     verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
@@ -856,3 +841,30 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
         energy_tolerance=base_left.tolerance, consistent_with_noise=bool(consistent),
         analyses=ctx.analyses, alpha=alpha, explanation=explanation, notes=tuple(notes),
         named=named, leftover=left, base_leftover=base_left, explained_share=share)
+
+
+def _prepare(calibration: Sequence, validation: Sequence, base: Model | None,
+             notes: list[str]) -> tuple[list, list, float]:
+    """Return the usable calibration and validation sources and their common rate."""
+    calib, valid = _sources(calibration, validation, notes)
+    rates = {s.recording.fs for s in calib + valid}
+    if len(rates) != 1:
+        raise DiagnosisError(f'recordings have different sample rates '
+                             f'({", ".join(f"{r:g} Hz" for r in sorted(rates))}); diagnose '
+                             f'one rate at a time')
+    fs = rates.pop()
+    if base is not None:
+        base.check_rate(fs, model_name='the base model', data_name='every recording given')
+    if not any(s.shots for s in calib) or not any(s.shots for s in valid):
+        raise DiagnosisError('the diagnosis needs calibration and validation shots'
+                             + (f' ({"; ".join(notes)})' if notes else ''))
+    return calib, valid, fs
+
+
+def _candidate_ids(candidates: Sequence[str] | None, base_effects: Sequence[str]) -> list[str]:
+    """Return the effect ids to try (checked): those given, else every one not in the base."""
+    ids = list(candidates) if candidates is not None else [
+        e for e in EFFECTS if e not in base_effects]
+    for effect_id in ids:
+        get_effect(effect_id)
+    return ids
