@@ -68,13 +68,9 @@ class CompensationFilter:
     ``b`` is ``(n_inputs, nb)`` (1-D: one input), ``b[i, 0]`` multiplying ``q^-nk``; ``a`` is
     normalised to ``a0 = 1``; ``inputs`` name the rows of ``b``; ``fs`` is needed by derivative
     inputs; ``disturbances`` are trackers (``tracker(residual)``, ``reset()``) whose estimate is
-    removed from the compensated pressure.
-
-    Raises:
-        CompensationError: On mismatched shapes or non-finite coefficients.
-        UnstableModelError: When a pole has magnitude ≥ 1.
-        InputError: On an unknown input name or a derivative input without ``fs``.
-
+    removed from the compensated pressure. Raises CompensationError on mismatched shapes or
+    non-finite coefficients, UnstableModelError on a pole of magnitude ≥ 1, InputError on an
+    unknown input or a derivative input without ``fs``.
     """
 
     def __init__(self, b: np.ndarray, a: np.ndarray, *, nk: int = 0,
@@ -122,10 +118,8 @@ class CompensationFilter:
         """
         Build the filter of ``model``, with its disturbance trackers unless ``trackers`` is False.
 
-        Raises:
-            UnstableModelError: When the model has a pole of magnitude ≥ 1.
-            CompensationError: When the model names an effect this version does not know.
-
+        Raises UnstableModelError on a pole of magnitude ≥ 1, CompensationError on an effect this
+        version does not know.
         """
         effects = getattr(model, 'effects', ())
         unknown = sorted({str(entry.get('id')) for entry in effects} - set(EFFECTS))
@@ -201,11 +195,8 @@ class CompensationFilter:
         """
         Return the induced pressure (Pa) for input rows ``u`` ``(n_inputs, w)``, continuing.
 
-        Non-finite input samples give NaN and restart the filter from rest after them.
-
-        Raises:
-            CompensationError: When ``u`` does not have one row per input.
-
+        Non-finite input samples give NaN and restart the filter from rest after them; ``u``
+        without one row per input raises CompensationError.
         """
         u = np.asarray(u, dtype=np.float64)
         if u.ndim != 2 or u.shape[0] != len(self.inputs):
@@ -267,9 +258,7 @@ class CompensationFilter:
         """
         Return the induced pressure (Pa) for a ``(3, w)`` acceleration block, continuing.
 
-        Raises:
-            InputError: When the block is not ``(3, w)``.
-
+        Raises InputError when the block is not ``(3, w)``.
         """
         acceleration = np.asarray(acceleration, dtype=np.float64)
         if self._axes is None or acceleration.ndim != 2 or acceleration.shape[0] != 3:
@@ -282,12 +271,8 @@ class CompensationFilter:
         """
         Compensate one block: ``(3, w)`` acceleration (m/s²), ``(w,)`` or ``(1, w)`` pressure (Pa).
 
-        Returns ``(compensated, induced)`` in Pa; ``compensated`` has disturbances removed and is
-        NaN wherever not finite.
-
-        Raises:
-            CompensationError: When the blocks do not have the same number of samples.
-
+        Returns ``(compensated, induced)`` in Pa, ``compensated`` with disturbances removed and NaN
+        wherever not finite. Raises CompensationError on blocks of different lengths.
         """
         pressure = np.asarray(pressure, dtype=np.float64)
         if pressure.ndim == 2 and pressure.shape[0] == 1:
@@ -326,13 +311,9 @@ def compensate_recording(model: LinearModel,
     """
     Compensate a whole recording offline, from rest, disturbances fitted on all of it.
 
-    Returns ``(compensated, induced)`` in Pa. The acceleration is used as recorded; a
-    disturbance the recording is too short for is left in with a :class:`DisturbanceWarning`.
-
-    Raises:
-        CompensationError: When the model's and the recording's sample rates differ.
-        UnstableModelError: When the model has a pole of magnitude ≥ 1.
-
+    Returns ``(compensated, induced)`` in Pa. A disturbance the recording is too short for is
+    left in with a :class:`DisturbanceWarning`. Raises CompensationError when the sample rates
+    differ, UnstableModelError on a pole of magnitude ≥ 1.
     """
     if not math.isclose(model.fs, recording.fs, rel_tol=1e-9):
         raise CompensationError(f'model identified at {model.fs:g} Hz but the recording is '
@@ -438,13 +419,9 @@ class RecordingDisturbances:
     A model's disturbances in one recording, fitted by least squares on its whole residual.
 
     Two passes: :meth:`add` every block's residual, :meth:`solve`, then subtract
-    ``self(start, n)`` (``doc/compensation.md``).
-
-    Attributes:
-        coefficients: Fitted coefficients (zero for one left in), after :meth:`solve`.
-        warnings: What :meth:`solve` could not remove, as sentences.
-        samples: Finite residual samples added.
-
+    ``self(start, n)`` (``doc/compensation.md``). After :meth:`solve`, ``coefficients`` holds
+    the fit (zero for one left in) and ``warnings`` what could not be removed; ``samples``
+    counts the finite residual samples added.
     """
 
     def __init__(self, entries: Iterable[Mapping], *, fs: float):
@@ -515,9 +492,7 @@ class RecordingDisturbances:
         """
         Return the fitted disturbances over samples ``start ... start + n − 1``, Pa.
 
-        Raises:
-            CompensationError: Before :meth:`solve`.
-
+        Raises CompensationError before :meth:`solve`.
         """
         if self.coefficients is None:
             raise CompensationError('the disturbances are not fitted yet: add the residual '
@@ -558,11 +533,8 @@ def peak_residual_percent(raw: np.ndarray, compensated: np.ndarray) -> float:
     """
     Return peak ``|compensated|`` as a percentage of peak ``|raw|`` (baselines removed).
 
-    The seed paper's figure of merit (0.016 of 0.1402 MPa, < 11 %).
-
-    Raises:
-        CompensationError: When the raw window has no non-zero finite sample.
-
+    The seed paper's figure of merit (0.016 of 0.1402 MPa, < 11 %). Raises CompensationError
+    when the raw window has no non-zero finite sample.
     """
     peak = np.nanmax(np.abs(raw)) if np.size(raw) else 0.0
     if not peak > 0:
@@ -576,9 +548,7 @@ def shot_residuals(shots: Sequence[Shot], raw: np.ndarray,
     """
     Return the peak residual percentage of every shot window (pre-trigger means removed).
 
-    Raises:
-        CompensationError: When a window lies outside the arrays or holds no raw peak.
-
+    Raises CompensationError when a window lies outside the arrays or holds no raw peak.
     """
     raw = np.asarray(raw, dtype=np.float64)
     compensated = np.asarray(compensated, dtype=np.float64)
