@@ -35,9 +35,7 @@ def check_orders(**orders: int) -> None:
     """
     Check integer settings given as keywords: ``nb`` and ``max_iter`` >= 1, others >= 0.
 
-    Raises:
-        IdentError: Naming the first setting that is not a suitable integer.
-
+    Raises IdentError naming the first setting that is not a suitable integer.
     """
     for name, value in orders.items():
         low = 1 if name in ('nb', 'max_iter') else 0
@@ -269,12 +267,7 @@ def _cholesky(gram: np.ndarray) -> np.ndarray | None:
 
 def _householder_blocks(blocks, scale: np.ndarray,
                         names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """
-    Return ``R`` and ``Qᵀ target`` of the scaled blocks by TSQR, refusing a lost rank.
-
-    Each step is a Householder QR of ``[R; block]`` whose ``Q`` carries ``[Qᵀ target;
-    block target]`` along: with one block, the arithmetic of the whole-matrix QR.
-    """
+    """Return ``R`` and ``Qᵀ target`` of the scaled blocks by TSQR, refusing a lost rank."""
     r, qt_target = np.zeros((0, scale.size)), np.zeros(0)
     for phi, target in blocks():
         q, r = np.linalg.qr(np.vstack([r, phi / scale]))

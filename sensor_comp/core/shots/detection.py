@@ -172,12 +172,7 @@ class Shot:
 
 
 def mad_sigma(x: np.ndarray) -> float:
-    """
-    Return the noise σ of ``x`` from its median absolute deviation (NaN ignored).
-
-    ``1.4826 · median|x − median x|`` equals σ for Gaussian noise and ignores outliers such
-    as shots that fill less than half of the samples.
-    """
+    """Return the noise σ of ``x`` as ``1.4826 · MAD`` (NaN ignored; robust to shots)."""
     x = np.asarray(x, dtype=np.float64)
     return float(1.4826 * np.nanmedian(np.abs(x - np.nanmedian(x))))
 
@@ -229,11 +224,7 @@ def _quantum(x: np.ndarray) -> float:
 
 
 def _flat_top(x: np.ndarray, sigma: float) -> tuple[float, int] | None:
-    """
-    Return ``(level, samples)`` of the flat top of ``x`` (baseline removed), or None.
-
-    See the module docs for the test; ``sigma`` is the channel's noise.
-    """
+    """Return ``(level, samples)`` of the flat top of ``x`` (``doc/shots.md``), or None."""
     finite = np.isfinite(x)
     if not finite.any():
         return None
@@ -433,9 +424,7 @@ def no_shot_message(recording: Recording, *, threshold_g: float | None = None,
     """
     Return why :func:`detect_shots` finds nothing, with the numbers and what to try.
 
-    Raises:
-        ShotError: As :func:`detect_shots` does on a recording it cannot scan.
-
+    Raises ShotError as :func:`detect_shots` does on a recording it cannot scan.
     """
     trigger = _trigger(recording, threshold_g, polarity)
     how = (f'the automatic threshold, the larger of '
@@ -453,20 +442,13 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
                  post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
                  polarity: int | None = None) -> list[Shot]:
     """
-    Find the shots in a recording's axial acceleration.
+    Find the shots in a recording's axial acceleration (rules: ``doc/shots.md``).
 
-    Args:
-        recording: Pressure and acceleration.
-        threshold_g: Trigger level in g above the median; default in ``doc/shots.md``.
-        hysteresis: A shot ends below ``hysteresis × threshold`` (0 < hysteresis ≤ 1).
-        pre_ms: Window length before the pulse onset in ms.
-        post_ms: Window length after the end of pulse in ms.
-        holdoff_ms: Threshold crossings closer than this are one shot.
-        polarity: 1 or -1, None to follow the largest excursion.
-
-    Returns:
-        The shots in time order; empty when nothing reaches the threshold
-        (:func:`no_shot_message` says why).
+    A shot starts where the acceleration, median removed and in g, reaches ``threshold_g``
+    and ends below ``hysteresis × threshold``; crossings closer than ``holdoff_ms`` are one
+    shot. Its window spans ``pre_ms`` before the onset to ``post_ms`` after the pulse.
+    ``polarity`` is 1 or -1, None to follow the largest excursion. Returns the shots in time
+    order; none when nothing reaches the threshold (:func:`no_shot_message` says why).
 
     Raises:
         ShotError: On bad options, or a constant or all-non-finite axial acceleration.
@@ -614,14 +596,7 @@ def split_calibration(shots: Sequence[Shot], *,
 
 
 def shot_table(shots: Sequence[Shot]) -> str:
-    """
-    Return the shots as a text table in the layout of the seed paper's Table 2.
-
-    Columns: shot index, peak acceleration (g), pulse width (ms), output charge (pC, '-'
-    without a charge sensitivity), peak pressure (MPa), pressure per g (MPa/g) and the
-    sensor mode (:attr:`Shot.mode`: 'normal', 'clipped' or 'excluded'); notes and defects
-    follow the table.
-    """
+    """Return the shots as a text table in the layout of the seed paper's Table 2."""
     header = (f'{"No.":>4} {"Accel. (g)":>11} {"Width (ms)":>11} {"Charge (pC)":>12} '
               f'{"Pressure (MPa)":>15} {"MPa/g":>10} {"Window (ms)":>12}  Mode')
     lines = [header, '-' * len(header)]
