@@ -27,11 +27,17 @@ class PlotError(SensorCompError, ValueError):
     """Data handed to a plot do not fit together."""
 
 
+def _canvas(width: float, height: float) -> Figure:
+    """Return an empty figure on an Agg canvas (never a display)."""
+    fig = Figure(figsize=(width, height), layout='constrained')
+    FigureCanvasAgg(fig)
+    return fig
+
+
 def _figure(n_panels: int, *, rows_of: int = 2) -> tuple[Figure, list]:
     cols = min(n_panels, rows_of)
     rows = math.ceil(n_panels / cols)
-    fig = Figure(figsize=(5.0 * cols, 3.2 * rows), layout='constrained')
-    FigureCanvasAgg(fig)
+    fig = _canvas(5.0 * cols, 3.2 * rows)
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax in axes[n_panels:]:
         ax.set_visible(False)
@@ -42,6 +48,16 @@ def _finish(fig: Figure, path: str | os.PathLike | None) -> Figure:
     if path is not None:
         fig.savefig(path, dpi=100)
     return fig
+
+
+def _check_responses(grid: np.ndarray, responses: Mapping[str, np.ndarray], what: str,
+                     axis: str) -> np.ndarray:
+    """Return ``grid`` as float64; raise PlotError on a response of another shape."""
+    grid = np.asarray(grid, dtype=np.float64)
+    for label, h in responses.items():
+        if np.shape(h) != grid.shape:
+            raise PlotError(f'{what} {label!r} has shape {np.shape(h)}, {axis} {grid.shape}')
+    return grid
 
 
 def _check_panels(times: Sequence[np.ndarray], named: Mapping[str, Sequence[np.ndarray]],
@@ -126,13 +142,8 @@ def frequency_response_figure(f: np.ndarray, responses: Mapping[str, np.ndarray]
         PlotError: When a response does not match ``f`` (Hz, positive).
 
     """
-    f = np.asarray(f, dtype=np.float64)
-    for label, h in responses.items():
-        if np.shape(h) != f.shape:
-            raise PlotError(f'frequency response {label!r} has shape {np.shape(h)}, '
-                            f'frequencies {f.shape}')
-    fig = Figure(figsize=(7.0, 5.5), layout='constrained')
-    FigureCanvasAgg(fig)
+    f = _check_responses(f, responses, 'frequency response', 'frequencies')
+    fig = _canvas(7.0, 5.5)
     mag, phase = fig.subplots(2, 1, sharex=True)
     for label, h in responses.items():
         h = np.asarray(h, dtype=np.complex128)
@@ -158,13 +169,8 @@ def step_response_figure(t: np.ndarray, responses: Mapping[str, np.ndarray], *,
         PlotError: When a response does not match ``t`` (s).
 
     """
-    t = np.asarray(t, dtype=np.float64)
-    for label, y in responses.items():
-        if np.shape(y) != t.shape:
-            raise PlotError(f'step response {label!r} has shape {np.shape(y)}, times '
-                            f'{t.shape}')
-    fig = Figure(figsize=(7.0, 4.0), layout='constrained')
-    FigureCanvasAgg(fig)
+    t = _check_responses(t, responses, 'step response', 'times')
+    fig = _canvas(7.0, 4.0)
     ax = fig.subplots()
     for label, y in responses.items():
         ax.plot(1e3 * t, y, label=label)
