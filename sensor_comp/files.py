@@ -237,9 +237,7 @@ def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     """
     Rename a finished temporary file to ``path`` with a new file's permissions (umask).
 
-    Raises:
-        OSError: If the rename fails (``tmp`` is then left for the caller to remove).
-
+    Raises OSError if the rename fails (``tmp`` is then left for the caller to remove).
     """
     umask = os.umask(0)
     os.umask(umask)
@@ -251,9 +249,7 @@ def save_figure(figure, path: str | os.PathLike, *, dpi: int = 100) -> None:
     """
     Save a matplotlib figure to ``path`` atomically, in the format its suffix names.
 
-    Raises:
-        OutputError: If the file cannot be written; ``path`` is then left as it was.
-
+    Raises OutputError if the file cannot be written; ``path`` is then left as it was.
     """
     try:
         with atomic_file(path) as f:

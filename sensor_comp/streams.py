@@ -207,10 +207,8 @@ class Recording:
         """
         Join an acceleration and a pressure stream on their common time span.
 
-        Raises:
-            StreamError: If rates differ, the streams do not overlap, or their sample grids are
-                offset by a fraction of a sample.
-
+        Raises StreamError if rates differ, the streams do not overlap, or their sample grids are
+        offset by a fraction of a sample.
         """
         accel_name, press_name = acceleration.info.topic, pressure.info.topic
         if acceleration.data.shape[0] != 3:

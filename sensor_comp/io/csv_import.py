@@ -283,9 +283,7 @@ def _classify(path, line: int, position: int, name: str) -> _Column | None:
     """
     Return the column a header cell names, None for a column to ignore.
 
-    Raises:
-        CsvError: For a time, pressure or acceleration column without a known unit or axis.
-
+    Raises CsvError for a time, pressure or acceleration column without a known unit or axis.
     """
     match = _COLUMN.fullmatch(name.lower())
     if not match:

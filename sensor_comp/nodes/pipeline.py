@@ -45,12 +45,8 @@ class Pipeline:
     """
     Nodes of one rig spinning in this process (make it with :func:`pipeline`).
 
-    Attributes:
-        nodes: The nodes by name (``'acquisition'``, ...).
-        namespace: Their namespace.
-        context: The rclpy context they run in.
-        executor: The executor spinning them.
-
+    ``nodes`` maps names (``'acquisition'``, ...) to nodes; ``context`` and ``executor`` are
+    the rclpy context they run in and the executor spinning them.
     """
 
     def __init__(self, *, namespace: str, nodes: Sequence[str],
@@ -147,11 +143,8 @@ class Pipeline:
         """
         Wait until ``predicate(self)`` is true, evaluating it every ``poll`` s.
 
-        Raises:
-            PipelineTimeout: After ``timeout`` seconds (``what`` names it); the message says where
-                the identification stands.
-            SensorCompError: The acquisition's error, if it failed meanwhile.
-
+        Raises PipelineTimeout after ``timeout`` seconds (``what`` names it; the message says where
+        the identification stands), or the acquisition's error if it failed meanwhile.
         """
         deadline = time.monotonic() + timeout
         while not predicate(self):
@@ -176,10 +169,7 @@ class Pipeline:
         """
         Wait until the acquisition has published everything (never with ``loop``).
 
-        Raises:
-            PipelineTimeout: After ``timeout`` seconds.
-            SensorCompError: The acquisition's error, if it failed.
-
+        Raises PipelineTimeout after ``timeout`` seconds, or the acquisition's error.
         """
         self.wait_until(lambda p: p.acquisition_done, timeout=timeout,
                         what='the acquisition to finish')
