@@ -187,10 +187,8 @@ def solve_least_squares(phi: np.ndarray, target: np.ndarray, *,
     """
     Solve ``min ‖target − phi θ‖`` by :func:`solve_blocks` over row views of ``phi``.
 
-    Raises:
-        IdentError: When a column is zero or the columns are linearly dependent (the input
-            does not excite the model, or the orders are too high).
-
+    Raises IdentError when a column is zero or the columns are linearly dependent (the input
+    does not excite the model, or the orders are too high).
     """
     def blocks() -> Iterator[tuple[np.ndarray, np.ndarray]]:
         for first in range(0, phi.shape[0], BLOCK_ROWS):
@@ -203,9 +201,7 @@ def solve_lagged(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int,
     """
     Solve the regression of :func:`lagged_regression` block by block; return it and names.
 
-    Raises:
-        IdentError: As :func:`lagged_regression` and :func:`solve_least_squares`.
-
+    Raises IdentError as :func:`lagged_regression` and :func:`solve_least_squares`.
     """
     blocks, names = lagged_blocks(ys, us, na=na, nb=nb, nk=nk)
     return solve_blocks(blocks, len(names), names=names), names
@@ -217,11 +213,8 @@ def solve_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], 
     Solve a least-squares problem given as row blocks, by CholeskyQR2 accumulated over them.
 
     ``blocks()`` returns the same ``(phi, target)`` blocks on every call; ``p`` is the number
-    of columns (method: ``doc/estimators.md``).
-
-    Raises:
-        IdentError: When a column is zero or the columns are linearly dependent.
-
+    of columns (method: ``doc/estimators.md``). Raises IdentError when a column is zero or the
+    columns are linearly dependent.
     """
     names = list(names) or [f'column {j}' for j in range(p)]
     norms = [np.linalg.norm(phi, axis=0) for phi, _ in blocks()]
@@ -294,11 +287,8 @@ def scaled_qr(phi: np.ndarray, *,
     Return ``(Q, R, scale)`` with ``phi / scale = Q R``, columns scaled to unit norm.
 
     CholeskyQR2, with Householder QR beyond a condition of ~1e8 (``doc/estimators.md``).
-
-    Raises:
-        IdentError: When a column is zero or the columns are linearly dependent to within
-            :data:`RANK_TOLERANCE`.
-
+    Raises IdentError when a column is zero or the columns are linearly dependent to within
+    :data:`RANK_TOLERANCE`.
     """
     names = list(names) or [f'column {j}' for j in range(phi.shape[1])]
     scale = np.linalg.norm(phi, axis=0)
@@ -332,11 +322,8 @@ def normal_equations(phi: np.ndarray, target: np.ndarray, *, ridge: float = 0.0)
     Return the least-squares solution from the column-scaled normal equations (Cholesky).
 
     Cheap and accurate below a condition of ~1e6; ``ridge`` is added to the unit diagonal
-    (``doc/estimators.md``).
-
-    Raises:
-        IdentError: When the scaled Gram matrix is not positive definite.
-
+    (``doc/estimators.md``). Raises IdentError when the scaled Gram matrix is not positive
+    definite.
     """
     return _solve_normal(phi.T @ phi, phi.T @ target, ridge)
 
@@ -360,9 +347,7 @@ def normal_equations_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.n
     """
     Return :func:`normal_equations`' solution of a problem given as row blocks (one pass).
 
-    Raises:
-        IdentError: When the scaled Gram matrix is not positive definite.
-
+    Raises IdentError when the scaled Gram matrix is not positive definite.
     """
     gram, moment = np.zeros((p, p)), np.zeros(p)
     for phi, target in blocks():
@@ -387,9 +372,7 @@ def triangular_inverse(r: np.ndarray) -> np.ndarray:
     """
     Return the inverse of the upper triangular ``r`` (LAPACK ``trtri``).
 
-    Raises:
-        IdentError: If ``r`` is singular.
-
+    Raises IdentError if ``r`` is singular.
     """
     inv, info = linalg.lapack.dtrtri(r, lower=0)
     if info != 0:

@@ -113,15 +113,10 @@ class ShotSource:
 
     def check_units(self) -> str | None:
         """
-        Check the shots' peak pressure per acceleration against pressure sensors' range.
+        Check the shots' median peak pressure per acceleration against pressure sensors' range.
 
-        Returns:
-            A warning naming the likely unit mistake when the median lies outside
-            ``TYPICAL_MPA_PER_G``, else None.
-
-        Raises:
-            ShotError: When it lies outside ``PLAUSIBLE_MPA_PER_G``.
-
+        Returns a warning naming the likely unit mistake outside ``TYPICAL_MPA_PER_G``, else None;
+        raises ShotError outside ``PLAUSIBLE_MPA_PER_G``.
         """
         ratios = [abs(s.mpa_per_g) for s in self.shots if s.usable and math.isfinite(s.mpa_per_g)]
         if not ratios:
