@@ -16,7 +16,9 @@ Data flow one way: bag/stream → shots → model → residual → diagnosis →
 core stays usable without ROS.
 """
 
-__version__ = '0.1.0'
+from .version import __version__
+
+__all__ = ['__version__', 'pipeline']
 
 
 def __getattr__(name: str):

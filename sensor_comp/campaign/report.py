@@ -17,7 +17,7 @@ import numpy as np
 from .store import CampaignFolder
 from .summary import BASES, CampaignSummary, SensorSummary
 from .table import read_columns
-from .. import __version__
+from ..version import __version__
 from ..core.report.html import embedded_png
 from ..files import write_text_atomically
 

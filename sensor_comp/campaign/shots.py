@@ -18,7 +18,7 @@ import numpy as np
 from .discover import FRAME_ID, sensor_of
 from .models import model_for, ModelFile
 from .table import failure_row, TABLE_VERSION
-from .. import __version__
+from ..version import __version__
 from ..core.compensation.compare import compare
 from ..core.identification.identify import ShotSource
 from ..core.shots.detection import Shot

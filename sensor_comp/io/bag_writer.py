@@ -12,7 +12,7 @@ from typing import Mapping, Sequence
 
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 
-from .. import __version__
+from ..version import __version__
 from ..blocks import iter_blocks
 from ..files import open_temporary, publish
 from ..streams import Recording, STREAM_INFO, Stream
@@ -122,10 +122,8 @@ class BagWriter:
         """
         Declare a topic with the schema and channel metadata of another bag, unchanged.
 
-        Raises:
-            BagError: If the writer is closed, the name is not absolute or already added, or the
-                schema encoding is not ``'ros2msg'`` or ``'ros2idl'``.
-
+        Raises BagError if the writer is closed, the name is not absolute or already added, or the
+        schema encoding is not ``'ros2msg'`` or ``'ros2idl'``.
         """
         self._check_new_topic(topic)
         if schema_encoding not in SCHEMA_ENCODINGS:

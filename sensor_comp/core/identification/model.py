@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from ... import __version__
+from ...version import __version__
 from ...errors import SensorCompError
 from ...files import write_text_atomically
 from ...streams import G0

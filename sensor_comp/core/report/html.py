@@ -23,7 +23,7 @@ from ..diagnosis.residual import ResidualAnalysis
 from .residual_plots import (amplitude_figure, cross_correlation_figure, probes_figure,
                              segments_figure, spectrum_figure, whiteness_figure)
 from ..shots.detection import Shot, shot_table
-from ... import __version__
+from ...version import __version__
 from ...files import write_text_atomically
 
 __all__ = ['embedded_png', 'html_report', 'verdict_html', 'write_report']
