@@ -61,11 +61,8 @@ class CsvError(SensorCompError, ValueError):
     """
     A CSV file cannot be imported; the message names file, line, column and a remedy.
 
-    Attributes:
-        path: The file.
-        line: 1-based line number of the problem, or None if it concerns the whole file.
-        column: Header name of the column concerned, or None.
-
+    ``path`` is the file, ``line`` the 1-based line of the problem and ``column`` the header
+    name concerned, each None when it concerns the whole file.
     """
 
     def __init__(self, path, message: str, *, line: int | None = None,
@@ -386,10 +383,8 @@ def _time_base(table: _Table, t: np.ndarray, tolerance_s: float | None) -> tuple
     """
     Check that the time column ``t`` (file units) is uniform; return (fs, first stamp ns).
 
-    Raises:
-        CsvError: Naming the first line where time does not increase, steps unevenly, or
-            drifts off the uniform grid.
-
+    Raises CsvError naming the first line where time does not increase, steps unevenly, or
+    drifts off the uniform grid.
     """
     time = table.columns[0]
     per_ns = TIME_UNITS[time.unit]

@@ -94,10 +94,8 @@ class Effect:
     """
     A switchable physical effect of the rig; subclasses set ``id`` and the hooks they need.
 
-    Raises:
-        SimConfigError: From the constructor when a parameter is out of range or of the
-            wrong type; the message names the effect, the parameter and its valid values.
-
+    The constructor raises SimConfigError on a parameter out of range or of the wrong type,
+    naming the effect, the parameter and its valid values.
     """
 
     #: The id users select the effect by, e.g. ``'channel_delay'``.
