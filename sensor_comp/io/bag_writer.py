@@ -37,12 +37,8 @@ class BagWriter:
     ``path`` is replaced if it exists (its directory must exist); ``compression`` is
     ``'zstd'``, ``'lz4'`` or ``'none'``; a chunk is closed after ``chunk_size`` uncompressed
     bytes. With ``atomic`` a temporary file beside ``path`` is renamed to it only when
-    :meth:`close` succeeds, and removed on any exception.
-
-    Raises:
-        BagError: On an unknown compression, a bad chunk size or a folder that does not take
-            the file.
-
+    :meth:`close` succeeds, and removed on any exception. Raises BagError on an unknown
+    compression, a bad chunk size or a folder that does not take the file.
     """
 
     def __init__(self, path, *, compression: str = 'zstd', chunk_size: int = 4 << 20,
@@ -168,11 +164,8 @@ class BagWriter:
         Append one serialized (CDR) message to a topic declared with :meth:`add_topic`.
 
         ``log_time_ns`` is the receive time (rosbag2's ``recv_timestamp``); ``publish_time_ns``
-        defaults to it and ``sequence`` to counting the topic's messages from 0.
-
-        Raises:
-            BagError: If the writer is closed, the topic unknown or a time negative.
-
+        defaults to it and ``sequence`` to counting the topic's messages from 0. Raises BagError
+        if the writer is closed, the topic unknown or a time negative.
         """
         self._check_open()
         try:

@@ -141,10 +141,7 @@ def read_csv(path, *, frame_id: str | None = None,
     Returns the recording in SI units (Pa; m/s², rows x, y, z). ``frame_id`` defaults to the
     file's ``# frame_id:`` line, else ``'sensor'``; ``time_tolerance_s`` (largest deviation of
     an interval from the median one and of a stamp from the grid) to the printed precision.
-
-    Raises:
-        CsvError: If the file cannot be read or is malformed.
-
+    Raises CsvError if the file cannot be read or is malformed.
     """
     if time_tolerance_s is not None and not (math.isfinite(time_tolerance_s)
                                              and time_tolerance_s >= 0):

@@ -231,12 +231,8 @@ def pipeline(*, namespace: str = DEFAULT_NAMESPACE,
     Start the rig's nodes (a subset of :data:`NODES`) in this process; use it in a ``with``.
 
     ``parameters`` is ``{node name: {parameter: value}}``; without ``context`` a new one
-    (``ROS_DOMAIN_ID``) is made and shut down on stop.
-
-    Raises:
-        NodeError: On an unknown node, a bad parameter, or a recorder that does not subscribe
-            in time.
-
+    (``ROS_DOMAIN_ID``) is made and shut down on stop. Raises NodeError on an unknown node, a
+    bad parameter, or a recorder that does not subscribe in time.
     """
     return Pipeline(namespace=namespace, nodes=tuple(nodes), parameters=parameters or {},
                     context=context)

@@ -105,14 +105,11 @@ def lagged_regression(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na:
     Stack the regression ``y(k) = φ(k)ᵀθ`` of every segment (layout: ``doc/estimators.md``).
 
     ``es`` are extra lagged signals (residuals of a pseudo-linear regression), ``nc`` lags
-    each.
+    each. Raises IdentError if the segments hold fewer rows than parameters.
 
     Returns:
         ``(phi, target, names)``: the ``(rows, p)`` regressor matrix, the ``(rows,)`` targets
         and one name per column (``'y(k-1)'``, ``'u0(k-2)'``, ``'e(k-1)'``).
-
-    Raises:
-        IdentError: If the segments hold fewer rows than parameters.
 
     """
     k0, names, used = _lag_layout(ys, us, na, nb, nk, nc)

@@ -448,11 +448,8 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
     and ends below ``hysteresis × threshold``; crossings closer than ``holdoff_ms`` are one
     shot. Its window spans ``pre_ms`` before the onset to ``post_ms`` after the pulse.
     ``polarity`` is 1 or -1, None to follow the largest excursion. Returns the shots in time
-    order; none when nothing reaches the threshold (:func:`no_shot_message` says why).
-
-    Raises:
-        ShotError: On bad options, or a constant or all-non-finite axial acceleration.
-
+    order; none when nothing reaches the threshold (:func:`no_shot_message` says why). Raises
+    ShotError on bad options, or a constant or all-non-finite axial acceleration.
     """
     _check_ms(pre_ms=pre_ms, post_ms=post_ms, holdoff_ms=holdoff_ms)
     if not 0 < hysteresis <= 1:
@@ -511,9 +508,7 @@ def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, fl
     """
     Build shots from ``(start, stop)`` windows in seconds instead of detecting them.
 
-    Raises:
-        ShotError: On a window outside the recording, empty, overlapping or out of order.
-
+    Raises ShotError on a window outside the recording, empty, overlapping or out of order.
     """
     fs, n = recording.fs, recording.n_samples
     shots: list[Shot] = []
