@@ -79,7 +79,9 @@ class BagReader:
 
     ``path`` is an ``.mcap`` file or a rosbag2 directory holding exactly one; with
     ``skip_damaged`` damaged chunks are skipped and listed in ``damaged`` instead of raising
-    (summary, truncation and damage rules: ``doc/recording.md``).
+    (summary, truncation and damage rules: ``doc/recording.md``). Raises BagError if the file
+    is missing, unreadable, empty, not MCAP, not the ``ros2`` profile, or has a channel that is
+    not CDR with a ``ros2msg``/``ros2idl`` schema.
 
     Attributes:
         path: The file read.
@@ -92,10 +94,6 @@ class BagReader:
         cut_in_data: The cut fell in the data section, so messages may be lost.
         warning: What was recovered and lost (or that a damaged summary was ignored), or ``''``.
         damaged: The parts skipped with ``skip_damaged``, in file order, once read.
-
-    Raises:
-        BagError: If the file is missing, unreadable, empty, not MCAP, not the ``ros2``
-            profile, or has a channel that is not CDR with a ``ros2msg``/``ros2idl`` schema.
 
     """
 
@@ -663,11 +661,10 @@ def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | N
     """
     Read the block streams of a bag as ``{relative topic: Stream}``.
 
-    Args:
-        path: The ``.mcap`` file (or rosbag2 directory holding one).
-        namespace: Rig namespace, e.g. ``'/rig'``; found from ``stream_info`` when None.
-        names: Relative topics to read, e.g. ``('acceleration',)``; all when None.
-        on_truncated: ``'warn'``, ``'ignore'`` or ``'raise'`` (``doc/recording.md``).
+    ``path`` is the ``.mcap`` file (or a rosbag2 directory holding one); ``namespace`` (e.g.
+    ``'/rig'``) is found from ``stream_info`` when None; ``names`` are relative topics to read
+    (e.g. ``('acceleration',)``), all when None; ``on_truncated`` is ``'warn'``, ``'ignore'``
+    or ``'raise'`` (``doc/recording.md``).
 
     Raises:
         BagError: On missing or several ``stream_info`` topics, undescribed or missing block

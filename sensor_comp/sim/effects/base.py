@@ -60,18 +60,11 @@ def param(default: float | int, *, unit: str, doc: str, low: float = -math.inf,
     """
     Declare an effect parameter: a dataclass field with its unit and valid range.
 
-    Args:
-        default: Default value; its type (int or float) is the parameter's type.
-        unit: Physical unit, e.g. ``'ms'`` (``'1'`` when dimensionless).
-        doc: One line saying what the parameter means.
-        low: Lower bound.
-        high: Upper bound.
-        low_open: Exclude ``low`` itself.
-        high_open: Exclude ``high`` itself.
-        choices: The only valid values, if the parameter is a choice.
-        allow_inf: Accept ``inf`` (e.g. "no saturation").
-        identified: The diagnosis fits it; False for a simulation setting.
-
+    ``default``'s type (int or float) is the parameter's type; ``unit`` is physical (``'1'``
+    when dimensionless), ``doc`` one line of meaning. The range is ``low``..``high`` (bounds
+    excluded with ``low_open``/``high_open``), or ``choices``; ``allow_inf`` accepts ``inf``
+    (e.g. "no saturation"); ``identified=False`` marks a simulation setting the diagnosis
+    does not fit.
     """
     return field(default=default, metadata={
         'unit': unit, 'doc': doc, 'low': low, 'high': high, 'low_open': low_open,
