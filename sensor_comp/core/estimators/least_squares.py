@@ -159,13 +159,9 @@ def lagged_blocks(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int
 @dataclass(frozen=True, eq=False)
 class LeastSquares:
     """
-    Solution of a linear least-squares problem.
+    Solution ``theta`` ``(p,)`` of a linear least-squares problem, residual ``(rows,)``.
 
-    Attributes:
-        theta: Parameters ``(p,)``.
-        residual: Target minus fit ``(rows,)``.
-        unit_covariance: ``(ΦᵀΦ)⁻¹``; times the noise variance, the parameter covariance.
-
+    ``unit_covariance`` is ``(ΦᵀΦ)⁻¹``; times the noise variance, the parameter covariance.
     """
 
     theta: np.ndarray
