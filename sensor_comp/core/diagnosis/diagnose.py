@@ -86,13 +86,12 @@ from ..effects.base import BASE_CONTEXT
 from ..effects.mains_hum import line_columns
 from ..identification.extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
 from ..estimators import estimate_delay, fit_percent, IdentError
-from ..identification.identify import ShotSource
+from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
 from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseModel,
                           PRACTICAL_SHARE, segment_bounds)
 from ..progress import ProgressFactory, Silent
 from .residual import analyse, model_resonances, ringing_time_s
-from ..shots.detection import split_calibration
 from ...errors import SensorCompError
 
 __all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
@@ -395,33 +394,6 @@ class _Context:
 def _peak_percent(windows: Sequence[Window], residuals: Sequence[np.ndarray]) -> float:
     return float(max(100 * np.max(np.abs(r)) / np.max(np.abs(w.y))
                      for w, r in zip(windows, residuals)))
-
-
-def _sources(calibration, validation, notes: list[str]):
-    calibration, validation = list(calibration), list(validation)
-    if not calibration:
-        raise DiagnosisError('no calibration recording given')
-    calibration = [_usable(s, notes) for s in calibration]
-    validation = [_usable(s, notes) for s in validation]
-    if validation:
-        return calibration, validation
-    calib, valid = [], []
-    for source in calibration:
-        if len(source.shots) < 2:
-            raise DiagnosisError(f'{source.name}: {len(source.shots)} usable shot(s); without '
-                                 f'a validation recording the diagnosis needs 2 per recording '
-                                 f'(one to fit, one to score on)')
-        fit_on, report_on = split_calibration(source.shots)
-        calib.append(type(source)(source.recording, tuple(fit_on), source.path))
-        valid.append(type(source)(source.recording, tuple(report_on), source.path))
-    return calib, valid
-
-
-def _usable(source, notes: list[str]):
-    """Return ``source`` without its defective shots; note each one left out."""
-    kept, left_out = ShotSource(source.recording, tuple(source.shots), source.path).usable()
-    notes.extend(left_out)
-    return kept
 
 
 def _analyses(model: Model, validation, notes: list[str]) -> tuple:
@@ -814,11 +786,11 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
         The diagnosis.
 
     Raises:
-        DiagnosisError: On mixed sample rates, no shots or no pre-trigger.
+        DiagnosisError: Without a pre-trigger.
         ModelError: When ``base`` belongs to another sample rate than the recordings.
-        ShotError: On a recording whose pressure is constant (a dead channel).
+        ShotError: On a dead pressure channel or too few shots (:func:`prepare_sources`).
         EffectError: On an unknown candidate id.
-        IdentError: When the base model cannot be fitted.
+        IdentError: On mixed sample rates, no usable shots, or a base that cannot be fitted.
 
     """
     notes: list[str] = []
@@ -846,19 +818,18 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
 def _prepare(calibration: Sequence, validation: Sequence, base: Model | None,
              notes: list[str]) -> tuple[list, list, float]:
     """Return the usable calibration and validation sources and their common rate."""
-    calib, valid = _sources(calibration, validation, notes)
-    rates = {s.recording.fs for s in calib + valid}
-    if len(rates) != 1:
-        raise DiagnosisError(f'recordings have different sample rates '
-                             f'({", ".join(f"{r:g} Hz" for r in sorted(rates))}); diagnose '
-                             f'one rate at a time')
-    fs = rates.pop()
+    sources = prepare_sources([_shot_source(s) for s in calibration],
+                              [_shot_source(s) for s in validation], task='diagnosis')
+    notes.extend((*sources.excluded, *sources.warnings))
     if base is not None:
-        base.check_rate(fs, model_name='the base model', data_name='every recording given')
-    if not any(s.shots for s in calib) or not any(s.shots for s in valid):
-        raise DiagnosisError('the diagnosis needs calibration and validation shots'
-                             + (f' ({"; ".join(notes)})' if notes else ''))
-    return calib, valid, fs
+        base.check_rate(sources.fs, model_name='the base model',
+                        data_name='every recording given')
+    return list(sources.calibration), list(sources.validation), sources.fs
+
+
+def _shot_source(source) -> ShotSource:
+    """Return a ``ShotSource``-like object (recording, shots, path) as a ShotSource."""
+    return ShotSource(source.recording, tuple(source.shots), source.path)
 
 
 def _candidate_ids(candidates: Sequence[str] | None, base_effects: Sequence[str]) -> list[str]:

@@ -184,12 +184,13 @@ class Sources:
     fs: float
 
 
-def prepare_sources(calibration: Sequence[ShotSource],
-                    validation: Sequence[ShotSource] = ()) -> Sources:
+def prepare_sources(calibration: Sequence[ShotSource], validation: Sequence[ShotSource] = (),
+                    *, task: str = 'identification') -> Sources:
     """
     Leave defective shots out, hold out validation shots and check units and sample rates.
 
     Without ``validation``, every second shot of each calibration recording is held out.
+    ``task`` (``identification`` or ``diagnosis``) words the errors for its user.
 
     Raises:
         IdentError: Without a calibration recording or usable shots, or on mixed rates.
@@ -207,9 +208,9 @@ def prepare_sources(calibration: Sequence[ShotSource],
             why = f' ({"; ".join(excluded)})' if excluded else ''
             raise IdentError(f'no usable {role} shot in {names}{why}: check the acceleration '
                              f'channel and the detection threshold')
-    calib, valid = _split(calibration, validation, excluded)
+    calib, valid = _split(calibration, validation, excluded, task)
     warnings = tuple(w for w in (s.check_units() for s in calibration + validation) if w)
-    fs = _check_rates(calib + valid)
+    fs = _check_rates(calib + valid, task)
     return Sources(tuple(calib), tuple(valid), tuple(excluded), warnings, fs)
 
 
@@ -219,8 +220,16 @@ def _usable(source: ShotSource, excluded: list[str]) -> ShotSource:
     return kept
 
 
+#: How each task lets a user fit on every shot of a recording (see :func:`_split`).
+_VALIDATION_HINT = {'identification': 'give validation recordings (--validate)',
+                    'diagnosis': 'give a validation recording'}
+#: What each task does with recordings of several rates.
+_ONE_RATE = {'identification': 'a model belongs to one rate: identify them separately',
+             'diagnosis': 'diagnose one rate at a time'}
+
+
 def _split(calibration: Sequence[ShotSource], validation: Sequence[ShotSource],
-           excluded: Sequence[str]):
+           excluded: Sequence[str], task: str):
     if validation:
         return list(calibration), list(validation)
     calib, valid = [], []
@@ -230,22 +239,22 @@ def _split(calibration: Sequence[ShotSource], validation: Sequence[ShotSource],
             raise ShotError(
                 f'{source.name}: {len(source.shots)} usable shot(s)'
                 + (f' ({left_out} more left out, see above)' if left_out else '')
-                + '; identification needs at least 2 per recording, one to fit and one held '
-                  'out to validate on: record more shots, or give validation recordings '
-                  '(--validate) to fit on every shot of this one')
+                + f'; {task} needs at least 2 per recording, one to fit and one held out to '
+                  f'validate on: record more shots, or {_VALIDATION_HINT[task]} to fit on every '
+                  f'shot of this one')
         fit_on, report_on = split_calibration(source.shots)
         calib.append(ShotSource(source.recording, tuple(fit_on), source.path))
         valid.append(ShotSource(source.recording, tuple(report_on), source.path))
     return calib, valid
 
 
-def _check_rates(sources: Sequence[ShotSource]) -> float:
+def _check_rates(sources: Sequence[ShotSource], task: str) -> float:
     rates = {source.recording.fs for source in sources}
     fs = sources[0].recording.fs
     if any(not math.isclose(rate, fs, rel_tol=1e-9) for rate in rates):
         listing = ', '.join(f'{s.name} at {s.recording.fs:g} Hz' for s in sources)
-        raise IdentError(f'recordings have different sample rates ({listing}); a model '
-                         f'belongs to one rate: identify them separately')
+        raise IdentError(f'recordings have different sample rates ({listing}); '
+                         f'{_ONE_RATE[task]}')
     return fs
 
 
