@@ -793,14 +793,15 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
         IdentError: On mixed sample rates, no usable shots, or a base that cannot be fitted.
 
     """
+    progress = progress or Silent
     notes: list[str] = []
     calib, valid, fs = _prepare(calibration, validation, base, notes)
     orders3, base_effects = _base_structure(
         base, orders, delay, shot_windows([s for s in calib if s.shots]), notes)
     ids = _candidate_ids(candidates, base_effects)
     ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
-                   residual_analysis, progress or Silent, notes)
-    ranked, skipped = _candidates(ids, ctx, progress or Silent, notes)
+                   residual_analysis, progress, notes)
+    ranked, skipped = _candidates(ids, ctx, progress, notes)
     base_left = ctx.leftover(ctx.residual, named=False)
     verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
