@@ -8,9 +8,10 @@ import sys
 
 from ..core.identification.identify import ShotSource
 from ..core.identification.model import load, Model, ModelError, Source
+from ..core.shots.detection import ShotError
 from ..errors import SensorCompError
 from ..files import check_output
-from ..io.recording_file import load_recording
+from ..io.recording_file import load_recording, load_recording_windows
 
 __all__ = ['add_force', 'calibration_sources', 'check_plots', 'load_model', 'load_shots',
            'progress_factory', 'run_diagnosis', 'usable_source']
@@ -23,20 +24,43 @@ def add_force(parser, *, help: str = 'replace an existing output file even if it
 
 
 def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
-               threshold_g: float | None = None) -> ShotSource:
+               threshold_g: float | None = None, windows_only: bool = False) -> ShotSource:
     """
     Read a recording and find its shots, or take the manual ``windows`` ``(start, stop)`` in s.
+
+    ``windows_only`` keeps only the shot windows of a bag in memory
+    (:func:`~sensor_comp.io.recording_file.load_recording_windows`): for commands that use
+    nothing outside them.
 
     Raises:
         SensorCompError: If the file does not read or holds no shot (naming the threshold
             used and the largest acceleration seen).
 
     """
-    from ..core.shots.detection import shots_from_windows
-    recording = load_recording(path)
+    from ..core.shots.detection import find_windows, measure_shots, shots_from_windows
+    if not windows_only:
+        recording = load_recording(path)
+        if windows:
+            return ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
+        return ShotSource.detect(recording, path=path, threshold_g=threshold_g)
+    found = []  # the detection of the first pass, measured on the windows of the second
+
+    def find(recording):
+        if windows:
+            return [(s.start, s.stop) for s in shots_from_windows(recording, windows)]
+        try:
+            found.append(find_windows(recording, threshold_g=threshold_g, scratch=True))
+        except ShotError as exc:  # worded as ShotSource.detect words it
+            raise ShotError(f'{path}: {exc}') from None
+        if not found[0].timings:
+            raise ShotError(f'{path}: {found[0].trigger.no_shot_message()}')
+        return found[0].windows
+
+    recording = load_recording_windows(path, find)
     if windows:
         return ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
-    return ShotSource.detect(recording, path=path, threshold_g=threshold_g)
+    shots = measure_shots(recording, found[0])
+    return ShotSource(recording, tuple(shots), path)
 
 
 def load_model(path: str) -> Model:

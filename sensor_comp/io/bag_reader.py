@@ -8,6 +8,7 @@ damage and memory: ``doc/recording.md``.
 
 from __future__ import annotations
 
+import math
 import mmap
 import os
 from pathlib import Path
@@ -38,6 +39,7 @@ __all__ = [
     'AttachmentRecord',
     'BagError',
     'BagReader',
+    'Keep',
     'block_topics',
     'ChannelRecord',
     'DamagedChunk',
@@ -53,6 +55,7 @@ __all__ = [
     'read_stream_infos',
     'read_streams',
     'require_described',
+    'zero_pages',
 ]
 
 
@@ -594,25 +597,89 @@ def require_described(path, infos: dict[str, StreamInfo], topics: dict[str, str]
                        f'stream_info of the node that publishes them')
 
 
+class Keep(NamedTuple):
+    """
+    What of a stream to keep in memory (:func:`read_streams`); the rest is never stored.
+
+    Args:
+        rows: Channel rows to store (None: all).
+        ranges: ``(start, stop)`` sample runs to store, in order (None: all samples).
+        size: The stream's sample count if known (from an earlier pass), else None.
+        span: ``(start, stop)`` samples whose finite ``(count, min, max)`` per stored row is
+            gathered in :attr:`extremes` (None: none).
+
+    """
+
+    rows: tuple[int, ...] | None = None
+    ranges: tuple[tuple[int, int], ...] | None = None
+    size: int | None = None
+    span: tuple[int, int] | None = None
+
+
+def zero_pages(shape: tuple[int, ...]) -> np.ndarray:
+    """
+    Return a float64 array of zeros whose pages take memory only once written.
+
+    Anonymous memory without transparent huge pages, so a sparse fill (the shot windows of a
+    long recording) costs only the pages it touches.
+    """
+    size = max(int(np.prod(shape)), 1) * 8
+    memory = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    if hasattr(mmap, 'MADV_NOHUGEPAGE'):
+        memory.madvise(mmap.MADV_NOHUGEPAGE)
+    return np.frombuffer(memory, dtype=np.float64)[:int(np.prod(shape))].reshape(shape)
+
+
 class _StreamFiller:
     """
     Assemble one stream's blocks as they are read, into one array sized up front.
 
     Holds the samples once, not twice (``doc/recording.md``); ``messages`` is the topic's
-    message count (0: unknown).
+    message count (0: unknown); ``keep`` limits what is stored (:class:`Keep`).
     """
 
-    def __init__(self, info: StreamInfo, *, name: str, messages: int):
+    def __init__(self, info: StreamInfo, *, name: str, messages: int, keep: Keep = Keep()):
         self.sequence = BlockSequence(info, name=name)
         self.channels = len(info.channels)
         self.left = messages
+        self.keep = keep
+        self.rows = list(range(self.channels) if keep.rows is None else keep.rows)
+        # A slice where every row is kept: a view, not a fancy-indexed copy, per block.
+        self.index = slice(None) if keep.rows is None else self.rows
+        self.runs = None if keep.ranges is None else np.array(keep.ranges,
+                                                              dtype=np.int64).reshape(-1, 2)
+        self.sparse = keep.rows is not None or keep.ranges is not None
+        self.extremes = {row: (0, math.inf, -math.inf) for row in self.rows}
         self.data: np.ndarray | None = None
         self.n = 0
         self.t0: int | None = None
         self.gaps: list[Gap] = []
 
+    def _pieces(self, first: int, stop: int) -> list[tuple[int, int]]:
+        """Return the kept ``(start, stop)`` parts of samples ``first:stop``."""
+        if self.runs is None:
+            return [(first, stop)]
+        runs = self.runs
+        i = int(np.searchsorted(runs[:, 1], first, side='right'))
+        out = []
+        while i < len(runs) and runs[i, 0] < stop:
+            out.append((max(first, int(runs[i, 0])), min(stop, int(runs[i, 1]))))
+            i += 1
+        return out
+
+    def _gather(self, first: int, block: np.ndarray) -> None:
+        """Add the finite extremes of ``block`` (starting at sample ``first``) in the span."""
+        lo, hi = self.keep.span
+        part = block[:, max(lo - first, 0):max(hi - first, 0)]
+        for row in self.rows:
+            values = part[row][np.isfinite(part[row])]
+            if values.size:
+                count, low, high = self.extremes[row]
+                self.extremes[row] = (count + values.size, min(low, float(values.min())),
+                                      max(high, float(values.max())))
+
     def add(self, stamp: int, block: np.ndarray) -> None:
-        """Check the next block (:class:`BlockSequence`) and copy it into place."""
+        """Check the next block (:class:`BlockSequence`) and copy its kept part into place."""
         block = np.asarray(block, dtype=np.float64)
         missing = self.sequence.add(stamp, block)
         self.left -= 1
@@ -623,20 +690,26 @@ class _StreamFiller:
             self.t0 = int(stamp)
         end = self.n + missing + width
         if self.data is None or end > self.data.shape[1]:
-            self._grow(end + width * max(self.left, 0), minimum=end)
+            self._grow(self.keep.size or end + width * max(self.left, 0), minimum=end)
         if missing:
             self.gaps.append(Gap(self.n, missing))
-            self.data[:, self.n:self.n + missing] = np.nan
-        self.data[:, end - width:end] = block
+            for a, b in self._pieces(self.n, self.n + missing):
+                self.data[self.index, a:b] = np.nan
+        if self.keep.span is not None:
+            self._gather(end - width, block)
+        for a, b in self._pieces(end - width, end):
+            self.data[self.index, a:b] = block[self.index, a - end + width:b - end + width]
         self.n = end
 
     def _grow(self, size: int, *, minimum: int) -> None:
         """Move the samples into a larger array (only when gaps outgrow the estimate)."""
         if self.data is not None:
             size = max(size, minimum + self.data.shape[1] // 2)
-        grown = np.empty((self.channels, size))
+        shape = (self.channels, size)
+        grown = zero_pages(shape) if self.sparse else np.empty(shape)
         if self.data is not None:
-            grown[:, :self.n] = self.data[:, :self.n]
+            for a, b in self._pieces(0, self.n):
+                grown[self.index, a:b] = self.data[self.index, a:b]
         self.data = grown
 
     def stream(self, info: StreamInfo) -> Stream:
@@ -646,25 +719,30 @@ class _StreamFiller:
         return Stream(info, self.t0, self.data[:, :self.n], tuple(self.gaps))
 
 
-def _fill(fillers: dict, pending: dict, infos: dict, bag: BagReader, topics: dict) -> None:
+def _fill(fillers: dict, pending: dict, infos: dict, bag: BagReader, topics: dict,
+          keep: dict) -> None:
     """Start the fillers of the streams described by now and give them their held blocks."""
     for name in list(pending):
         if name in infos:
             fillers[name] = _StreamFiller(infos[name], name=topics[name],
-                                          messages=bag.topics[topics[name]].message_count)
+                                          messages=bag.topics[topics[name]].message_count,
+                                          keep=keep.get(name, Keep()))
             for stamp, data in pending.pop(name):
                 fillers[name].add(stamp, data)
 
 
 def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | None = None,
-                 on_truncated: str = 'warn') -> dict[str, Stream]:
+                 on_truncated: str = 'warn', keep: dict[str, Keep] | None = None,
+                 extremes: dict | None = None) -> dict[str, Stream]:
     """
     Read the block streams of a bag as ``{relative topic: Stream}``.
 
     ``path`` is the ``.mcap`` file (or a rosbag2 directory holding one); ``namespace`` (e.g.
     ``'/rig'``) is found from ``stream_info`` when None; ``names`` are relative topics to read
     (e.g. ``('acceleration',)``), all when None; ``on_truncated`` is ``'warn'``, ``'ignore'``
-    or ``'raise'`` (``doc/recording.md``).
+    or ``'raise'`` (``doc/recording.md``); ``keep`` limits what of a stream is stored
+    (:class:`Keep`; samples not kept read as 0), and ``extremes`` receives ``{name: {row:
+    (finite count, min, max)}}`` over each :attr:`Keep.span`.
 
     Raises:
         BagError: On missing or several ``stream_info`` topics, undescribed or missing block
@@ -681,6 +759,7 @@ def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | N
         elif bag.truncated and on_truncated == 'warn':
             warnings.warn(bag.warning, TruncatedBagWarning, stacklevel=2)
         namespace = find_namespace(bag) if namespace is None else namespace
+        keep = keep or {}
         info_topic = _stream_info_topic(bag, namespace)
         prefix = topic_name(namespace, '')
         topics = block_topics(bag, namespace=namespace, names=names)
@@ -694,7 +773,7 @@ def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | N
             for msg in bag.messages([info_topic, *topics.values()]):
                 if msg.topic == info_topic:
                     _merge_stream_info(infos, msg, bag.path)
-                    _fill(fillers, pending, infos, bag, topics)
+                    _fill(fillers, pending, infos, bag, topics, keep)
                     continue
                 try:
                     stamp, _, data = decode_block(msg.data)
@@ -712,7 +791,9 @@ def read_streams(path, *, namespace: str | None = None, names: Iterable[str] | N
                             bag.topics[prefix + name].msgtype != IMAGE:
                         raise _not_blocks(bag, prefix + name)
             require_described(path, infos, topics, info_topic)
-            _fill(fillers, pending, infos, bag, topics)
+            _fill(fillers, pending, infos, bag, topics, keep)
+            if extremes is not None:
+                extremes.update({name: f.extremes for name, f in fillers.items()})
             return {name: fillers[name].stream(infos[name]) for name in topics}
         except StreamError as exc:
             raise StreamError(f'{path}: {exc}') from None

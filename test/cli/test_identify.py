@@ -146,3 +146,22 @@ def test_a_missing_recording_is_refused_naming_it(calibration, tmp_path, capsys)
     err = capsys.readouterr().err
     assert str(missing) in err and 'no such file' in err
     assert not out.exists()
+
+
+def test_windows_only_reading_identifies_the_model_of_a_full_read(calibration, validation):
+    from sensor_comp.cli.sources import load_shots
+    from sensor_comp.core.identification.identify import identify
+    from sensor_comp.core.shots.detection import WindowedRecording
+    full = [load_shots(p) for p in (calibration.path, validation.path)]
+    windowed = [load_shots(p, windows_only=True) for p in (calibration.path, validation.path)]
+    assert all(isinstance(s.recording, WindowedRecording) for s in windowed)
+    assert [s.shots for s in windowed] == [s.shots for s in full]
+    manual = [(s.start_s, s.stop_s) for s in full[0].shots[:3]]
+    assert load_shots(calibration.path, windows=manual, windows_only=True).shots == \
+        load_shots(calibration.path, windows=manual).shots
+    models = [identify(sources[:1], validation=sources[1:], structure='oe', delay=1,
+                       denoise=False).model for sources in (full, windowed)]
+    assert models[1].a == pytest.approx(models[0].a, rel=1e-12, abs=1e-14)
+    np.testing.assert_allclose(models[1].b, models[0].b, rtol=1e-12, atol=0)
+    assert models[1].fit['validation_fit_percent'] == pytest.approx(
+        models[0].fit['validation_fit_percent'], rel=1e-12)

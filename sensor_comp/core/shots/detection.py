@@ -9,7 +9,7 @@ pressure) in :attr:`Shot.defects`. Rules and numbers: ``doc/shots.md``.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -27,12 +27,19 @@ __all__ = [
     'DEFAULT_POST_MS',
     'DEFAULT_PRE_MS',
     'DEFAULT_THRESHOLD_FRACTION',
+    'Detection',
     'NOISE_FACTOR',
+    'SCAN_BLOCK',
     'Shot',
     'ShotError',
+    'Trigger',
+    'WindowedRecording',
     'dead_channel',
     'detect_shots',
+    'find_windows',
+    'finite_extremes',
     'mad_sigma',
+    'measure_shots',
     'no_shot_message',
     'segments',
     'shot_table',
@@ -340,6 +347,49 @@ def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: 
                 notes=tuple(notes), defects=tuple(defects))
 
 
+#: Samples per block of the full-length scans (bounded temporaries).
+SCAN_BLOCK = 1 << 20
+
+
+def finite_extremes(row: np.ndarray) -> tuple[int, float, float]:
+    """Return ``(count, min, max)`` of the finite samples of ``row``, block by block."""
+    count, lo, hi = 0, math.inf, -math.inf
+    for first in range(0, row.size, SCAN_BLOCK):
+        part = row[first:first + SCAN_BLOCK]
+        part = part[np.isfinite(part)]
+        if part.size:
+            count += part.size
+            lo, hi = min(lo, float(part.min())), max(hi, float(part.max()))
+    return count, lo, hi
+
+
+@dataclass(frozen=True)
+class WindowedRecording(Recording):
+    """
+    A recording read for its shot windows only: samples outside ``kept`` were never read.
+
+    Its arrays span the whole recording, but only the ``kept`` ``(start, stop)`` windows hold
+    data (the rest is zero pages that take no memory); ``extremes`` holds the whole-length
+    ``(finite count, min, max)`` of ``'pressure'`` and ``'axial'`` that :func:`dead_channel`
+    needs. :func:`segments` refuses a window outside ``kept``.
+    """
+
+    kept: tuple[tuple[int, int], ...] = ()
+    extremes: dict[str, tuple[int, float, float]] = field(default_factory=dict)
+
+    def check_kept(self, start: int, stop: int) -> None:
+        """
+        Check that samples ``start:stop`` were read.
+
+        Raises:
+            ShotError: If they reach outside every kept window.
+
+        """
+        if not any(a <= start and stop <= b for a, b in self.kept):
+            raise ShotError(f'samples {start}:{stop} lie outside the shot windows read from '
+                            f'the recording (it was read for its shot windows only)')
+
+
 def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
     """
     Return why the axial acceleration (or, with ``pressure``, the pressure) is dead, or None.
@@ -347,13 +397,15 @@ def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
     A channel is dead when every finite sample has one value (a disconnected sensor, an
     amplifier in reset or overload, a channel mapped to nothing).
     """
-    channels = [('axial acceleration (row z)', recording.axial, 'm/s²')]
+    channels = [('axial acceleration (row z)', 'axial', 'm/s²')]
     if pressure:
-        channels.insert(0, ('pressure', recording.pressure, 'Pa'))
-    for name, row, unit in channels:
-        finite = row[np.isfinite(row)]
-        if finite.size > 1 and finite.min() == finite.max():
-            return (f'the {name} is constant at {finite[0]:g} {unit} over all '
+        channels.insert(0, ('pressure', 'pressure', 'Pa'))
+    stored = getattr(recording, 'extremes', {})
+    for name, key, unit in channels:
+        count, lo, hi = stored[key] if key in stored else finite_extremes(
+            getattr(recording, key))
+        if count > 1 and lo == hi:
+            return (f'the {name} is constant at {lo:g} {unit} over all '
                     f'{recording.n_samples} samples: the sensor is dead or disconnected, its '
                     f'amplifier is in reset or overload, or the channel is mapped wrong; check '
                     f'the wiring and the recorded channels')
@@ -384,27 +436,49 @@ def _events(s: np.ndarray, on: float, off: float) -> list[list[int]]:
 
 
 @dataclass(frozen=True)
-class _Trigger:
-    """The detection signal and its level: ``s`` in g, baseline removed, pulses positive."""
+class Trigger:
+    """
+    The level shots are detected at (see :func:`find_windows`).
 
-    s: np.ndarray
+    Attributes:
+        threshold_g: Threshold above the median, g.
+        largest_g: Largest excursion of the trigger signal, g.
+        sigma_g: Its noise σ, g.
+        automatic: The threshold was chosen, not given.
+
+    """
+
     threshold_g: float
     largest_g: float
     sigma_g: float
     automatic: bool
 
+    def no_shot_message(self) -> str:
+        """Return why nothing reaches the threshold, with the numbers and what to try."""
+        how = (f'the automatic threshold, the larger of '
+               f'{100 * DEFAULT_THRESHOLD_FRACTION:g} % of the largest excursion and '
+               f'{NOISE_FACTOR:g} noise σ' if self.automatic else 'the threshold given')
+        return (f'no shot found: the axial acceleration never reaches {self.threshold_g:.4g} '
+                f'g above its median ({how}); its largest excursion is {self.largest_g:.4g} '
+                f'g and its noise σ {self.sigma_g:.3g} g. Give a lower --threshold G (one '
+                f'below {NOISE_FACTOR:g} σ = {NOISE_FACTOR * self.sigma_g:.3g} g may trigger '
+                f'on noise) or the shot windows with --window START STOP in seconds')
 
-def _trigger(recording: Recording, threshold_g: float | None,
-             polarity: int | None) -> _Trigger:
+
+def _trigger(recording: Recording, threshold_g: float | None, polarity: int | None, *,
+             scratch: bool = False) -> tuple[np.ndarray, Trigger]:
+    """Return the trigger signal (g, baseline removed, pulses positive) and its level."""
     if threshold_g is not None and not threshold_g > 0:
         raise ShotError(f'threshold must be a positive number of g, got {threshold_g!r}')
-    # In place, one channel-sized temporary at a time (the recording's channel may be
-    # hundreds of MB): the values of the plain expressions, bit for bit.
-    s = recording.axial / G0
-    s[~np.isfinite(s)] = np.nan  # an Inf is bad data, not a shock
     dead = dead_channel(recording, pressure=False)
     if dead is not None:
         raise ShotError(dead)
+    # In place, one channel-sized temporary at a time (the recording's channel may be
+    # hundreds of MB): the values of the plain expressions, bit for bit. With ``scratch``
+    # the recording's own axial row becomes the signal (no copy at all).
+    s = recording.axial
+    s = np.divide(s, G0, out=s if scratch else None)
+    s[~np.isfinite(s)] = np.nan  # an Inf is bad data, not a shock
     if np.isfinite(s).any():
         s -= _nanmedian_of_copy(s)
     s *= _polarity(s, polarity, 'recording')
@@ -416,7 +490,7 @@ def _trigger(recording: Recording, threshold_g: float | None,
     automatic = threshold_g is None
     if automatic:
         threshold_g = max(DEFAULT_THRESHOLD_FRACTION * largest, NOISE_FACTOR * sigma)
-    return _Trigger(s, threshold_g, largest, sigma, automatic)
+    return s, Trigger(threshold_g, largest, sigma, automatic)
 
 
 def no_shot_message(recording: Recording, *, threshold_g: float | None = None,
@@ -426,41 +500,35 @@ def no_shot_message(recording: Recording, *, threshold_g: float | None = None,
 
     Raises ShotError as :func:`detect_shots` does on a recording it cannot scan.
     """
-    trigger = _trigger(recording, threshold_g, polarity)
-    how = (f'the automatic threshold, the larger of '
-           f'{100 * DEFAULT_THRESHOLD_FRACTION:g} % of the largest excursion and '
-           f'{NOISE_FACTOR:g} noise σ' if trigger.automatic else 'the threshold given')
-    return (f'no shot found: the axial acceleration never reaches {trigger.threshold_g:.4g} g '
-            f'above its median ({how}); its largest excursion is {trigger.largest_g:.4g} g '
-            f'and its noise σ {trigger.sigma_g:.3g} g. Give a lower --threshold G (one below '
-            f'{NOISE_FACTOR:g} σ = {NOISE_FACTOR * trigger.sigma_g:.3g} g may trigger on '
-            f'noise) or the shot windows with --window START STOP in seconds')
+    return _trigger(recording, threshold_g, polarity)[1].no_shot_message()
 
 
-def detect_shots(recording: Recording, *, threshold_g: float | None = None,
-                 hysteresis: float = DEFAULT_HYSTERESIS, pre_ms: float = DEFAULT_PRE_MS,
-                 post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
-                 polarity: int | None = None) -> list[Shot]:
+@dataclass(frozen=True)
+class Detection:
     """
-    Find the shots in a recording's axial acceleration (rules: ``doc/shots.md``).
+    Where the shots of a recording are, before they are measured (:func:`find_windows`).
 
-    A shot starts where the acceleration, median removed and in g, reaches ``threshold_g``
-    and ends below ``hysteresis × threshold``; crossings closer than ``holdoff_ms`` are one
-    shot. Its window spans ``pre_ms`` before the onset to ``post_ms`` after the pulse.
-    ``polarity`` is 1 or -1, None to follow the largest excursion. Returns the shots in time
-    order; none when nothing reaches the threshold (:func:`no_shot_message` says why). Raises
-    ShotError on bad options, or a constant or all-non-finite axial acceleration.
+    Attributes:
+        trigger: The detection level.
+        timings: ``(onset, end, peak, notes)`` per shot, in samples of the recording.
+        bounds: ``[start, stop)`` of each shot's window.
+
     """
-    _check_ms(pre_ms=pre_ms, post_ms=post_ms, holdoff_ms=holdoff_ms)
-    if not 0 < hysteresis <= 1:
-        raise ShotError(f'hysteresis must lie in (0, 1], got {hysteresis!r}')
-    fs, n = recording.fs, recording.n_samples
-    trigger = _trigger(recording, threshold_g, polarity)
-    s, threshold_g = trigger.s, trigger.threshold_g
-    if not trigger.largest_g >= threshold_g:
-        return []
+
+    trigger: Trigger
+    timings: tuple
+    bounds: tuple
+
+    @property
+    def windows(self) -> list[tuple[int, int]]:
+        """Return the ``(start, stop)`` sample windows of the shots."""
+        return [(start, stop) for start, stop in self.bounds]
+
+
+def _merged_events(s: np.ndarray, threshold_g: float, hysteresis: float,
+                   holdoff: float) -> list[list[int]]:
+    """Return ``[first, stop, crossings]`` per shot: events closer than ``holdoff`` merged."""
     events = _events(s, threshold_g, hysteresis * threshold_g)
-    holdoff = holdoff_ms * fs / 1e3
     merged = [events[0] + [1]]
     for first, stop in events[1:]:
         if first - merged[-1][1] < holdoff:
@@ -468,6 +536,31 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
             merged[-1][2] += 1
         else:
             merged.append([first, stop, 1])
+    return merged
+
+
+def find_windows(recording: Recording, *, threshold_g: float | None = None,
+                 hysteresis: float = DEFAULT_HYSTERESIS, pre_ms: float = DEFAULT_PRE_MS,
+                 post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
+                 polarity: int | None = None, scratch: bool = False) -> Detection:
+    """
+    Find where the shots of a recording are, from its axial acceleration only.
+
+    As :func:`detect_shots` (which measures what this finds); ``scratch`` lets the
+    recording's axial row be overwritten by the trigger signal instead of copied.
+
+    Raises:
+        ShotError: On bad options, or a constant or all-non-finite axial acceleration.
+
+    """
+    _check_ms(pre_ms=pre_ms, post_ms=post_ms, holdoff_ms=holdoff_ms)
+    if not 0 < hysteresis <= 1:
+        raise ShotError(f'hysteresis must lie in (0, 1], got {hysteresis!r}')
+    fs, n = recording.fs, recording.n_samples
+    s, trigger = _trigger(recording, threshold_g, polarity, scratch=scratch)
+    if not trigger.largest_g >= trigger.threshold_g:
+        return Detection(trigger, (), ())
+    merged = _merged_events(s, trigger.threshold_g, hysteresis, holdoff_ms * fs / 1e3)
     timings = []
     for i, (first, stop, count) in enumerate(merged):
         lo = merged[i - 1][1] if i else 0
@@ -498,9 +591,34 @@ def detect_shots(recording: Recording, *, threshold_g: float | None = None,
                                  f'this pulse ends')
             timings[i + 1][3].append(f'window shortened: previous pulse ends {gap:.2f} ms '
                                      f'before this one')
+    return Detection(trigger, tuple(timings), tuple((a, b) for a, b in bounds))
+
+
+def measure_shots(recording: Recording, detection: Detection) -> list[Shot]:
+    """Return the shots :func:`find_windows` found, measured on ``recording``."""
     return [_measure(recording, index=i, start=start, stop=stop, onset=onset, end=end,
-                     peak=peak, notes=notes)
-            for i, ((onset, end, peak, notes), (start, stop)) in enumerate(zip(timings, bounds))]
+                     peak=peak, notes=list(notes))
+            for i, ((onset, end, peak, notes), (start, stop))
+            in enumerate(zip(detection.timings, detection.bounds))]
+
+
+def detect_shots(recording: Recording, *, threshold_g: float | None = None,
+                 hysteresis: float = DEFAULT_HYSTERESIS, pre_ms: float = DEFAULT_PRE_MS,
+                 post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
+                 polarity: int | None = None) -> list[Shot]:
+    """
+    Find the shots in a recording's axial acceleration (rules: ``doc/shots.md``).
+
+    A shot starts where the acceleration, median removed and in g, reaches ``threshold_g``
+    and ends below ``hysteresis × threshold``; crossings closer than ``holdoff_ms`` are one
+    shot. Its window spans ``pre_ms`` before the onset to ``post_ms`` after the pulse.
+    ``polarity`` is 1 or -1, None to follow the largest excursion. Returns the shots in time
+    order; none when nothing reaches the threshold (:func:`no_shot_message` says why). Raises
+    ShotError on bad options, or a constant or all-non-finite axial acceleration.
+    """
+    return measure_shots(recording, find_windows(
+        recording, threshold_g=threshold_g, hysteresis=hysteresis, pre_ms=pre_ms,
+        post_ms=post_ms, holdoff_ms=holdoff_ms, polarity=polarity))
 
 
 def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, float]], *,
@@ -547,6 +665,8 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
         if shot.stop > recording.n_samples:
             raise ShotError(f'shot {shot.index}: window ends at sample {shot.stop}, beyond '
                             f'the {recording.n_samples}-sample recording')
+        if isinstance(recording, WindowedRecording):
+            recording.check_kept(shot.start, shot.stop)
         acc = recording.acceleration[:, shot.window] - \
             np.asarray(shot.baseline_acceleration)[:, np.newaxis]
         y = recording.pressure[shot.window] - shot.baseline_pa

@@ -5,7 +5,8 @@ import pytest
 from scipy import signal
 
 from sensor_comp.core.shots.detection import (
-    detect_shots, segments, shot_table, ShotError, shots_from_windows, split_calibration)
+    dead_channel, detect_shots, find_windows, finite_extremes, measure_shots, no_shot_message,
+    SCAN_BLOCK, segments, shot_table, ShotError, shots_from_windows, split_calibration)
 from sensor_comp.streams import G0, Recording
 
 FS = 100e3
@@ -214,3 +215,28 @@ def test_shot_table_layout():
     assert float(row[1]) == pytest.approx(shots[3].peak_g, abs=0.05)
     assert float(row[2]) == pytest.approx(shots[3].width_ms, abs=5e-4)
     assert row[-1] == 'normal'
+
+
+def test_find_then_measure_is_detect_even_on_a_scratch_axial_row():
+    rec, _ = make()
+    expected = detect_shots(rec)
+    scratch = Recording(fs=FS, t0_ns=0, pressure=rec.pressure,
+                        acceleration=rec.acceleration.copy())
+    detection = find_windows(scratch, scratch=True)
+    assert not np.array_equal(scratch.axial, rec.axial)  # overwritten by the trigger signal
+    assert measure_shots(rec, detection) == expected
+    assert detection.windows == [(s.start, s.stop) for s in expected]
+    quiet, _ = make(shots=())
+    assert find_windows(quiet).trigger.no_shot_message() == no_shot_message(quiet)
+
+
+def test_finite_extremes_and_dead_channel_over_blocks():
+    row = np.arange(2.5 * SCAN_BLOCK) - 7.0
+    row[[3, SCAN_BLOCK + 1]] = np.nan, np.inf
+    assert finite_extremes(row) == (row.size - 2, -7.0, row[-1])
+    assert finite_extremes(np.full(5, np.nan)) == (0, np.inf, -np.inf)
+    rec, _ = make()
+    dead = Recording(fs=FS, t0_ns=0, pressure=np.full(rec.n_samples, 2.5),
+                     acceleration=rec.acceleration)
+    assert 'pressure is constant at 2.5 Pa' in dead_channel(dead)
+    assert dead_channel(dead, pressure=False) is None
