@@ -154,6 +154,7 @@ def _oe_delay_search(segs, delays, na, nb, start):
     reference = start.a if start is not None and start.na == na else None
     if reference is None:
         fit(min(delays, key=lambda d: abs(d - 1)))
+    held_at = held = None
     while True:
         good = {nk: est for nk, est in fits.items() if isinstance(est, Estimate)}
         todo = set()
@@ -164,7 +165,8 @@ def _oe_delay_search(segs, delays, na, nb, start):
             todo = {delays[i] for i in (index - 1, index + 1) if 0 <= i < len(delays)}
         elif reference is None or fits:
             return None
-        held = profile_losses(segs, reference, delays, nb)
+        if held_at is not reference:  # the same best fit gives the same held profile
+            held_at, held = reference, profile_losses(segs, reference, delays, nb)
         if np.any(np.isfinite(held)):
             low = int(np.nanargmin(held))
             if delays[low] not in fits:  # with its neighbours: the next round's bracket
