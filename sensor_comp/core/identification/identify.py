@@ -59,6 +59,8 @@ _FITTERS = {
     'gls': lambda segs, na, nb, nk: fit_armax_gls(segs, na=na, nb=nb, nk=nk),
     'oe': lambda segs, na, nb, nk: fit_oe(segs, nf=na, nb=nb, nk=nk),
 }
+#: Structures whose fit is an output-error one, a start for the delay search.
+_SEED_SEARCH = ('gls', 'oe')
 
 
 @dataclass(frozen=True)
@@ -320,10 +322,12 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     else:
         if delay is None:
             with progress('delay search', 1) as bar:
-                # The model's own fit at nk = 1 is the model when the search ends there and
-                # the pressure is not denoised; an output-error one (oe, gls) starts the
-                # search (an equation-error denominator is biased: a worse start).
-                provisional = _attempt(lambda: _FITTERS[structure](data.measured, na, nb, 1))
+                # An output-error fit at nk = 1 (oe, gls) starts the search, and is the model
+                # when the search ends there and the pressure is not denoised. An
+                # equation-error one (arx, armax) is biased, a worse start: it is fitted once,
+                # after the search, at the delay found.
+                if structure in _SEED_SEARCH:
+                    provisional = _attempt(lambda: _FITTERS[structure](data.measured, na, nb, 1))
                 unbiased = provisional is not None and provisional.structure == 'oe'
                 search = _search_delay(data, provisional if unbiased else None)
                 bar.advance()
