@@ -74,26 +74,47 @@ class SecondResonance(Effect):
 
     def physical(self, model: FittedModel, *,
                  covariance: np.ndarray | None = None) -> Physical:
-        """Return the second mode's frequency (kHz), damping and relative static gain."""
+        """
+        Return the second mode's frequency (kHz), damping and relative static gain.
+
+        The second mode is the one with the smaller static gain share: when the searched
+        mode carries more than the other (``|gain| > 1``), the fit put the sensor's own
+        mode in the search and the mount mode in the base poles (a base fitted before
+        the effect was known settles on the stronger ringing), so the two swap roles and
+        the base mode is reported, its values and deviations read from the denominator.
+        """
         row = row_of(model, 'a')
         freq, zeta = modifier_value(model, 'mode')
         pair = mode_pair(freq, zeta, model.fs)
 
-        def gain(a, b):
+        def reading(a, b):
             full = np.convolve(a, pair)
             found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
-            second = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
-            main = max((m for m in found if m is not second), key=lambda m: abs(m[2]),
+            searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
+            main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
                        default=None)
             if main is None:
                 raise EffectError('the fitted model has no main mode beside the second one')
-            return second[2] / main[2]
+            if abs(searched[2]) > abs(main[2]):
+                return main[0] / 1e3, main[1], main[2] / searched[2], True
+            return searched[0] / 1e3, searched[1], searched[2] / main[2], False
 
-        std = (delta_std(gain, model.a, model.b, covariance) if covariance is not None
-               else stored_std(model, self.id, 'gain'))
-        return {'freq_khz': (freq, stored_std(model, self.id, 'freq_khz')),
-                'zeta': (zeta, stored_std(model, self.id, 'zeta')),
-                'gain': (gain(model.a, model.b), std)}
+        khz, damping, gain, swapped = reading(model.a, model.b)
+
+        def std_of(index: int) -> float | None:
+            return (delta_std(lambda a, b: reading(a, b)[index], model.a, model.b, covariance)
+                    if covariance is not None else None)
+
+        names = ('freq_khz', 'zeta', 'gain')
+        stored = {name: stored_std(model, self.id, name) for name in names}
+        if swapped:
+            stds = [std_of(0) if covariance is not None else stored['freq_khz'],
+                    std_of(1) if covariance is not None else stored['zeta']]
+        else:
+            stds = [stored['freq_khz'], stored['zeta']]
+        stds.append(std_of(2) if covariance is not None else stored['gain'])
+        return {name: (value, std) for name, value, std in zip(names, (khz, damping, gain),
+                                                               stds)}
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Name the residual's spectral peak and what the second mode removes."""

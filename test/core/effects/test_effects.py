@@ -253,6 +253,27 @@ def test_delays_are_read_from_the_dc_group_delay():
     assert physical['tau_ms'] == (40.0, None)
 
 
+@pytest.mark.parametrize('searched', ['mount', 'sensor'])
+def test_second_mode_is_the_one_with_the_smaller_static_share(searched):
+    # A sensor mode (20 kHz, gain 1) beside a mount mode (6 kHz, gain -0.4), written as
+    # the second-resonance structure with either mode in the search: a fit may settle on
+    # both, and the reading must not depend on which.
+    sensor, mount = (20.0, 0.05, 1.0), (6.0, 0.03, -0.4)
+    held, swept = (sensor, mount) if searched == 'mount' else (mount, sensor)
+    a, pair = mode_pair(*held[:2], FS), mode_pair(*swept[:2], FS)
+    numerator = (held[2] * a.sum() * pair + swept[2] * pair.sum() * a)
+    model = _model([f'a_z@mode={swept[0]!r},{swept[1]!r}'], numerator / pair.sum(), a=a, nk=0)
+    covariance = np.diag(np.full(2 + 3, 1e-16))
+    reading = get_effect('second_resonance').physical(model, covariance=covariance)
+    assert reading['freq_khz'][0] == pytest.approx(6.0, rel=1e-6)
+    assert reading['zeta'][0] == pytest.approx(0.03, rel=1e-5)
+    assert reading['gain'][0] == pytest.approx(-0.4, rel=1e-6)
+    assert reading['gain'][1] > 0
+    # Read from the denominator when swapped (its deviation from the covariance); the
+    # searched values' deviations are stored with the fit, none in this bare model.
+    assert (reading['freq_khz'][1] is None) == (searched == 'mount')
+
+
 def test_model_file_with_effects_compensates_alike_after_loading(tmp_path):
     entry = effect_entry(get_effect('mains_hum'), {'freq_hz': (60.0, 0.0),
                                                    'amplitude_pa': (500.0, 5.0)})
