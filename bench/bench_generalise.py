@@ -428,23 +428,36 @@ def _clean_table(rows: list[dict]) -> tuple[str, dict]:
 
 
 def _outside_table(rows: list[dict]) -> tuple[str, dict]:
+    """
+    Return the out-of-catalogue table and rates ``(honest, n, confident)`` per effect and R.
+
+    Confident: a catalogue name given as the answer (verdict ``missing_effect``); a name
+    with ``partly_explained`` says the effect leaves a residual beyond the noise, which is
+    what the product owes the user on an effect it does not know.
+    """
     out, rates = [], {}
     for effect in OUT_OF_CATALOGUE:
         for R in R_OUTSIDE:
             group = [r for r in rows if r['effect'] == effect and r['R'] == R]
             honest = sum(r.get('verdict') in HONEST for r in group)
-            confident = [r for r in group if _named(r)]
+            confident = [r for r in group if _named(r) and r.get('verdict') == 'missing_effect']
+            partial = [r for r in group if _named(r) and r.get('verdict') != 'missing_effect']
             rates[effect, R] = (honest, len(group), len(confident))
-            named = Counter(_named(r) for r in confident)
             out.append([effect, f'{R:g}', len(group), _rate(honest, len(group)),
                         _rate(len(confident), len(group)),
                         _rate(sum(r.get('verdict') == 'adequate' for r in group), len(group)),
-                        ', '.join(f'{k} {v}' for k, v in named.most_common(3)) or '—',
+                        _names(confident), _names(partial),
                         _median(_ratio(r, 'top', 'ceiling_percent') for r in group),
                         _crashes(group)])
     headers = ['effect', 'R', 'n', 'unexplained/partly', 'confident name', 'adequate',
-               'names given', 'named: after/ceiling', 'crash']
+               'named as the answer', 'named in part', 'named: after/ceiling', 'crash']
     return _table(headers, out), rates
+
+
+def _names(rows: list[dict]) -> str:
+    """Return the catalogue names given in ``rows`` with their counts."""
+    return ', '.join(f'{k} {v}' for k, v in Counter(_named(r) for r in rows).most_common(3)) \
+        or '—'
 
 
 def _crash_table(rows: list[dict]) -> str:
