@@ -59,11 +59,13 @@ def run(args: argparse.Namespace) -> int:
     """Identify and write the model; return the exit code."""
     args.output = str(check_output(args.output, inputs=[*args.calibration, *args.validate],
                                    kind='model', force=args.force))
-    # Identification reads nothing outside the shot windows: only they are kept in memory.
+    # Identification reads nothing outside the shot windows, and the lateral acceleration
+    # only for effects: the rest is not kept in memory.
+    lateral = bool(args.effect)
     calibration = [load_shots(p, windows=args.window, threshold_g=args.threshold,
-                              windows_only=True) for p in args.calibration]
-    validation = [load_shots(p, threshold_g=args.threshold, windows_only=True)
-                  for p in args.validate]
+                              windows_only=True, lateral=lateral) for p in args.calibration]
+    validation = [load_shots(p, threshold_g=args.threshold, windows_only=True,
+                             lateral=lateral) for p in args.validate]
     result = identify(calibration, validation=validation, structure=args.structure,
                       orders=tuple(args.orders) if args.orders else None, delay=args.delay,
                       denoise=not args.no_emd, criterion=args.criterion,

@@ -11,7 +11,7 @@ from ..core.identification.model import load, Model, ModelError, Source
 from ..core.shots.detection import ShotError
 from ..errors import SensorCompError
 from ..files import check_output
-from ..io.recording_file import load_recording, load_recording_windows
+from ..io.recording_file import load_recording, load_recording_windows, without_lateral
 
 __all__ = ['add_force', 'calibration_sources', 'check_plots', 'load_model', 'load_shots',
            'progress_factory', 'run_diagnosis', 'usable_source']
@@ -24,13 +24,15 @@ def add_force(parser, *, help: str = 'replace an existing output file even if it
 
 
 def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
-               threshold_g: float | None = None, windows_only: bool = False) -> ShotSource:
+               threshold_g: float | None = None, windows_only: bool = False,
+               lateral: bool = True) -> ShotSource:
     """
     Read a recording and find its shots, or take the manual ``windows`` ``(start, stop)`` in s.
 
     ``windows_only`` keeps only the shot windows of a bag in memory
     (:func:`~sensor_comp.io.recording_file.load_recording_windows`): for commands that use
-    nothing outside them.
+    nothing outside them; without ``lateral`` it then also drops the x and y acceleration
+    once the shots are measured (for models of the axial acceleration alone).
 
     Raises:
         SensorCompError: If the file does not read or holds no shot (naming the threshold
@@ -57,10 +59,9 @@ def load_shots(path: str, *, windows: list[tuple[float, float]] | None = None,
         return found[0].windows
 
     recording = load_recording_windows(path, find)
-    if windows:
-        return ShotSource(recording, tuple(shots_from_windows(recording, windows)), path)
-    shots = measure_shots(recording, found[0])
-    return ShotSource(recording, tuple(shots), path)
+    shots = shots_from_windows(recording, windows) if windows else \
+        measure_shots(recording, found[0])
+    return ShotSource(recording if lateral else without_lateral(recording), tuple(shots), path)
 
 
 def load_model(path: str) -> Model:

@@ -11,7 +11,7 @@ from typing import NamedTuple
 from ..errors import SensorCompError
 from ..streams import ACCELERATION, PRESSURE_RAW, Recording, StreamError
 
-__all__ = ['CSV_SUFFIXES', 'load_recording', 'load_recording_windows']
+__all__ = ['CSV_SUFFIXES', 'load_recording', 'load_recording_windows', 'without_lateral']
 
 #: Suffixes read as oscilloscope CSV exports.
 CSV_SUFFIXES = ('.csv', '.tsv', '.txt')
@@ -80,6 +80,23 @@ def load_recording_windows(path: str | os.PathLike,
     extremes = {'pressure': second.extremes[PRESSURE_RAW][0],
                 'axial': second.extremes[ACCELERATION][2]}
     return replace(second.recording, kept=windows, extremes=extremes)
+
+
+def without_lateral(recording: Recording) -> Recording:
+    """
+    Return a windowed recording without its x and y acceleration (their memory released).
+
+    For work that reads only the axial row once the shots are measured; other recordings
+    are returned as they are.
+    """
+    from ..core.shots.detection import WindowedRecording
+    from .bag_reader import zero_pages
+    if not isinstance(recording, WindowedRecording):
+        return recording
+    acceleration = zero_pages(recording.acceleration.shape)
+    for start, stop in recording.kept:
+        acceleration[2, start:stop] = recording.axial[start:stop]
+    return replace(recording, acceleration=acceleration, rows=(2,))
 
 
 class _Pass(NamedTuple):

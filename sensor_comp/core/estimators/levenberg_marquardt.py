@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = ['STALL', 'LevenbergMarquardt', 'levenberg_marquardt', 'predicted_decrease',
-           'scaled_normal_equations']
+           'scale_normal_equations', 'scaled_normal_equations']
 
 #: Largest damping tried before a point counts as a minimum to working precision.
 _MAX_DAMPING = 1e12
@@ -29,29 +29,36 @@ class LevenbergMarquardt(NamedTuple):
         theta: The parameters at the minimum found.
         cost: The sum of squared errors there.
         e: The errors there.
-        jac: Their Jacobian there.
+        jac: Their Jacobian there (None when built as ``normal`` equations).
         iterations: Steps taken.
         evaluations: Error evaluations, the first included.
         converged: Whether it stopped on the tolerance (or no step improved) before the limit.
+        normal: ``(JᵀJ, Jᵀe)`` there.
 
     """
 
     theta: np.ndarray
     cost: float
     e: np.ndarray
-    jac: np.ndarray
+    jac: np.ndarray | None
     iterations: int
     evaluations: int
     converged: bool
+    normal: tuple[np.ndarray, np.ndarray]
 
 
 def scaled_normal_equations(jac: np.ndarray,
                             e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return ``(JsᵀJs, Jsᵀe, scale)`` for the Jacobian scaled to unit column norms."""
-    gram = jac.T @ jac
+    return scale_normal_equations(jac.T @ jac, jac.T @ e)
+
+
+def scale_normal_equations(gram: np.ndarray,
+                           moment: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``(JsᵀJs, Jsᵀe, scale)`` of ``JᵀJ`` and ``Jᵀe``, columns scaled to unit norm."""
     scale = np.sqrt(np.diag(gram))
     scale[~(scale > 0)] = 1.0
-    return gram / np.outer(scale, scale), (jac.T @ e) / scale, scale
+    return gram / np.outer(scale, scale), moment / scale, scale
 
 
 def predicted_decrease(gram: np.ndarray, grad: np.ndarray) -> float:
@@ -82,19 +89,27 @@ def _damped_step(residual: Callable, theta: np.ndarray, cost: float, gram: np.nd
 
 
 def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
-                        stable: Callable[[np.ndarray], bool], max_iter: int,
-                        tol: float) -> LevenbergMarquardt:
+                        stable: Callable[[np.ndarray], bool], max_iter: int, tol: float,
+                        normal: Callable | None = None) -> LevenbergMarquardt:
     """
     Minimise ``‖e(θ)‖²`` from a stable ``theta``, rejecting steps to unstable parameters.
 
     ``residual(theta, jacobian)`` returns ``e = y − ŷ(θ)``, or ``(e, ∂ŷ/∂θ)``; ``stable``
-    tells whether a trial's denominator is stable. Stops as ``doc/estimators.md`` says.
+    tells whether a trial's denominator is stable. ``normal(theta)``, if given, returns
+    ``(e, JᵀJ, Jᵀe)`` instead of the Jacobian (built block by block, it never holds all of
+    it). Stops as ``doc/estimators.md`` says.
     """
-    e, jac = residual(theta, True)
+    def linearise(theta):
+        if normal is not None:
+            return (None, *normal(theta))
+        e, jac = residual(theta, True)
+        return jac, e, jac.T @ jac, jac.T @ e
+
+    jac, e, *moments = linearise(theta)
     cost = float(e @ e)
     damping, converged, iterations, evaluations, stalled = 1e-4, False, 0, 1, 0
     while True:
-        gram, grad, scale = scaled_normal_equations(jac, e)
+        gram, grad, scale = scale_normal_equations(*moments)
         if cost == 0.0 or predicted_decrease(gram, grad) <= tol * cost:
             converged = True
             break
@@ -110,8 +125,9 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
         stalled = stalled + 1 if cost - cost_trial <= tol * cost_trial else 0
         theta, cost = trial, cost_trial
         damping = max(damping / 10.0, 1e-12)
-        e, jac = residual(theta, True)
+        jac, e, *moments = linearise(theta)
         if stalled == STALL:
             converged = True
             break
-    return LevenbergMarquardt(theta, cost, e, jac, iterations, evaluations, converged)
+    return LevenbergMarquardt(theta, cost, e, jac, iterations, evaluations, converged,
+                              tuple(moments))

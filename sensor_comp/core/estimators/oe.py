@@ -8,7 +8,7 @@ rest. Details: ``doc/estimators.md`` (output error).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 import math
 
@@ -18,9 +18,9 @@ from scipy import signal
 from .arx import fit_arx
 from .data import as_segments, IdentError, Segment
 from .estimate import Estimate
-from .least_squares import (check_orders, filter_each, lagged_regression, minimum_norm,
-                            normal_equations, solve_least_squares)
-from .levenberg_marquardt import levenberg_marquardt, scaled_normal_equations
+from .least_squares import (BLOCK_ROWS, check_orders, filter_each, lagged_blocks,
+                            minimum_norm, normal_equations_blocks, solve_blocks)
+from .levenberg_marquardt import levenberg_marquardt, scale_normal_equations
 from .polynomials import is_stable, reflect_unstable
 
 __all__ = ['ARX_MARGIN', 'OutputErrorProblem', 'SteiglitzMcBride', 'fit_oe',
@@ -79,16 +79,17 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
     converged = False
     iterations = 0
     for iterations in range(1, max_iter + 1):
-        phi, target, names = lagged_regression(filter_each([1.0], a, ys),
-                                               filter_each([1.0], a, us),
-                                               na=nf, nb=nb, nk=nk)
+        # Row blocks of the prefiltered regression, never the whole of it: the blocks of
+        # solve_least_squares, so the QR solve is that of the whole matrix.
+        blocks, names = lagged_blocks(filter_each([1.0], a, ys), filter_each([1.0], a, us),
+                                      na=nf, nb=nb, nk=nk)
         ls = None
         try:
-            theta = None if exact else normal_equations(phi, target)
+            theta = None if exact else normal_equations_blocks(blocks, len(names))
         except IdentError:
             theta = None
         if theta is None:
-            ls = solve_least_squares(phi, target, names=names)
+            ls = solve_blocks(blocks, len(names), names=names)
             theta = ls.theta
         a_new = reflect_unstable(np.concatenate([[1.0], theta[:nf]]))
         b_new = theta[nf:].reshape(b.shape)
@@ -98,12 +99,19 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
             converged = True
             break
     if ls is None:
-        e = target - phi @ theta
-        variance = float(e @ e) / max(e.size - theta.size, 1)
+        sse, rows = 0.0, 0
+        for phi, target in blocks():
+            e = target - phi @ theta
+            sse, rows = sse + float(e @ e), rows + e.size
+        variance = sse / max(rows - theta.size, 1)
         return SteiglitzMcBride(a, b, np.full((theta.size,) * 2, np.nan), variance,
                                 iterations, converged)
     return SteiglitzMcBride(a, b, ls.noise_variance * ls.unit_covariance, ls.noise_variance,
                             iterations, converged)
+
+
+#: One row block of a regression: ``(phi, target)``.
+_Block = tuple[np.ndarray, np.ndarray]
 
 
 class OutputErrorProblem:
@@ -148,16 +156,7 @@ class OutputErrorProblem:
                    count: int) -> None:
         """Write each row of ``x`` (per segment) delayed by ``first … first+count−1``."""
         for s, xs in enumerate(x):
-            start, stop = self.offsets[s], self.offsets[s + 1]
-            n = stop - start
-            for i in range(xs.shape[0]):
-                for j in range(count):
-                    lag, col = first + j, column + i * count + j
-                    if lag < n:
-                        out[start:start + lag, col] = 0.0
-                        out[start + lag:stop, col] = xs[i, :n - lag]
-                    else:
-                        out[start:stop, col] = 0.0
+            _lags(out[self.offsets[s]:self.offsets[s + 1]], column, xs, first, count)
 
     def regression(self, f: np.ndarray) -> np.ndarray:
         """Return the ``(n, n_inputs·nb + k)`` regressors at a fixed ``F`` (Fortran order)."""
@@ -168,36 +167,63 @@ class OutputErrorProblem:
             out[:, q:] = self.extra
         return out
 
+    def regression_blocks(self, f: np.ndarray) -> Callable[[], Iterator[_Block]]:
+        """
+        Return :meth:`regression` and the outputs as row blocks (``solve_blocks``' form).
+
+        The blocks are the :data:`BLOCK_ROWS` row ranges :func:`solve_least_squares` cuts the
+        whole matrix into, built when reached: the same solve without the whole matrix.
+        """
+        q, x, offsets = self.n_inputs * self.nb, self.filtered(f), self.offsets
+
+        def blocks() -> Iterator[_Block]:
+            for first in range(0, self.y.size, BLOCK_ROWS):
+                stop = min(first + BLOCK_ROWS, self.y.size)
+                phi = np.empty((stop - first, q + self.n_extra), order='F')
+                s = int(np.searchsorted(offsets, first, side='right')) - 1
+                while s < len(x) and offsets[s] < stop:
+                    a, b = max(first, offsets[s]), min(stop, offsets[s + 1])
+                    _lags(phi[a - first:b - first], 0, x[s], self.nk, self.nb,
+                          row0=a - offsets[s])
+                    s += 1
+                if self.extra is not None:
+                    phi[:, q:] = self.extra[first:stop]
+                yield phi, self.y[first:stop]
+        return blocks
+
     def linear(self, f: np.ndarray) -> np.ndarray:
         """Return the least-squares numerators and extra coefficients at ``F`` (minimum norm)."""
-        phi = self.regression(f)
         try:
-            return solve_least_squares(phi, self.y).theta
+            return solve_blocks(self.regression_blocks(f), self.n_parameters - self.nf).theta
         except IdentError:
-            return minimum_norm(phi, self.y)
+            return minimum_norm(self.regression(f), self.y)
 
     def profile_sse(self, f: np.ndarray) -> float:
         """
         Return the least sum of squares over numerators (and extra coefficients) at ``F``.
 
         Cholesky with a 1e-10 ridge where singular; the residual is recomputed, so round-off can
-        only raise the loss.
+        only raise the loss. Built block by block (:meth:`regression_blocks`).
         """
-        phi = self.regression(f)
+        blocks, p = self.regression_blocks(f), self.n_parameters - self.nf
         try:
-            theta = normal_equations(phi, self.y)
+            theta = normal_equations_blocks(blocks, p)
         except IdentError:
             try:
-                theta = normal_equations(phi, self.y, ridge=1e-10)
+                theta = normal_equations_blocks(blocks, p, ridge=1e-10)
             except IdentError:  # not finite
                 return math.inf
-        e = self.y - phi @ theta
-        return float(e @ e)
+        sse = 0.0
+        for phi, y in blocks():
+            e = y - phi @ theta
+            sse += float(e @ e)
+        return sse
 
     def filtered(self, f: np.ndarray) -> list[np.ndarray]:
         """Return every segment's inputs filtered by ``1/F`` from rest (cached)."""
         key = f.tobytes()
         if self._last is None or self._last[0] != key:
+            self._last = None  # the old filtered inputs go before the new ones are made
             self._last = (key, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us])
         return self._last[1]
 
@@ -220,7 +246,8 @@ class OutputErrorProblem:
     def residual(self, theta: np.ndarray, jacobian: bool = False):
         """Return the simulation error ``e = y − ŷ``; with ``jacobian``, ``(e, ∂ŷ/∂θ)``."""
         if not jacobian:
-            return self.y - self.simulate(theta)
+            out = self.simulate(theta)
+            return np.subtract(self.y, out, out=out)
         f, b, d = self.unpack(theta)
         nf, q = self.nf, self.n_inputs * self.nb
         jac = np.empty((self.y.size, self.n_parameters), order='F')
@@ -234,6 +261,48 @@ class OutputErrorProblem:
             jac[:, nf + q:] = self.extra
             e -= self.extra @ d
         return e, jac
+
+    def normal_equations(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Return ``(e, JᵀJ, Jᵀe)`` of :meth:`residual` with ``jacobian``, segment by segment.
+
+        Only one segment's Jacobian is held at a time (the whole one is as large as the
+        data times the parameters).
+        """
+        f, b, d = self.unpack(theta)
+        nf, q, p = self.nf, self.n_inputs * self.nb, self.n_parameters
+        e = np.empty(self.y.size)
+        gram, moment = np.zeros((p, p)), np.zeros(p)
+        for s, x in enumerate(self.filtered(f)):
+            start, stop = self.offsets[s], self.offsets[s + 1]
+            jac = np.empty((stop - start, p), order='F')
+            _lags(jac, nf, x, self.nk, self.nb)
+            induced = jac[:, nf:nf + q] @ b.ravel()
+            _lags(jac, 0, -signal.lfilter([1.0], f, induced)[None], 1, nf)
+            part = e[start:stop]
+            np.subtract(self.y[start:stop], induced, out=part)
+            if self.extra is not None:
+                jac[:, nf + q:] = self.extra[start:stop]
+                part -= self.extra[start:stop] @ d
+            gram += jac.T @ jac
+            moment += jac.T @ part
+        return e, gram, moment
+
+
+def _lags(out: np.ndarray, column: int, xs: np.ndarray, first: int, count: int, *,
+          row0: int = 0) -> None:
+    """
+    Write each row of ``xs`` (one segment) delayed by ``first … first+count−1`` from rest.
+
+    ``out`` holds the segment's rows from ``row0`` on.
+    """
+    m = out.shape[0]
+    for i in range(xs.shape[0]):
+        for j in range(count):
+            lag, col = first + j, column + i * count + j
+            zero = min(m, max(lag - row0, 0))  # rows before the signal reaches this lag
+            out[:zero, col] = 0.0
+            out[zero:, col] = xs[i, row0 + zero - lag:row0 + m - lag]
 
 
 def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, nk: int = 1,
@@ -255,7 +324,8 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
 
     def descend(theta):
         return levenberg_marquardt(problem.residual, theta, max_iter=max_iter, tol=tol,
-                                   stable=lambda th: is_stable(problem.unpack(th)[0]))
+                                   stable=lambda th: is_stable(problem.unpack(th)[0]),
+                                   normal=problem.normal_equations)
 
     if start is not None:
         f0 = reflect_unstable(np.asarray(start, dtype=np.float64))
@@ -301,12 +371,12 @@ def _cost(problem: OutputErrorProblem, theta: np.ndarray) -> float:
 
 def _estimate(problem: OutputErrorProblem, best, passes: int, start: str) -> Estimate:
     """Return the ``'oe'`` estimate at a Levenberg-Marquardt minimum, with its covariance."""
-    theta, cost, e, jac, iterations, converged = (best.theta, best.cost, best.e, best.jac,
-                                                  best.iterations, best.converged)
+    theta, cost, e, iterations, converged = (best.theta, best.cost, best.e, best.iterations,
+                                             best.converged)
     f, b, _ = problem.unpack(theta)
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
-    gram, _, scale = scaled_normal_equations(jac, e)
+    gram, _, scale = scale_normal_equations(*best.normal)
     if np.linalg.cond(gram) < 1e12:
         covariance = variance * np.linalg.inv(gram) / np.outer(scale, scale)
     else:  # over-parameterised (e.g. a pole cancels a zero): not identifiable

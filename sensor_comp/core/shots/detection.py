@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .inputs import input_channels
+from .inputs import input_channels, parse_channel
 from ...errors import SensorCompError
 from ...streams import G0, Recording
 
@@ -371,11 +371,13 @@ class WindowedRecording(Recording):
     Its arrays span the whole recording, but only the ``kept`` ``(start, stop)`` windows hold
     data (the rest is zero pages that take no memory); ``extremes`` holds the whole-length
     ``(finite count, min, max)`` of ``'pressure'`` and ``'axial'`` that :func:`dead_channel`
-    needs. :func:`segments` refuses a window outside ``kept``.
+    needs; ``rows`` are the acceleration rows kept (x, y, z: 0, 1, 2). :func:`segments`
+    refuses a window outside ``kept`` and an input of a row not kept.
     """
 
     kept: tuple[tuple[int, int], ...] = ()
     extremes: dict[str, tuple[int, float, float]] = field(default_factory=dict)
+    rows: tuple[int, ...] = (0, 1, 2)
 
     def check_kept(self, start: int, stop: int) -> None:
         """
@@ -388,6 +390,20 @@ class WindowedRecording(Recording):
         if not any(a <= start and stop <= b for a, b in self.kept):
             raise ShotError(f'samples {start}:{stop} lie outside the shot windows read from '
                             f'the recording (it was read for its shot windows only)')
+
+    def check_inputs(self, inputs: Sequence[str]) -> None:
+        """
+        Check that the acceleration rows the model ``inputs`` read were kept.
+
+        Raises:
+            ShotError: Naming the first input whose row was not kept.
+
+        """
+        for name in inputs:
+            axis = parse_channel(name).axis
+            if axis not in self.rows:
+                raise ShotError(f'model input {name!r} reads acceleration row {"xyz"[axis]}, '
+                                f'which was not kept when the recording was read')
 
 
 def dead_channel(recording: Recording, *, pressure: bool = True) -> str | None:
@@ -660,6 +676,8 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
     ``denoise`` is applied to each window's pressure (e.g. an ``EmdDenoiser``); None keeps the
     measured pressure. Raises ShotError on a non-finite sample or a window outside the recording.
     """
+    if isinstance(recording, WindowedRecording):
+        recording.check_inputs(inputs)
     out = []
     for shot in shots:
         if shot.stop > recording.n_samples:
