@@ -10,8 +10,10 @@ EMD), and diagnose it with the validation bag. Then:
   ``adequate``; with two hidden effects both rank in the top two;
 - adding the effect (the ranked entry's extended model, fitted on calibration shots and
   scored on validation shots; with two effects, the second round of the loop: the model
-  with the first effect diagnosed again) lowers the worst validation peak residual by at
-  least 60 % and brings the validation fit within one point of the noise-limited ceiling;
+  with the first effect diagnosed again) lowers the worst validation peak residual of the
+  identified base model by at least 60 % and brings the validation fit within one point
+  of the noise-limited ceiling (the diagnosis's own base, with an exact sensor numerator,
+  may already hold part of that fall);
 - the recovered physical parameters are within 15 % of the simulator's truth.
 
 The ceiling is the fit of the simulator's own clean pressure (induced plus disturbance, run
@@ -76,12 +78,14 @@ class Outcome:
         extended: By effect id, the ranked entry that adds it: to the base model; with
             two hidden effects, the second to the base model with the first (both in).
         ceiling: Validation fit of the simulator's clean pressure, %.
+        base_peak: Worst validation peak residual of the identified base model, %.
 
     """
 
     diagnosis: Diagnosis
     extended: dict
     ceiling: float
+    base_peak: float
 
 
 def _source(case, role: str) -> ShotSource:
@@ -129,7 +133,8 @@ def outcome(name: str) -> Outcome:
         again = diagnose([calib], [valid], base=diagnosis.entry(first).fit.model(),
                          candidates=[second])
         extended[second] = again.entry(second)
-    return Outcome(diagnosis, extended, _ceiling(case, valid))
+    return Outcome(diagnosis, extended, _ceiling(case, valid),
+                   base.fit['validation_peak_residual_percent'])
 
 
 @pytest.mark.parametrize('case', CLEAN, ids=_ids)
@@ -167,7 +172,7 @@ def test_both_hidden_effects_rank_in_the_top_two(case):
 @pytest.mark.parametrize('case', SINGLE + PAIRS, ids=_ids)
 def test_adding_the_effect_removes_the_peak_residual(case):
     result = outcome(case.name)
-    before = result.diagnosis.peak_residual_percent
+    before = result.base_peak
     for entry in result.extended.values():
         reduction = 1 - entry.peak_residual_percent / before
         assert reduction >= PEAK_REDUCTION, (

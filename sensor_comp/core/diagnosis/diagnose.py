@@ -7,11 +7,14 @@ effect is fitted on the CALIBRATION shots
 and scored on the VALIDATION shots, which it has never seen:
 
 - **base**: a given model's effects on a sensor base of at most one mode, sampled exactly
-  (``nf ≤ 2``, numerator on lags ``nk..nf``, ``nk ≤ 1``), refitted on the calibration
-  shots: the orders and delay a free structure search chose are not used, because extra
-  poles or a delay of many samples stand in for the effects the diagnosis is to name; and
-  no pole of any fit may be slower than :data:`SLOWEST_POLE_S` (a slow real pole with a
-  zero at 1 imitates an amplifier high-pass or a zero shift exactly).
+  (``nf ≤ 2``, numerator on lags ``0..nf``), refitted on the calibration shots: the orders
+  and delay a free structure search chose are not used, because extra poles or a delay of
+  many samples stand in for the effects the diagnosis is to name; no pole of any fit may
+  be slower than :data:`SLOWEST_POLE_S` (a slow real pole with a zero at 1 imitates an
+  amplifier high-pass or a zero shift exactly); and every numerator through the mechanics
+  lags at DC exactly as the mechanics do (:mod:`~sensor_comp.core.identification.lag_free`:
+  a free numerator leads or lags by more, and so takes in a base-strain term or a channel
+  delay, which then are never named).
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
 - **noise**: the base residual before the triggers (a straight line per window and the
@@ -412,10 +415,10 @@ def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Win
 
     Without ``base``: ``orders`` and ``delay``. With it: its effects on a sensor base of at
     most one mode (``nf`` at most that of :data:`BASE_ORDERS`; fewer when the model was
-    identified with fewer, as the data support) with the numerator on lags ``nk .. nf``,
-    ``nk`` at most 1 (the exact structure of a sampled ``nf``-th order sensor): poles beyond
-    the sensor's mode or an input delay of many samples stand in for an effect (a second
-    mode, a slow tail, a channel delay), which the diagnosis is there to name.
+    identified with fewer, as the data support) with the numerator on lags ``0 .. nf`` (the
+    exact structure of an ``nf``-th order sensor sampled with its input interpolated
+    linearly): poles beyond the sensor's mode or an input delay stand in for an effect (a
+    second mode, a slow tail, a channel delay), which the diagnosis is there to name.
     """
     if base is None:
         nf, nb = orders
@@ -425,8 +428,8 @@ def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Win
     base_effects = tuple(e['id'] for e in base.effects if e.get('id') in EFFECTS)
     given = tuple(int(base.fit.get(f'base_{key}', value)) for key, value in (
         ('nf', base.a.size - 1), ('nb', base.b.shape[1]), ('nk', base.nk)))
-    nf, nk = min(given[0], BASE_ORDERS[0]), min(given[2], 1)
-    physical = (nf, max(nf + 1 - nk, 1), nk)
+    nf = min(given[0], BASE_ORDERS[0])
+    physical = (nf, nf + 1, 0)
     text = (f'base: nf={physical[0]}, nb={physical[1]}, nk={physical[2]} with the given '
             f'model\'s effects ({", ".join(base_effects) or "none"}), refitted on the '
             f'calibration shots')
@@ -448,11 +451,12 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
     with progress('base model', 1) as bar:
         try:
             base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                                slowest_pole_s=SLOWEST_POLE_S)
+                                slowest_pole_s=SLOWEST_POLE_S, lag_free=True)
         except (IdentError, EffectError) as exc:  # as free as the given model, then
             notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:g} ms '
                          f'({exc}); fitted without that bound')
-            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk)
+            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                                lag_free=True)
         bar.advance()
     prediction = base.predict(vw)
     residual = [w.y - p for w, p in zip(vw, prediction.total)]
@@ -544,7 +548,7 @@ def _fit_each(ids: Sequence[str], ctx: _Context, progress, notes: list[str],
                     fit = fit_extended(ctx.calibration, effects=ctx.base_effects + (effect_id,),
                                        fs=ctx.fs, nf=nf, nb=nb, nk=nk,
                                        starts=ctx.base.denominators,
-                                       slowest_pole_s=SLOWEST_POLE_S)
+                                       slowest_pole_s=SLOWEST_POLE_S, lag_free=True)
                     ranked.append(_score(effect_id, fit, ctx))
                 except Exception as exc:  # noqa: B902 - one candidate must not stop the others
                     why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''

@@ -75,6 +75,10 @@ class FitView(Protocol):
     def values(self) -> Mapping[str, float]:
         ...
 
+    @property
+    def value_std(self) -> Mapping[str, float | None]:
+        ...
+
     def parameters(self, effect_id: str) -> Physical:
         ...
 
@@ -217,6 +221,9 @@ class ModelSpec:
         fs: Sample rate in Hz (search ranges may depend on it).
         ringing_khz: Strongest ringing after the pulses in the data, kHz, or None.
         slowest_pole_s: Slowest time constant the model's own poles may have, s, or None.
+        lag_free: Hold every numerator through the mechanics to the mechanics' own lag at DC
+            (:mod:`sensor_comp.core.identification.lag_free`): a delay or lead is then an
+            effect's, not the sensor path's.
 
     """
 
@@ -230,6 +237,7 @@ class ModelSpec:
     fs: float = 1e6
     ringing_khz: float | None = None
     slowest_pole_s: float | None = None
+    lag_free: bool = False
 
     def with_inputs(self, *bases: str) -> ModelSpec:
         """Return the spec with further input channel bases."""
@@ -345,18 +353,22 @@ class Effect:
         """
         Return why a fit of this effect is no physical reading of it, or None when it is one.
 
-        Unreadable parameters or a log-searched value at an end of its range mean the
-        extension fits something else (``doc/effects.md``).
+        Unreadable parameters, or a log-searched value at an end of its range or not
+        resolved (its deviation above the value: the data do not tell its decade), mean
+        the extension fits something else (``doc/effects.md``).
         """
         if self.parameters and not fit.parameters(self.id):
             return 'its physical parameters cannot be read from the fitted model'
         for search in fit.spec.searches:
             if search.key.partition('.')[0] != self.id or not search.log:
                 continue
-            value = fit.values[search.key]
+            value, name = fit.values[search.key], search.key.partition('.')[2]
             if not search.low * EDGE_FACTOR < value < search.high / EDGE_FACTOR:
-                return (f'{search.key.partition(".")[2]} = {value:.4g} sits at an end of '
-                        f'its range ({search.low:g} to {search.high:g})')
+                return (f'{name} = {value:.4g} sits at an end of its range ({search.low:g} '
+                        f'to {search.high:g})')
+            std = fit.value_std.get(search.key)
+            if std is not None and std > value:
+                return f'{name} = {value:.4g} ± {std:.2g} is not resolved by these data'
         return None
 
     def describe(self) -> str:

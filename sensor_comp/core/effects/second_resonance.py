@@ -13,9 +13,9 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FittedModel, ModelSpec,
-                   modifier_value, Outcome, parameters_text, Physical, ResidualView, row_of,
-                   Search, segment_of, sentence, stored_std)
+from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView, FittedModel,
+                   ModelSpec, modifier_value, Outcome, parameters_text, Physical,
+                   ResidualView, row_of, Search, segment_of, sentence, stored_std)
 from ..estimators.least_squares import delayed_numerator
 from ..shots.inputs import mode_pair
 
@@ -28,6 +28,9 @@ MIN_KHZ = 1.0
 MAX_ZETA = 0.2
 #: Relative band around the sensor's own mode not searched.
 MAIN_BAND = 0.2
+#: A second mode whose gain lies within this many standard deviations of zero is not
+#: resolved: the two extra numerator coefficients, not the mode, did the fitting.
+GAIN_Z = 2.0
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
@@ -115,6 +118,18 @@ class SecondResonance(Effect):
         stds.append(std_of(2) if covariance is not None else stored['gain'])
         return {name: (value, std) for name, value, std in zip(names, (khz, damping, gain),
                                                                stds)}
+
+    def implausible(self, fit: FitView) -> str | None:
+        """Return why the fit is no second mode: the generic checks or an unresolved gain."""
+        why = super().implausible(fit)
+        if why is not None:
+            return why
+        gain, std = fit.parameters(self.id).get('gain', (None, None))
+        if gain is not None and std is not None and math.isfinite(std) and \
+                not abs(gain) > GAIN_Z * std:
+            return (f'its gain ({gain:.3g} ± {std:.2g}) is not told apart from zero: the '
+                    f'extra numerator coefficients, not the mode, follow the residual')
+        return None
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Name the residual's spectral peak and what the second mode removes."""

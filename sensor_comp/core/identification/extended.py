@@ -55,6 +55,7 @@ from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
 from ..shots.inputs import input_channels, mode_pair
+from .lag_free import LagFree, target_lag
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
 
@@ -77,6 +78,9 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
+#: Most fits of a lag-free structure, and the change of its target lag (samples) at which
+#: they stop (see :meth:`_Fitter._descend`).
+LAG_ROUNDS, LAG_TOLERANCE = 4, 1e-3
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -235,9 +239,16 @@ def _lstsq(phi: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _problem(us: Sequence[np.ndarray], ys: Sequence[np.ndarray],
-             cols: Sequence[np.ndarray] | None, spec: ModelSpec) -> OutputErrorProblem:
-    """Return the output-error problem of channels ``us`` plus disturbance columns."""
-    return OutputErrorProblem(us, ys, spec.nf, spec.nb, spec.nk, extra=cols)
+             cols: Sequence[np.ndarray] | None, spec: ModelSpec,
+             lag: LagFree | None = None) -> OutputErrorProblem:
+    """
+    Return the output-error problem of channels ``us`` plus disturbance columns.
+
+    With ``lag``, over its expanded channels, one coefficient each (``nb = 1``, ``nk = 0``).
+    """
+    if lag is None:
+        return OutputErrorProblem(us, ys, spec.nf, spec.nb, spec.nk, extra=cols)
+    return OutputErrorProblem([lag.expand(u) for u in us], ys, spec.nf, 1, 0, extra=cols)
 
 
 def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
@@ -384,18 +395,34 @@ class _Fitter:
             self._channels[names] = _channels(self.windows, names, self.fs)
         return self._channels[names]
 
-    def problem(self, values: Mapping[str, float], *,
-                early: bool = False) -> OutputErrorProblem:
-        """Return the regression data; ``early``: up to 3 ms after each pulse only."""
-        us = self.channels(values)
+    def lag(self, values: Mapping[str, float], a: np.ndarray | None) -> LagFree | None:
+        """Return the lag-free parametrisation at denominator ``a`` (None: free numerators)."""
+        if not self.spec.lag_free or a is None:
+            return None
+        return LagFree(self.spec.channels(values), a, self.spec.nb, self.spec.nk, self.fs)
+
+    def problem(self, values: Mapping[str, float], *, early: bool = False,
+                a: np.ndarray | None = None) -> OutputErrorProblem:
+        """
+        Return the regression data; ``early``: up to 3 ms after each pulse only.
+
+        For a lag-free spec, ``a`` is the denominator the numerators' lag is held to (its
+        problem is only valid there); without it, the free problem (a start).
+        """
+        us, lag = self.channels(values), self.lag(values, a)
         if not early:
-            return _problem(us, self.ys, self.cols, self.spec)
+            return _problem(us, self.ys, self.cols, self.spec, lag)
         stops = [w.y.size if w.end is None else min(w.y.size, w.end + round(EARLY_S * self.fs))
                  for w in self.windows]
         return _problem([u[:, :n] for u, n in zip(us, stops)],
                         [y[:n] for y, n in zip(self.ys, stops)],
                         None if self.cols is None else [c[:, :n] for c, n in
-                                                        zip(self.cols, stops)], self.spec)
+                                                        zip(self.cols, stops)], self.spec, lag)
+
+    def profile(self, values: Mapping[str, float], a: np.ndarray, *,
+                early: bool = False) -> float:
+        """Return the loss at denominator ``a``, the numerators solved exactly."""
+        return self.problem(values, early=early, a=a).profile_sse(a)
 
     def starts(self, values: Mapping[str, float], *,
                base: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
@@ -427,23 +454,22 @@ class _Fitter:
             pass
         # On the windows' early part (pulse and first ringing): a slow tail has not built
         # up there to pull the grid towards slow pairs.
-        early = self.problem(values, early=True)
-        grid = [(early.profile_sse(a), zeta, a) for zeta, a in _grid(problem.nf, self.fs)
-                if self.feasible(a)]
+        grid = [(self.profile(values, a, early=True), zeta, a)
+                for zeta, a in _grid(problem.nf, self.fs) if self.feasible(a)]
         grid = [g for g in grid if np.isfinite(g[0])]
         if grid:
             firsts.append(min(grid, key=lambda g: g[0])[2])
             resonant = [g for g in grid if g[1] < 0.5]
             if resonant:
                 firsts.append(min(resonant, key=lambda g: g[0])[2])
-                firsts += self._ringing_start(early, sorted({g[1] for g in resonant}))
+                firsts += self._ringing_start(values, sorted({g[1] for g in resonant}))
         if not firsts:
             raise IdentError(f'no start for a model with nf={problem.nf}: neither output '
                              f'error nor a grid of poles gives a denominator the effects '
                              f'allow')
         return _distinct(firsts)
 
-    def _ringing_start(self, early: OutputErrorProblem,
+    def _ringing_start(self, values: Mapping[str, float],
                        zetas: Sequence[float]) -> list[np.ndarray]:
         """
         Return the grid's resonant pair retuned to the windows' own ringing, or none.
@@ -457,7 +483,8 @@ class _Fitter:
             return []
         pairs = [np.concatenate([mode_pair(khz, zeta, self.fs), np.zeros(self.spec.nf - 2)])
                  for zeta in zetas]
-        scored = [(early.profile_sse(a), i) for i, a in enumerate(pairs) if self.feasible(a)]
+        scored = [(self.profile(values, a, early=True), i) for i, a in enumerate(pairs)
+                  if self.feasible(a)]
         scored = [s for s in scored if np.isfinite(s[0])]
         return [pairs[min(scored)[1]]] if scored else []
 
@@ -472,7 +499,7 @@ class _Fitter:
         """
         problem = self.problem(values)
         results, failed = [], []
-        if self.cols is None and fresh:
+        if self.cols is None and fresh and not self.spec.lag_free:
             try:
                 oe = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
                             nk=problem.nk)
@@ -482,10 +509,9 @@ class _Fitter:
                 failed.append(str(exc))
         usable = [a for a in starts if a.size == problem.nf + 1 and self.feasible(a)]
         if usable:  # Levenberg-Marquardt from the start with the least loss
-            best = min(usable, key=problem.profile_sse)
+            best = min(usable, key=lambda a: self.profile(values, a))
             try:
-                results.append(_joint(problem, best, feasible=self.feasible,
-                                      method='output error from the best start denominator'))
+                results.append(self._descend(values, best))
             except IdentError as exc:
                 failed.append(str(exc))
         if not results:
@@ -493,10 +519,32 @@ class _Fitter:
                              + ('; '.join(failed) or 'no start denominator'))
         return min(results, key=lambda r: r[0].loss)
 
+    def _descend(self, values: Mapping[str, float], a: np.ndarray):
+        """
+        Return the joint fit from ``a`` (:func:`_joint`), numerators in the spec's form.
+
+        A lag-free fit holds the lag to the denominator it starts from; it is fitted again
+        from its own denominator until that lag settles (:data:`LAG_TOLERANCE` samples, at
+        most :data:`LAG_ROUNDS` fits) and its numerators are mapped back.
+        """
+        method = 'output error from the best start denominator'
+        lag = self.lag(values, a)
+        if lag is None:
+            return _joint(self.problem(values), a, feasible=self.feasible, method=method)
+        for _ in range(LAG_ROUNDS):
+            estimate, coef, cov = _joint(self.problem(values, a=a), a, feasible=self.feasible,
+                                         method=method + ', lag-free numerators')
+            moved = abs(target_lag(estimate.a, self.fs) - lag.lag)
+            if not moved > LAG_TOLERANCE:
+                break
+            a, lag = estimate.a, self.lag(values, estimate.a)
+        return (replace(estimate, b=lag.numerators(estimate.b), nk=self.spec.nk,
+                        covariance=lag.covariance(estimate.covariance, self.spec.nf)),
+                coef, cov)
+
     def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
         """Return the least loss over the start denominators, numerators re-solved."""
-        problem = self.problem(values)
-        return min(problem.profile_sse(a) for a in starts)
+        return min(self.profile(values, a) for a in starts)
 
     def search(self, search: Search, values: Mapping[str, float],
                starts: Sequence[np.ndarray]) -> float:
@@ -511,7 +559,7 @@ class _Fitter:
 
         grid = search.points()
         xs = np.log(grid) if search.log else grid
-        table = np.array([[self.problem(at(x)).profile_sse(a) for a in starts] for x in xs])
+        table = np.array([[self.profile(at(x), a) for a in starts] for x in xs])
         losses = table.min(axis=1)
         best = int(np.argmin(losses))
         start = starts[int(np.argmin(table[best]))]
@@ -522,7 +570,7 @@ class _Fitter:
                 high = min(high, band[0])
             else:
                 low = max(low, band[1])
-        result = optimize.minimize_scalar(lambda x: self.problem(at(x)).profile_sse(start),
+        result = optimize.minimize_scalar(lambda x: self.profile(at(x), start),
                                           bounds=(low, high), method='bounded',
                                           options={'xatol': 1e-4 * max(high - low, 1e-12)})
         x = result.x if result.fun <= losses[best] else xs[best]
@@ -552,7 +600,7 @@ class _Fitter:
                 if not search.low <= v <= search.high:
                     v = value - k * step  # mirror a step beyond a bound (symmetric curvature)
                 values_at.append(v)
-        at = [self.problem({**values, search.key: v}).profile_sse(f) for v in values_at]
+        at = [self.profile({**values, search.key: v}, f) for v in values_at]
         curvature = (at[2] - 2 * at[1] + at[0]) / step ** 2
         if not curvature > 0:
             return None
@@ -571,7 +619,7 @@ def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
 def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,
                  nf: int = 2, nb: int = 2, nk: int = 1,
                  starts: Sequence[np.ndarray] = (),
-                 slowest_pole_s: float | None = None) -> ExtendedFit:
+                 slowest_pole_s: float | None = None, lag_free: bool = False) -> ExtendedFit:
     """
     Fit a base output-error model plus effects on shot windows.
 
@@ -588,6 +636,9 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         slowest_pole_s: Slowest time constant the model's own poles may have, s (see
             :func:`slowest_pole_s`; the diagnosis holds the base alike, so that it cannot
             imitate a tail its extensions may not); None: only the effects' bound.
+        lag_free: Hold the numerators through the mechanics to the mechanics' own lag at
+            DC (:mod:`~sensor_comp.core.identification.lag_free`; the diagnosis does, so
+            that a channel delay or base strain is no part of the sensor path).
 
     Returns:
         The fit, with the physical parameters of every effect.
@@ -609,7 +660,7 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         if reason is not None:
             raise EffectError(f'cannot fit {effect.id}: {reason}')
     spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs),
-                     slowest_pole_s=slowest_pole_s)
+                     slowest_pole_s=slowest_pole_s, lag_free=lag_free)
     for effect in chosen:
         spec = effect.extend(spec)
     spec = _bound_time_constants(spec, max(w.y.size for w in windows) / fs)
@@ -756,16 +807,29 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
     """
     windows = list(windows)
     e, jac, offsets, keys = _joint_jacobian(fit, windows)
-    covariance = _sandwich(e, jac, offsets)
     io = fit.estimate.covariance.shape[0]
     nd = 0 if fit.disturbance is None else fit.disturbance.coefficients.size
-    notes = []
-    if keys and not np.all(np.isfinite(covariance)):
+    # Lag-free numerators: the sandwich over the free coefficients, mapped back.
+    lag = (LagFree(fit.inputs, fit.estimate.a, fit.spec.nb, fit.spec.nk, fit.fs)
+           if fit.spec.lag_free else None)
+    nf = fit.estimate.a.size - 1
+    if lag is not None:
+        jac = lag.project(jac, nf)
+    kept = jac.shape[1] - len(keys)
+    covariance = _sandwich(e, jac, offsets)
+    notes, held = [], not np.all(np.isfinite(covariance)) and bool(keys)
+    if held:
         # A searched value the polynomials can imitate: the others with it held fixed.
-        covariance = _sandwich(e, jac[:, :io + nd], offsets)
+        covariance = _sandwich(e, jac[:, :kept], offsets)
         notes = [f'{key} = {fit.values[key]:.4g} cannot be told apart from the base '
                  f'polynomials by these data (their joint covariance is singular): no '
                  f'deviation stated; the others are given with it held fixed' for key in keys]
+    if lag is not None and np.all(np.isfinite(covariance)):
+        covariance = lag.covariance(covariance, nf)
+    elif lag is not None:
+        size = io + nd + (0 if held else len(keys))
+        covariance = np.full((size, size), np.inf)
+    if held:
         covariance = np.pad(covariance, (0, len(keys)), constant_values=np.inf)
     variance = float(e @ e) / max(e.size - jac.shape[1], 1)
     estimate = replace(fit.estimate, covariance=covariance[:io, :io],
