@@ -15,8 +15,8 @@ from scipy import linalg, signal
 
 from .data import IdentError
 
-__all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'LeastSquares', 'check_orders',
-           'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
+__all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'Filtered', 'LeastSquares',
+           'check_orders', 'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
            'lagged_regression', 'minimum_norm', 'normal_equations', 'normal_equations_blocks',
            'scaled_qr', 'solve_blocks', 'solve_lagged', 'solve_least_squares',
            'triangular_inverse']
@@ -53,6 +53,23 @@ def filter_each(num: np.ndarray, den: np.ndarray,
                 signals: Sequence[np.ndarray]) -> list[np.ndarray]:
     """Filter every array of ``signals`` along its last axis by ``num/den``, each from rest."""
     return [signal.lfilter(num, den, x, axis=-1) for x in signals]
+
+
+class Filtered(Sequence):
+    """
+    ``signals`` filtered by ``num/den`` from rest (as :func:`filter_each`), each when indexed.
+
+    For block-wise passes over long data: the filtered copies are never all held at once.
+    """
+
+    def __init__(self, num: np.ndarray, den: np.ndarray, signals: Sequence[np.ndarray]):
+        self.num, self.den, self.signals = num, den, signals
+
+    def __len__(self) -> int:
+        return len(self.signals)
+
+    def __getitem__(self, index: int) -> np.ndarray:
+        return signal.lfilter(self.num, self.den, self.signals[index], axis=-1)
 
 
 def equation_error(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, a: np.ndarray,

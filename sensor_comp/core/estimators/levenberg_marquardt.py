@@ -28,7 +28,7 @@ class LevenbergMarquardt(NamedTuple):
     Args:
         theta: The parameters at the minimum found.
         cost: The sum of squared errors there.
-        e: The errors there.
+        e: The errors there (None when built as ``normal`` equations).
         jac: Their Jacobian there (None when built as ``normal`` equations).
         iterations: Steps taken.
         evaluations: Error evaluations, the first included.
@@ -39,7 +39,7 @@ class LevenbergMarquardt(NamedTuple):
 
     theta: np.ndarray
     cost: float
-    e: np.ndarray
+    e: np.ndarray | None
     jac: np.ndarray | None
     iterations: int
     evaluations: int
@@ -67,7 +67,7 @@ def predicted_decrease(gram: np.ndarray, grad: np.ndarray) -> float:
     return max(float(step @ grad), 0.0)
 
 
-def _damped_step(residual: Callable, theta: np.ndarray, cost: float, gram: np.ndarray,
+def _damped_step(sse: Callable, theta: np.ndarray, cost: float, gram: np.ndarray,
                  grad: np.ndarray, scale: np.ndarray, damping: float,
                  stable: Callable[[np.ndarray], bool]):
     """Return ``(trial, cost, damping, evaluations)``: the least damping that lowers cost."""
@@ -79,9 +79,8 @@ def _damped_step(residual: Callable, theta: np.ndarray, cost: float, gram: np.nd
         except np.linalg.LinAlgError:  # singular at this damping: damp more
             trial = None
         if trial is not None and np.all(np.isfinite(trial)) and stable(trial):
-            e_trial = residual(trial, False)
+            cost_trial = sse(trial)
             evaluations += 1
-            cost_trial = float(e_trial @ e_trial)
             if cost_trial <= cost:
                 return trial, cost_trial, damping, evaluations
         damping *= 10.0
@@ -90,23 +89,35 @@ def _damped_step(residual: Callable, theta: np.ndarray, cost: float, gram: np.nd
 
 def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
                         stable: Callable[[np.ndarray], bool], max_iter: int, tol: float,
-                        normal: Callable | None = None) -> LevenbergMarquardt:
+                        normal: Callable | None = None,
+                        sse: Callable | None = None) -> LevenbergMarquardt:
     """
     Minimise ``‖e(θ)‖²`` from a stable ``theta``, rejecting steps to unstable parameters.
 
     ``residual(theta, jacobian)`` returns ``e = y − ŷ(θ)``, or ``(e, ∂ŷ/∂θ)``; ``stable``
-    tells whether a trial's denominator is stable. ``normal(theta)``, if given, returns
-    ``(e, JᵀJ, Jᵀe)`` instead of the Jacobian (built block by block, it never holds all of
-    it). Stops as ``doc/estimators.md`` says.
+    tells whether a trial's denominator is stable. Given ``normal(theta)``, returning
+    ``(‖e‖², JᵀJ, Jᵀe)``, and ``sse(theta)``, returning ``‖e‖²``, they are used instead
+    (built block by block, neither the errors nor the Jacobian are ever held whole; the
+    result's ``e`` and ``jac`` are then None). Stops as ``doc/estimators.md`` says.
+
+    Raises:
+        ValueError: When only one of ``normal`` and ``sse`` is given.
+
     """
+    if (normal is None) != (sse is None):
+        raise ValueError('normal and sse go together: give both or neither')
+
     def linearise(theta):
         if normal is not None:
-            return (None, *normal(theta))
+            return (None, None, *normal(theta))
         e, jac = residual(theta, True)
-        return jac, e, jac.T @ jac, jac.T @ e
+        return jac, e, float(e @ e), jac.T @ jac, jac.T @ e
 
-    jac, e, *moments = linearise(theta)
-    cost = float(e @ e)
+    def whole_sse(theta):
+        e = residual(theta, False)
+        return float(e @ e)
+
+    jac, e, cost, *moments = linearise(theta)
     damping, converged, iterations, evaluations, stalled = 1e-4, False, 0, 1, 0
     while True:
         gram, grad, scale = scale_normal_equations(*moments)
@@ -116,8 +127,8 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
         if iterations == max_iter:
             break
         iterations += 1
-        trial, cost_trial, damping, count = _damped_step(residual, theta, cost, gram, grad,
-                                                         scale, damping, stable)
+        trial, cost_trial, damping, count = _damped_step(sse or whole_sse, theta, cost, gram,
+                                                         grad, scale, damping, stable)
         evaluations += count
         if trial is None:
             converged = True  # no step improves the cost: a minimum to working precision
@@ -125,7 +136,7 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
         stalled = stalled + 1 if cost - cost_trial <= tol * cost_trial else 0
         theta, cost = trial, cost_trial
         damping = max(damping / 10.0, 1e-12)
-        jac, e, *moments = linearise(theta)
+        jac, e, _, *moments = linearise(theta)
         if stalled == STALL:
             converged = True
             break

@@ -18,8 +18,8 @@ from scipy import signal
 from .arx import fit_arx
 from .data import as_segments, IdentError, Segment
 from .estimate import Estimate
-from .least_squares import (BLOCK_ROWS, check_orders, filter_each, lagged_blocks,
-                            minimum_norm, normal_equations_blocks, solve_blocks)
+from .least_squares import (BLOCK_ROWS, check_orders, Filtered, lagged_blocks, minimum_norm,
+                            normal_equations, normal_equations_blocks, solve_blocks)
 from .levenberg_marquardt import levenberg_marquardt, scale_normal_equations
 from .polynomials import is_stable, reflect_unstable
 
@@ -79,9 +79,9 @@ def steiglitz_mcbride(segments: Sequence[Segment], *, nf: int, nb: int, nk: int,
     converged = False
     iterations = 0
     for iterations in range(1, max_iter + 1):
-        # Row blocks of the prefiltered regression, never the whole of it: the blocks of
-        # solve_least_squares, so the QR solve is that of the whole matrix.
-        blocks, names = lagged_blocks(filter_each([1.0], a, ys), filter_each([1.0], a, us),
+        # Row blocks of the prefiltered regression, filtered when reached, never the whole
+        # of it: the blocks of solve_least_squares, so the QR solve is that of the whole.
+        blocks, names = lagged_blocks(Filtered([1.0], a, ys), Filtered([1.0], a, us),
                                       na=nf, nb=nb, nk=nk)
         ls = None
         try:
@@ -203,21 +203,19 @@ class OutputErrorProblem:
         Return the least sum of squares over numerators (and extra coefficients) at ``F``.
 
         Cholesky with a 1e-10 ridge where singular; the residual is recomputed, so round-off can
-        only raise the loss. Built block by block (:meth:`regression_blocks`).
+        only raise the loss. On the whole regression: the extended fits search this loss on
+        fine grids, where the round-off of a block-wise sum moves their minima.
         """
-        blocks, p = self.regression_blocks(f), self.n_parameters - self.nf
+        phi = self.regression(f)
         try:
-            theta = normal_equations_blocks(blocks, p)
+            theta = normal_equations(phi, self.y)
         except IdentError:
             try:
-                theta = normal_equations_blocks(blocks, p, ridge=1e-10)
+                theta = normal_equations(phi, self.y, ridge=1e-10)
             except IdentError:  # not finite
                 return math.inf
-        sse = 0.0
-        for phi, y in blocks():
-            e = y - phi @ theta
-            sse += float(e @ e)
-        return sse
+        e = self.y - phi @ theta
+        return float(e @ e)
 
     def filtered(self, f: np.ndarray) -> list[np.ndarray]:
         """Return every segment's inputs filtered by ``1/F`` from rest (cached)."""
@@ -227,21 +225,36 @@ class OutputErrorProblem:
             self._last = (key, [signal.lfilter([1.0], f, u, axis=-1) for u in self.us])
         return self._last[1]
 
+    def _output(self, s: int, x: np.ndarray, b: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Return the model output over segment ``s`` from its filtered inputs ``x``."""
+        start, stop = self.offsets[s], self.offsets[s + 1]
+        part = np.zeros(stop - start)
+        n = part.size
+        for i in range(self.n_inputs):
+            for j in range(self.nb):
+                lag = self.nk + j
+                if lag < n:
+                    part[lag:] += b[i, j] * x[i, :n - lag]
+        if self.extra is not None:
+            part += self.extra[start:stop] @ d
+        return part
+
     def simulate(self, theta: np.ndarray) -> np.ndarray:
         """Return the model output over all segments (concatenated), from rest."""
         f, b, d = self.unpack(theta)
-        out = np.zeros(self.y.size)
+        out = np.empty(self.y.size)
         for s, x in enumerate(self.filtered(f)):
-            part = out[self.offsets[s]:self.offsets[s + 1]]
-            n = part.size
-            for i in range(self.n_inputs):
-                for j in range(self.nb):
-                    lag = self.nk + j
-                    if lag < n:
-                        part[lag:] += b[i, j] * x[i, :n - lag]
-        if self.extra is not None:
-            out += self.extra @ d
+            out[self.offsets[s]:self.offsets[s + 1]] = self._output(s, x, b, d)
         return out
+
+    def sse(self, theta: np.ndarray) -> float:
+        """Return ``‖e‖²`` of :meth:`residual`, segment by segment (no whole-length array)."""
+        f, b, d = self.unpack(theta)
+        total = 0.0
+        for s, (u, y) in enumerate(zip(self.us, self.ys)):
+            e = y - self._output(s, signal.lfilter([1.0], f, u, axis=-1), b, d)
+            total += float(e @ e)
+        return total
 
     def residual(self, theta: np.ndarray, jacobian: bool = False):
         """Return the simulation error ``e = y − ŷ``; with ``jacobian``, ``(e, ∂ŷ/∂θ)``."""
@@ -262,31 +275,30 @@ class OutputErrorProblem:
             e -= self.extra @ d
         return e, jac
 
-    def normal_equations(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def normal_equations(self, theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """
-        Return ``(e, JᵀJ, Jᵀe)`` of :meth:`residual` with ``jacobian``, segment by segment.
+        Return ``(‖e‖², JᵀJ, Jᵀe)`` of :meth:`residual` with ``jacobian``, segment by segment.
 
-        Only one segment's Jacobian is held at a time (the whole one is as large as the
-        data times the parameters).
+        Only one segment's errors and Jacobian are held at a time (the whole Jacobian is as
+        large as the data times the parameters).
         """
         f, b, d = self.unpack(theta)
         nf, q, p = self.nf, self.n_inputs * self.nb, self.n_parameters
-        e = np.empty(self.y.size)
-        gram, moment = np.zeros((p, p)), np.zeros(p)
-        for s, x in enumerate(self.filtered(f)):
+        cost, gram, moment = 0.0, np.zeros((p, p)), np.zeros(p)
+        for s, (u, y) in enumerate(zip(self.us, self.ys)):
             start, stop = self.offsets[s], self.offsets[s + 1]
             jac = np.empty((stop - start, p), order='F')
-            _lags(jac, nf, x, self.nk, self.nb)
+            _lags(jac, nf, signal.lfilter([1.0], f, u, axis=-1), self.nk, self.nb)
             induced = jac[:, nf:nf + q] @ b.ravel()
             _lags(jac, 0, -signal.lfilter([1.0], f, induced)[None], 1, nf)
-            part = e[start:stop]
-            np.subtract(self.y[start:stop], induced, out=part)
+            e = y - induced
             if self.extra is not None:
                 jac[:, nf + q:] = self.extra[start:stop]
-                part -= self.extra[start:stop] @ d
+                e -= self.extra[start:stop] @ d
+            cost += float(e @ e)
             gram += jac.T @ jac
-            moment += jac.T @ part
-        return e, gram, moment
+            moment += jac.T @ e
+        return cost, gram, moment
 
 
 def _lags(out: np.ndarray, column: int, xs: np.ndarray, first: int, count: int, *,
@@ -325,7 +337,7 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     def descend(theta):
         return levenberg_marquardt(problem.residual, theta, max_iter=max_iter, tol=tol,
                                    stable=lambda th: is_stable(problem.unpack(th)[0]),
-                                   normal=problem.normal_equations)
+                                   normal=problem.normal_equations, sse=problem.sse)
 
     if start is not None:
         f0 = reflect_unstable(np.asarray(start, dtype=np.float64))
@@ -347,11 +359,11 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     # began (it drifted) or when it is already below the minimum found (ARX_MARGIN);
     # otherwise its bias puts it above the same minimum and it is skipped.
     arx = np.concatenate([f0[1:], problem.linear(f0)])
-    arx_cost = _cost(problem, arx)
+    arx_cost = problem.sse(arx)
     best = drifted = None
     if sm is not None:
         theta = np.concatenate([sm.a[1:], sm.b.ravel()])
-        drifted = _cost(problem, theta) > arx_cost
+        drifted = problem.sse(theta) > arx_cost
         best = descend(theta)
     if best is None or drifted or arx_cost < (1 + ARX_MARGIN) * best.cost:
         other = descend(arx)
@@ -363,18 +375,12 @@ def fit_oe(segments: Segment | Iterable[Segment], *, nf: int = 2, nb: int = 2, n
     return _estimate(problem, best, 0 if sm is None else sm.iterations, start)
 
 
-def _cost(problem: OutputErrorProblem, theta: np.ndarray) -> float:
-    """Return the sum of squared simulation errors at ``theta``."""
-    e = problem.residual(theta)
-    return float(e @ e)
-
-
 def _estimate(problem: OutputErrorProblem, best, passes: int, start: str) -> Estimate:
     """Return the ``'oe'`` estimate at a Levenberg-Marquardt minimum, with its covariance."""
-    theta, cost, e, iterations, converged = (best.theta, best.cost, best.e, best.iterations,
-                                             best.converged)
+    theta, cost, iterations, converged = (best.theta, best.cost, best.iterations,
+                                          best.converged)
     f, b, _ = problem.unpack(theta)
-    n, p = e.size, theta.size
+    n, p = problem.y.size, theta.size
     variance = cost / max(n - p, 1)
     gram, _, scale = scale_normal_equations(*best.normal)
     if np.linalg.cond(gram) < 1e12:

@@ -36,9 +36,6 @@ def test_regression_blocks_are_the_rows_of_the_whole_regression(extra):
     np.testing.assert_array_equal(np.concatenate([b[1] for b in blocks]), problem.y)
     phi = problem.regression(f)
     np.testing.assert_array_equal(problem.linear(f), solve_least_squares(phi, problem.y).theta)
-    theta = normal_equations(phi, problem.y)
-    e = problem.y - phi @ theta
-    assert problem.profile_sse(f) == pytest.approx(float(e @ e), rel=1e-12)
 
 
 @pytest.mark.parametrize('extra', [False, True])
@@ -46,11 +43,13 @@ def test_normal_equations_are_those_of_the_whole_jacobian(extra):
     problem = _problem(extra)
     theta = np.concatenate([[-1.1, 0.45], problem.linear(np.array([1.0, -1.1, 0.45]))])
     e, jac = problem.residual(theta, True)
-    e_blocks, gram, moment = problem.normal_equations(theta)
-    np.testing.assert_allclose(e_blocks, e, rtol=0, atol=1e-12 * np.abs(e).max())
+    cost, gram, moment = problem.normal_equations(theta)
+    assert cost == pytest.approx(float(e @ e), rel=1e-12)
     np.testing.assert_allclose(gram, jac.T @ jac, rtol=1e-12)
     np.testing.assert_allclose(moment, jac.T @ e, rtol=1e-9, atol=1e-12 * np.abs(jac.T @ e).max())
-    np.testing.assert_array_equal(problem.residual(theta), problem.y - problem.simulate(theta))
+    e = problem.residual(theta)
+    np.testing.assert_array_equal(e, problem.y - problem.simulate(theta))
+    assert problem.sse(theta) == pytest.approx(float(e @ e), rel=1e-12)
 
 
 def test_levenberg_marquardt_on_blocks_ends_where_the_whole_jacobian_does():
@@ -59,10 +58,10 @@ def test_levenberg_marquardt_on_blocks_ends_where_the_whole_jacobian_does():
     theta = np.concatenate([start[1:], problem.linear(start)])
     runs = [levenberg_marquardt(problem.residual, theta, max_iter=50, tol=1e-10,
                                 stable=lambda th: is_stable(problem.unpack(th)[0]),
-                                normal=normal)
-            for normal in (None, problem.normal_equations)]
+                                normal=normal, sse=sse)
+            for normal, sse in ((None, None), (problem.normal_equations, problem.sse))]
     whole, blocks = runs
-    assert blocks.jac is None and whole.jac is not None
+    assert blocks.jac is None and blocks.e is None and whole.jac is not None
     np.testing.assert_allclose(blocks.theta, whole.theta, rtol=1e-9)
     assert blocks.cost == pytest.approx(whole.cost, rel=1e-12)
     assert blocks.iterations == whole.iterations
@@ -88,3 +87,10 @@ def test_steiglitz_mcbride_on_blocks_is_that_of_the_whole_regression(exact):
     tol = 0 if exact else 1e-11
     np.testing.assert_allclose(got.a, a, rtol=tol, atol=0)
     np.testing.assert_allclose(got.b.ravel(), theta[2:], rtol=tol, atol=tol * 1e-2)
+
+
+def test_normal_equations_need_their_sum_of_squares():
+    problem = _problem()
+    with pytest.raises(ValueError, match='give both or neither'):
+        levenberg_marquardt(problem.residual, np.zeros(6), stable=lambda th: True, max_iter=1,
+                            tol=1e-8, normal=problem.normal_equations)
