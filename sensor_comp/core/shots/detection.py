@@ -189,16 +189,77 @@ def _polarity(s: np.ndarray, polarity: int | None, where: str) -> int:
         if polarity not in (1, -1):
             raise ShotError(f'polarity must be 1, -1 or None (automatic), got {polarity!r}')
         return polarity
-    if not np.any(np.isfinite(s)):
+    # np.nanargmax(np.abs(s)) block by block: the first of the largest magnitudes.
+    best, at = -np.inf, -1
+    for first in range(0, s.size, SCAN_BLOCK):
+        magnitude = np.abs(s[first:first + SCAN_BLOCK])
+        magnitude[np.isnan(magnitude)] = -np.inf
+        index = int(np.argmax(magnitude))
+        if magnitude[index] > best:
+            best, at = magnitude[index], first + index
+    if at < 0:
         raise ShotError(f'{where}: the axial acceleration holds no finite sample')
-    magnitude = np.abs(s)  # np.nanargmax, with one temporary instead of two
-    magnitude[np.isnan(magnitude)] = -np.inf
-    return 1 if s[np.argmax(magnitude)] >= 0 else -1
+    return 1 if s[at] >= 0 else -1
 
 
-def _nanmedian_of_copy(x: np.ndarray) -> float:
-    """Return ``np.nanmedian(x)``, partitioning one copy of ``x`` in place (no second)."""
-    return np.nanmedian(np.array(x, dtype=np.float64), overwrite_input=True)
+#: Bits of the sortable keys of float64 (see :func:`_keys`) per radix pass.
+_RADIX = 16
+
+
+def _keys(x: np.ndarray) -> np.ndarray:
+    """Return unsigned keys in the order of the float64 values ``x`` (NaN dropped)."""
+    bits = np.ascontiguousarray(x[~np.isnan(x)]).view(np.uint64)
+    negative = (bits >> np.uint64(63)).astype(bool)
+    return np.where(negative, ~bits, bits | np.uint64(1 << 63))
+
+
+def _value(key: int) -> float:
+    """Return the float64 whose :func:`_keys` key is ``key``."""
+    bits = key & ~(1 << 63) if key >> 63 else ~key & ((1 << 64) - 1)
+    return float(np.array(bits, dtype=np.uint64).view(np.float64))
+
+
+def _select(x: np.ndarray, rank: int, transform: Callable) -> float:
+    """
+    Return the ``rank``-th smallest (from 0) non-NaN value of ``transform(x)``, exactly.
+
+    Radix selection on the values' bits, block by block: temporaries of one block, never
+    of ``x`` (whose copy ``np.partition`` needs). Once the candidates left fit in one block
+    they are partitioned directly.
+    """
+    prefix, shift, mask = 0, 64, (1 << _RADIX) - 1
+    while True:
+        shift -= _RADIX
+        counts, candidates, held = np.zeros(1 << _RADIX, np.int64), [], 0
+        for first in range(0, x.size, SCAN_BLOCK):
+            keys = _keys(transform(x[first:first + SCAN_BLOCK]))
+            if shift + _RADIX < 64:  # only the keys under the prefix found so far
+                keys = keys[(keys >> np.uint64(shift + _RADIX)) == np.uint64(prefix)]
+            counts += np.bincount((keys >> np.uint64(shift)).astype(np.intp) & mask,
+                                  minlength=1 << _RADIX)
+            held += keys.size
+            if candidates is not None:
+                candidates = candidates + [keys] if held <= SCAN_BLOCK else None
+        if candidates is not None:
+            return _value(int(np.partition(np.concatenate(candidates), rank)[rank]))
+        cumulative = np.cumsum(counts)
+        digit = int(np.searchsorted(cumulative, rank, side='right'))
+        rank -= int(cumulative[digit - 1]) if digit else 0
+        prefix = (prefix << _RADIX) | digit
+        if shift == 0:
+            return _value(prefix)
+
+
+def _nanmedian_blocks(x: np.ndarray, transform: Callable = lambda v: v) -> float:
+    """Return ``np.nanmedian(transform(x))`` exactly, with temporaries of one block only."""
+    n = sum(int(np.count_nonzero(~np.isnan(transform(x[first:first + SCAN_BLOCK]))))
+            for first in range(0, x.size, SCAN_BLOCK))
+    if not n:
+        return math.nan
+    upper = _select(x, n // 2, transform)
+    if n % 2:
+        return upper
+    return float(np.mean(np.array([_select(x, n // 2 - 1, transform), upper])))
 
 
 def _pulse_timing(s: np.ndarray, peak: int) -> tuple[float, float, list[str]]:
@@ -437,7 +498,6 @@ def _check_ms(**values: float) -> None:
 def _events(s: np.ndarray, on: float, off: float) -> list[list[int]]:
     """Return ``[first, stop)`` sample runs from ``s >= on`` until ``s < off``."""
     ons = np.flatnonzero(s >= on)
-    offs = np.flatnonzero(s < off)
     events = []
     position = 0
     while True:
@@ -445,10 +505,22 @@ def _events(s: np.ndarray, on: float, off: float) -> list[list[int]]:
         if j == ons.size:
             return events
         first = int(ons[j])
-        k = np.searchsorted(offs, first)
-        stop = int(offs[k]) if k < offs.size else s.size
+        stop = _next_below(s, first, off)
         events.append([first, stop])
         position = stop
+
+
+def _next_below(s: np.ndarray, first: int, off: float) -> int:
+    """Return the first sample from ``first`` on below ``off`` (``s.size`` if none)."""
+    # Growing steps: a pulse ends within a few of them, and no index array as long as s
+    # (nearly every sample is below ``off``).
+    step = 1024
+    while first < s.size:
+        below = np.flatnonzero(s[first:first + step] < off)
+        if below.size:
+            return first + int(below[0])
+        first, step = first + step, min(2 * step, SCAN_BLOCK)
+    return s.size
 
 
 @dataclass(frozen=True)
@@ -489,20 +561,18 @@ def _trigger(recording: Recording, threshold_g: float | None, polarity: int | No
     dead = dead_channel(recording, pressure=False)
     if dead is not None:
         raise ShotError(dead)
-    # In place, one channel-sized temporary at a time (the recording's channel may be
-    # hundreds of MB): the values of the plain expressions, bit for bit. With ``scratch``
-    # the recording's own axial row becomes the signal (no copy at all).
+    # In place, with block-sized temporaries (the recording's channel may be hundreds of
+    # MB): the values of the plain expressions, bit for bit. With ``scratch`` the
+    # recording's own axial row becomes the signal (no copy at all).
     s = recording.axial
     s = np.divide(s, G0, out=s if scratch else None)
     s[~np.isfinite(s)] = np.nan  # an Inf is bad data, not a shock
     if np.isfinite(s).any():
-        s -= _nanmedian_of_copy(s)
+        s -= _nanmedian_blocks(s)
     s *= _polarity(s, polarity, 'recording')
     largest = float(np.nanmax(s))
-    deviation = s - _nanmedian_of_copy(s)  # mad_sigma(s)
-    np.abs(deviation, out=deviation)
-    sigma = float(1.4826 * np.nanmedian(deviation, overwrite_input=True))
-    del deviation
+    center = _nanmedian_blocks(s)  # mad_sigma(s), without a deviation array as long as s
+    sigma = float(1.4826 * _nanmedian_blocks(s, lambda v: np.abs(v - center)))
     automatic = threshold_g is None
     if automatic:
         threshold_g = max(DEFAULT_THRESHOLD_FRACTION * largest, NOISE_FACTOR * sigma)

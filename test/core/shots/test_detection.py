@@ -1,5 +1,7 @@
 """Shot detection, windows, baselines, Table 2 columns and calibration splits."""
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -240,3 +242,37 @@ def test_finite_extremes_and_dead_channel_over_blocks():
                      acceleration=rec.acceleration)
     assert 'pressure is constant at 2.5 Pa' in dead_channel(dead)
     assert dead_channel(dead, pressure=False) is None
+
+
+@pytest.mark.parametrize('block', [7, 1 << 20])
+def test_block_medians_are_numpy_medians_bit_for_bit(monkeypatch, block):
+    from sensor_comp.core.shots import detection
+    monkeypatch.setattr(detection, 'SCAN_BLOCK', block)
+    rng = np.random.default_rng(4)
+    cases = [rng.standard_normal(1001), rng.standard_normal(1000) * 1e-3 + 5.0,
+             np.round(rng.standard_normal(999), 1), np.array([-0.0, 0.0, -1.0, 2.0]),
+             np.array([np.nan, 3.0, np.nan, -2.0, 7.0]), np.array([np.nan, np.nan]),
+             np.concatenate([rng.standard_normal(500), np.full(40, np.nan)])]
+    for x in cases:
+        with warnings.catch_warnings():  # numpy warns on an all-NaN median
+            warnings.simplefilter('ignore')
+            expected = np.nanmedian(x)
+            expected_mad = np.nanmedian(np.abs(x - expected))
+        got = detection._nanmedian_blocks(x)
+        assert got == expected or (np.isnan(got) and np.isnan(expected))
+        mad = detection._nanmedian_blocks(x, lambda v: np.abs(v - got))
+        assert mad == expected_mad or (np.isnan(mad) and np.isnan(expected_mad))
+    s = rng.standard_normal(50)
+    s[[3, 9]] = np.nan, -9.0
+    assert detection._polarity(s, None, 'x') == -1
+    with pytest.raises(ShotError, match='no finite sample'):
+        detection._polarity(np.full(20, np.nan), None, 'x')
+
+
+def test_events_end_where_the_signal_first_falls_below_the_lower_level():
+    from sensor_comp.core.shots import detection
+    s = np.zeros(10_000)
+    s[100:105] = 10.0
+    s[5000:9000] = 10.0  # longer than the first steps of the scan
+    s[9990:] = 10.0  # still above at the end
+    assert detection._events(s, 8.0, 4.0) == [[100, 105], [5000, 9000], [9990, 10_000]]
