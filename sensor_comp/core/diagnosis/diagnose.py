@@ -11,10 +11,10 @@ and scored on the VALIDATION shots, which it has never seen:
   and delay a free structure search chose are not used, because extra poles or a delay of
   many samples stand in for the effects the diagnosis is to name; no pole of any fit may
   be slower than :data:`SLOWEST_POLE_S` (a slow real pole with a zero at 1 imitates an
-  amplifier high-pass or a zero shift exactly); and every numerator through the mechanics
-  lags at DC exactly as the mechanics do (:mod:`~sensor_comp.core.identification.lag_free`:
-  a free numerator leads or lags by more, and so takes in a base-strain term or a channel
-  delay, which then are never named).
+  amplifier high-pass or a zero shift exactly); and when the base resolves the sensor's
+  mode, every numerator through the mechanics lags at DC exactly as the mechanics do
+  (:mod:`~sensor_comp.core.identification.lag_free`: a free numerator leads or lags by
+  more, and so takes in a base-strain term or a channel delay, which then are never named).
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
 - **noise**: the base residual before the triggers (a straight line per window and the
@@ -355,6 +355,16 @@ class _Context:
     bounds: list[tuple[int, int, int, int, int]]
     analyses: tuple
     alpha: float
+    free: ExtendedFit
+    free_residual: list[np.ndarray]
+
+    @property
+    def lag_free(self) -> bool:
+        return self.free is not self.base
+
+    @property
+    def free_sse(self) -> float:
+        return sum(float(r @ r) for r in self.free_residual)
 
     @property
     def samples(self) -> int:
@@ -447,26 +457,20 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
     """Fit the base model and measure its validation residual and the noise."""
     cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
         [s for s in valid if s.shots])
-    nf, nb, nk = orders
     with progress('base model', 1) as bar:
-        try:
-            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                                slowest_pole_s=SLOWEST_POLE_S, lag_free=True)
-        except (IdentError, EffectError) as exc:  # as free as the given model, then
-            notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:g} ms '
-                         f'({exc}); fitted without that bound')
-            base = fit_extended(cw, effects=base_effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                                lag_free=True)
+        free, held = _base_fits(cw, base_effects, fs, orders, notes)
         bar.advance()
-    prediction = base.predict(vw)
-    residual = [w.y - p for w, p in zip(vw, prediction.total)]
-    quiet = _quiet(residual, vw, fs)
+    free_residual = [w.y - p for w, p in zip(vw, free.predict(vw).total)]
+    quiet = _quiet(free_residual, vw, fs)
     if not quiet:
         raise DiagnosisError('no validation window has a pre-trigger of 8 samples or more: '
                              'the noise cannot be measured; detect shots with a longer '
                              'pre-trigger')
     noise = noise_model(quiet, max(1, round(NOISE_LAG_S * fs)))
-    model = base.model()
+    base = held or free
+    prediction = base.predict(vw)
+    residual = [w.y - p for w, p in zip(vw, prediction.total)]
+    model = free.model()
     ringing = max(1, round(ringing_time_s(model) * fs))
     shots = [shot for s in valid if s.shots for shot in s.shots]
     bounds = [segment_bounds(shot, w.y.size, ringing) for shot, w in zip(shots, vw)]
@@ -476,7 +480,44 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
             analyses = _analyses(model, valid, notes)
             bar.advance()
     return _Context(fs, cw, vw, orders, base_effects, base, prediction, residual, noise,
-                    bounds, analyses, alpha)
+                    bounds, analyses, alpha, free, free_residual)
+
+
+def _base_fits(windows: Sequence[Window], effects: tuple[str, ...], fs: float,
+               orders: tuple[int, int, int], notes: list[str]
+               ) -> tuple[ExtendedFit, ExtendedFit | None]:
+    """
+    Return the base fit with free numerators and with lag-free ones (None: not fitted).
+
+    The free base gives the verdict when no effect is named (its numerator may shape the
+    accelerometer noise, which an exact sensor numerator passes on, so it is the fairer
+    judge of clean data); the lag-free one (:mod:`~sensor_comp.core.identification.lag_free`,
+    with two poles: one pole is no sensor mode) is what every candidate is fitted and
+    scored against, so that a lead or delay is an effect's.
+    """
+    nf, nb, nk = orders
+    try:
+        free = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            slowest_pole_s=SLOWEST_POLE_S)
+        bound = SLOWEST_POLE_S
+    except (IdentError, EffectError) as exc:  # as free as the given model, then
+        notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:g} ms '
+                     f'({exc}); fitted without that bound')
+        free, bound = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk), None
+    if nf < 2:
+        notes.append('base: numerators free (one pole is no sensor mode, so a channel delay '
+                     'or base strain cannot be told from the sensor\'s own lag)')
+        return free, None
+    try:
+        held = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            starts=free.denominators, slowest_pole_s=bound, lag_free=True)
+    except (IdentError, EffectError) as exc:
+        notes.append(f'base: numerators free (no lag-free fit: {exc})')
+        return free, None
+    notes.append('base: candidates fitted and scored with lag-free numerators (a lead or '
+                 'delay is an effect\'s, not the sensor path\'s); the verdict without an '
+                 'effect is the free-numerator base\'s')
+    return free, held
 
 
 def _quiet(residual: Sequence[np.ndarray], windows: Sequence[Window],
@@ -548,7 +589,7 @@ def _fit_each(ids: Sequence[str], ctx: _Context, progress, notes: list[str],
                     fit = fit_extended(ctx.calibration, effects=ctx.base_effects + (effect_id,),
                                        fs=ctx.fs, nf=nf, nb=nb, nk=nk,
                                        starts=ctx.base.denominators,
-                                       slowest_pole_s=SLOWEST_POLE_S, lag_free=True)
+                                       slowest_pole_s=SLOWEST_POLE_S, lag_free=ctx.lag_free)
                     ranked.append(_score(effect_id, fit, ctx))
                 except Exception as exc:  # noqa: B902 - one candidate must not stop the others
                     why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
@@ -606,8 +647,9 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         doubt = _after_triggers(prediction, residual, ctx)
     if doubt is not None:
         evidence = f'{evidence} Not counted: {doubt}.'
+    # With lag-free numerators the effect must also leave less than free numerators do.
     relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
-                and doubt is None)
+                and doubt is None and (not ctx.lag_free or sse < ctx.free_sse))
     left = ctx.leftover(residual)
     # Against the extended model's own noise floor: the accelerometer noise through a
     # wrong base can raise the base's floor above the residual's own mean square.
@@ -806,14 +848,16 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
                    residual_analysis, progress, notes)
     ranked, skipped = _candidates(ids, ctx, progress, notes)
-    base_left = ctx.leftover(ctx.residual, named=False)
+    base_left = ctx.leftover(ctx.free_residual, named=False)
     verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
     return Diagnosis(
-        verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.base,
+        verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.free,
         base_effects=tuple(base_effects),
-        fit_percent=float(fit_percent([w.y for w in ctx.validation], ctx.prediction.total)),
-        peak_residual_percent=_peak_percent(ctx.validation, ctx.residual),
+        fit_percent=float(fit_percent([w.y for w in ctx.validation],
+                                      [w.y - r for w, r in zip(ctx.validation,
+                                                               ctx.free_residual)])),
+        peak_residual_percent=_peak_percent(ctx.validation, ctx.free_residual),
         noise_sigma_pa=math.sqrt(ctx.noise.variance), energy_ratio=base_left.energy_ratio,
         energy_tolerance=base_left.tolerance, consistent_with_noise=bool(consistent),
         analyses=ctx.analyses, alpha=alpha, explanation=explanation, notes=tuple(notes),

@@ -460,7 +460,10 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
     Fit the base structure plus ``effects``; return ``(extended fit, notes)``.
 
     With ``compare``, a base of other than two poles competes with two by BIC (why:
-    ``doc/identification.md``). Raises EffectError when nothing fits or an effect does not apply.
+    ``doc/identification.md``), among the fits in which every effect reads as itself
+    (:meth:`~sensor_comp.core.effects.Effect.implausible`) when there is one: extra base
+    poles can hold what the effect is for and leave it to fit something else. Raises
+    EffectError when nothing fits or an effect does not apply.
     """
     measured = shot_windows([s for s in sources.calibration if s.shots])
     windows = [replace(w, y=y) for w, (_, y) in zip(measured, data.fit)]
@@ -483,7 +486,11 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
         why = '; '.join(f'nf={nf}: {text}' for nf, text in failed.items())
         raise EffectError(f'cannot fit {names} on a base of nf={base.na} nb={base.nb} '
                           f'nk={base.nk}' + (' or nf=2' if len(tries) > 1 else '') + f': {why}')
-    chosen = min(fits, key=lambda nf: _bic(fits[nf]))
+    doubts = {nf: next((f'{e.id}: {why}' for e in ordered(effects)
+                        if (why := e.implausible(fit)) is not None), None)
+              for nf, fit in fits.items()}
+    chosen = min([nf for nf in fits if doubts[nf] is None] or fits,
+                 key=lambda nf: _bic(fits[nf]))
     notes = []
     if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
         fits[chosen] = robust_uncertainty(fits[chosen], measured)
@@ -491,6 +498,10 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
         if base.na in failed:
             notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
                          f'nf={base.na}, which could not be fitted ({failed[base.na]})')
+        elif doubts[base.na] is not None and doubts[chosen] is None:
+            notes.append(f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
+                         f'instead of the nf={base.na} chosen without them, on which the '
+                         f'effect reads as no such effect ({doubts[base.na]})')
         else:
             why = ('the extra poles imitated the effect' if base.na > 2 else
                    'with the effect in, the mode needs both poles')

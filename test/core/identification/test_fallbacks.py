@@ -52,9 +52,9 @@ def ceiling(source, shots, clean):
 
 
 @functools.lru_cache(maxsize=None)
-def rig(seed, effect, ratio):
+def rig(seed, effect, ratio, rates=(100e3, 2e6)):
     """Return an independent rig cut in two by time, and the clean pressure of the second."""
-    spec = draw_spec(seed, effect=effect, R=ratio)
+    spec = draw_spec(seed, effect=effect, R=ratio, rate_range=rates)
     case = simulate_rig(spec)
     half = len(spec.shots) // 2
     gap = (max(p.stop_s for p in spec.shots[half - 1].axes) + spec.shots[half].z.onset_s) / 2
@@ -157,6 +157,21 @@ def test_a_high_pass_is_not_imitated_by_the_base_poles():
     assert tau == pytest.approx(82.0, rel=0.15)
     assert std is not None and abs(tau - 82.0) <= 3 * std, (tau, std)
     assert any('base of nf=2' in note for note in result.notes), result.notes
+
+
+def test_an_effect_is_fitted_on_the_base_where_it_reads_as_itself():
+    # Independent rig (1.63 MS/s, sensor 40.4 kHz, mount mode 8.47 kHz, R = 5): auto takes
+    # both modes into nf = 4, where the searched second mode went to 322 kHz with no
+    # deviation (the extra poles held the mount mode) although its BIC was lower. The
+    # effect is now fitted where it reads as a second mode: on the sensor's two poles.
+    calib, valid, _ = rig(3941510019, 'second_resonance', 5.0, (1e6, 2e6))
+    result = identify([calib], validation=[valid], effects=['second_resonance'])
+    assert result.model.orders['na'] == 2
+    entry = result.model.effects[0]
+    for name, truth in (('freq_khz', 8.466), ('zeta', 0.0351), ('gain', -0.439)):
+        value, std = entry['parameters'][name], entry['std'][name]
+        assert std is not None and abs(value - truth) <= 3 * std, (name, value, std)
+    assert any('reads as no such effect' in note for note in result.notes), result.notes
 
 
 def test_an_effect_fit_that_cannot_start_is_one_effect_error(monkeypatch):
