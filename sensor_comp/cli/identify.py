@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 
 from .describe import describe_effect, describe_model
@@ -55,8 +56,29 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+#: glibc's ``mallopt`` parameter of the size from which an allocation gets its own mapping.
+_M_MMAP_THRESHOLD = -3
+#: That size for identify: a shot window's array (hundreds of kB) and up.
+MMAP_THRESHOLD = 128 << 10
+
+
+def _return_freed_windows() -> None:
+    """
+    Give arrays of a shot window and up their own mappings, returned to the system when freed.
+
+    glibc otherwise raises the threshold once large arrays are freed, and the per-window
+    arrays of the fits then fragment its heap: about 0.2x one stream more at the peak on a
+    1 GB bag. Nothing happens without glibc.
+    """
+    try:
+        ctypes.CDLL(None).mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+    except (OSError, AttributeError):
+        pass
+
+
 def run(args: argparse.Namespace) -> int:
     """Identify and write the model; return the exit code."""
+    _return_freed_windows()
     args.output = str(check_output(args.output, inputs=[*args.calibration, *args.validate],
                                    kind='model', force=args.force))
     # Identification reads nothing outside the shot windows, and the lateral acceleration

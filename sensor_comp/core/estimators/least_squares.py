@@ -218,13 +218,14 @@ def solve_lagged(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int,
 
 
 def solve_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], p: int, *,
-                 names: Sequence[str] = ()) -> LeastSquares:
+                 names: Sequence[str] = (), residual: bool = True) -> LeastSquares:
     """
     Solve a least-squares problem given as row blocks, by CholeskyQR2 accumulated over them.
 
     ``blocks()`` returns the same ``(phi, target)`` blocks on every call; ``p`` is the number
-    of columns (method: ``doc/estimators.md``). Raises IdentError when a column is zero or the
-    columns are linearly dependent.
+    of columns (method: ``doc/estimators.md``); without ``residual`` the result's residual is
+    empty (for a caller that needs only ``theta``: no array as long as the data). Raises
+    IdentError when a column is zero or the columns are linearly dependent.
     """
     names = list(names) or [f'column {j}' for j in range(p)]
     norms = [np.linalg.norm(phi, axis=0) for phi, _ in blocks()]
@@ -258,8 +259,10 @@ def solve_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], 
     r_inv = triangular_inverse(r)
     theta = r_inv @ qt_target / scale
     unit_cov = (r_inv @ r_inv.T) / np.outer(scale, scale)
-    residual = np.concatenate([target - phi @ theta for phi, target in blocks()])
-    return LeastSquares(theta, residual, unit_cov)
+    if not residual:
+        return LeastSquares(theta, np.empty(0), unit_cov)
+    return LeastSquares(theta, np.concatenate([target - phi @ theta for phi, target in blocks()]),
+                        unit_cov)
 
 
 def _cholesky(gram: np.ndarray) -> np.ndarray | None:

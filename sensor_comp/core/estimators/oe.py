@@ -172,18 +172,22 @@ class OutputErrorProblem:
         Return :meth:`regression` and the outputs as row blocks (``solve_blocks``' form).
 
         The blocks are the :data:`BLOCK_ROWS` row ranges :func:`solve_least_squares` cuts the
-        whole matrix into, built when reached: the same solve without the whole matrix.
+        whole matrix into, built when reached (inputs filtered segment by segment): the same
+        solve without the whole matrix.
         """
-        q, x, offsets = self.n_inputs * self.nb, self.filtered(f), self.offsets
+        q, offsets = self.n_inputs * self.nb, self.offsets
 
         def blocks() -> Iterator[_Block]:
+            x = (-1, None)  # the segment last filtered: a segment may span two blocks
             for first in range(0, self.y.size, BLOCK_ROWS):
                 stop = min(first + BLOCK_ROWS, self.y.size)
                 phi = np.empty((stop - first, q + self.n_extra), order='F')
                 s = int(np.searchsorted(offsets, first, side='right')) - 1
-                while s < len(x) and offsets[s] < stop:
+                while s < len(self.us) and offsets[s] < stop:
+                    if x[0] != s:
+                        x = (s, signal.lfilter([1.0], f, self.us[s], axis=-1))
                     a, b = max(first, offsets[s]), min(stop, offsets[s + 1])
-                    _lags(phi[a - first:b - first], 0, x[s], self.nk, self.nb,
+                    _lags(phi[a - first:b - first], 0, x[1], self.nk, self.nb,
                           row0=a - offsets[s])
                     s += 1
                 if self.extra is not None:
@@ -194,7 +198,8 @@ class OutputErrorProblem:
     def linear(self, f: np.ndarray) -> np.ndarray:
         """Return the least-squares numerators and extra coefficients at ``F`` (minimum norm)."""
         try:
-            return solve_blocks(self.regression_blocks(f), self.n_parameters - self.nf).theta
+            return solve_blocks(self.regression_blocks(f), self.n_parameters - self.nf,
+                                residual=False).theta
         except IdentError:
             return minimum_norm(self.regression(f), self.y)
 
