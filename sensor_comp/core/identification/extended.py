@@ -55,7 +55,7 @@ from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
 from ..shots.inputs import input_channels, mode_pair
-from .lag_free import LagFree, target_lag
+from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
 
@@ -78,9 +78,6 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
-#: Most fits of a lag-free structure, and the change of its target lag (samples) at which
-#: they stop (see :meth:`_Fitter._descend`).
-LAG_ROUNDS, LAG_TOLERANCE = 4, 1e-3
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -252,7 +249,7 @@ def _problem(us: Sequence[np.ndarray], ys: Sequence[np.ndarray],
 
 
 def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
-           feasible: Callable[[np.ndarray], bool]
+           feasible: Callable[[np.ndarray], bool], max_iter: int = MAX_ITERATIONS
            ) -> tuple[Estimate, np.ndarray | None, np.ndarray | None]:
     """
     Fit ``F``, ``B`` and the disturbance coefficients jointly, starting from ``F = a0``.
@@ -261,13 +258,14 @@ def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
     (:class:`~sensor_comp.core.estimators.oe.OutputErrorProblem`); the numerators and
     disturbance coefficients start from their least squares at ``a0``; every step keeps
     ``feasible(F)`` (stable, and no slower than the effects' own time constants).
+    ``max_iter = 0`` only states the estimate at ``a0`` (its covariance from the Jacobian).
     """
     nf = problem.nf
     io = nf + problem.n_inputs * problem.nb
     x0 = np.concatenate([a0[1:], problem.linear(a0)])
     result = levenberg_marquardt(
         problem.residual, x0, stable=lambda theta: feasible(problem.unpack(theta)[0]),
-        max_iter=MAX_ITERATIONS, tol=1e-9)
+        max_iter=max_iter, tol=1e-9)
     theta, cost, e, jac = result.theta, result.cost, result.e, result.jac
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
@@ -523,24 +521,47 @@ class _Fitter:
         """
         Return the joint fit from ``a`` (:func:`_joint`), numerators in the spec's form.
 
-        A lag-free fit holds the lag to the denominator it starts from; it is fitted again
-        from its own denominator until that lag settles (:data:`LAG_TOLERANCE` samples, at
-        most :data:`LAG_ROUNDS` fits) and its numerators are mapped back.
+        A lag-free fit's constraint moves with the denominator, so the denominator is found
+        first by Levenberg-Marquardt on the profile loss (numerators and disturbance
+        coefficients solved exactly at every trial, the constraint at the trial's own lag;
+        a forward-difference Jacobian over the ``nf`` coefficients), then everything is
+        refitted jointly at the lag found and the numerators mapped back.
         """
         method = 'output error from the best start denominator'
-        lag = self.lag(values, a)
-        if lag is None:
+        if not self.spec.lag_free:
             return _joint(self.problem(values), a, feasible=self.feasible, method=method)
-        for _ in range(LAG_ROUNDS):
-            estimate, coef, cov = _joint(self.problem(values, a=a), a, feasible=self.feasible,
-                                         method=method + ', lag-free numerators')
-            moved = abs(target_lag(estimate.a, self.fs) - lag.lag)
-            if not moved > LAG_TOLERANCE:
-                break
-            a, lag = estimate.a, self.lag(values, estimate.a)
+        result = levenberg_marquardt(
+            lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
+            stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
+            max_iter=MAX_ITERATIONS, tol=1e-9)
+        a = np.concatenate([[1.0], result.theta])
+        lag = self.lag(values, a)
+        estimate, coef, cov = _joint(self.problem(values, a=a), a, feasible=self.feasible,
+                                     method=method, max_iter=0)
         return (replace(estimate, b=lag.numerators(estimate.b), nk=self.spec.nk,
-                        covariance=lag.covariance(estimate.covariance, self.spec.nf)),
+                        iterations=result.evaluations, converged=result.converged,
+                        covariance=lag.covariance(estimate.covariance, self.spec.nf),
+                        method=f'{method}; lag-free numerators: profile Levenberg-Marquardt '
+                               f'over the denominator ({result.evaluations} evaluations)'),
                 coef, cov)
+
+    def _profile_residual(self, values: Mapping[str, float], x: np.ndarray, jacobian: bool):
+        """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
+        def at(x):
+            a = np.concatenate([[1.0], x])
+            problem = self.problem(values, a=a)
+            return problem.residual(np.concatenate([x, problem.linear(a)]))
+
+        e = at(x)
+        if not jacobian:
+            return e
+        columns = []
+        for j in range(x.size):
+            step = 1e-7 * max(abs(x[j]), 1e-2)
+            moved = x.copy()
+            moved[j] += step
+            columns.append((e - at(moved)) / step)
+        return e, np.column_stack(columns)
 
     def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
         """Return the least loss over the start denominators, numerators re-solved."""
