@@ -134,7 +134,15 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     found = diagnose([ShotSource(recording, by_role['calibration'])],
                      [ShotSource(recording, by_role['validation'])], base=live)
     assert values['diagnosis_verdict'] == found.verdict
-    assert values['diagnosis_top_effect'] == found.ranking[0].effect
+    # The same top effect when it is significant; without one, two improvements below
+    # significance may swap places (mains hum's columns are phased to each recording's
+    # start, and the node's buffer starts elsewhere than the bag).
+    top = found.ranking[0]
+    if top.significant:
+        assert values['diagnosis_top_effect'] == top.effect
+    else:
+        assert not found.entry(values['diagnosis_top_effect']).significant
+        assert values['diagnosis_top_significant'] == 'False'
     assert int(values['samples_received']) == recording.n_samples
     # Bounded memory: the buffer spans a few shot windows, not the recording.
     span = (5 + 10 + 20 + 1) * FS / 1e3  # pre + max pulse + post + holdoff, in samples
