@@ -16,7 +16,7 @@ import numpy as np
 
 from .data import as_segments, Segment
 from .estimate import Estimate
-from .least_squares import check_orders, solve_lagged
+from .least_squares import check_orders, lagged_blocks, solve_blocks
 
 __all__ = ['fit_arx']
 
@@ -45,12 +45,19 @@ def fit_arx(segments: Segment | Iterable[Segment], *, na: int = 2, nb: int = 2,
     """
     check_orders(na=na, nb=nb, nk=nk)
     segs = as_segments(segments)
-    # Block by block: the regressors of millions of calibration samples are never held whole.
-    ls, _ = solve_lagged([s.y for s in segs], [s.u for s in segs], na=na, nb=nb, nk=nk)
+    # Block by block: the regressors and the residual of millions of calibration samples are
+    # never held whole.
+    blocks, names = lagged_blocks([s.y for s in segs], [s.u for s in segs], na=na, nb=nb, nk=nk)
+    ls = solve_blocks(blocks, len(names), names=names, residual=False)
     theta = ls.theta
+    sse, rows = 0.0, 0
+    for phi, target in blocks():
+        e = target - phi @ theta
+        sse, rows = sse + float(e @ e), rows + e.size
+    noise_variance = sse / max(rows - theta.size, 1)
     return Estimate(
         structure='arx', a=np.concatenate([[1.0], theta[:na]]),
         b=theta[na:].reshape(segs[0].n_inputs, nb), nk=nk,
-        covariance=ls.noise_variance * ls.unit_covariance,
-        noise_variance=ls.noise_variance, loss=float(np.mean(ls.residual ** 2)),
-        n_samples=ls.residual.size, method='least squares')
+        covariance=noise_variance * ls.unit_covariance,
+        noise_variance=noise_variance, loss=sse / rows, n_samples=rows,
+        method='least squares')

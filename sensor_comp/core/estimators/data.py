@@ -30,6 +30,9 @@ class Segment:
     """
     One shot window: inputs and output sampled together, starting at rest.
 
+    ``u`` and ``y`` are kept as read-only views of the arrays given (copied only when not
+    float64): change those arrays after making the segment and the segment changes too.
+
     Args:
         u: Inputs ``(n_inputs, n)`` (a 1-D array is one input).
         y: Output ``(n,)``.
@@ -45,8 +48,11 @@ class Segment:
     label: str = ''
 
     def __post_init__(self):
-        u = np.array(self.u, dtype=np.float64)
-        y = np.array(self.y, dtype=np.float64)
+        # Read-only views, not copies: a fit's segments are its caller's windows (two copies
+        # of the calibration data at the peak of an identification otherwise). The caller's
+        # own array stays writable; the segment sees what it later writes there.
+        u = np.asarray(self.u, dtype=np.float64).view()
+        y = np.asarray(self.y, dtype=np.float64).view()
         if u.ndim == 1:
             u = u[np.newaxis]
         name = self.label or 'segment'
