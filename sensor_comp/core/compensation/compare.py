@@ -147,20 +147,27 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
                                      f'{radius:.6f}): its simulation diverges; identify it '
                                      f'again (identify never writes an unstable model)')
     measured = [y for _, y in segments(recording, shots, inputs=(), denoise=denoise)]
-    times = [np.arange(s.start, s.stop) / recording.fs for s in shots]
+    # Windows as long as the validation data, made as late and freed as early as they can be:
+    # the inputs after the last model that reads them, the residuals once the disturbances
+    # are fitted, the times per row.
+    uses = [tuple(model.inputs) for model in models]
     inputs_cache: dict[tuple[str, ...], list[np.ndarray]] = {}
     out = []
-    for model, label in zip(models, labels):
-        inputs = tuple(model.inputs)
+    for position, (model, label) in enumerate(zip(models, labels)):
+        inputs = uses[position]
         if inputs not in inputs_cache:
             inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
         simulated = simulate_output(model, inputs_cache[inputs])
+        if inputs not in uses[position + 1:]:
+            del inputs_cache[inputs]
         disturbances = window_disturbances(
             model, [s.start for s in shots], [s.baseline_stop - s.start for s in shots],
             [y - yhat for y, yhat in zip(measured, simulated)])
-        simulated = [yhat + d for yhat, d in zip(simulated, disturbances)]
+        for yhat, d in zip(simulated, disturbances):
+            yhat += d
+        del disturbances
         rows = []
-        for shot, t, y, yhat in zip(shots, times, measured, simulated):
+        for shot, y, yhat in zip(shots, measured, simulated):
             peak, model_peak = _signed_peak(y) / 1e6, _signed_peak(yhat) / 1e6
             try:
                 residual = peak_residual_percent(y, y - yhat)
@@ -172,7 +179,8 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
                 model_peak_mpa=model_peak,
                 peak_error_mpa=model_peak - peak,
                 peak_error_percent=100.0 * (model_peak - peak) / abs(peak),
-                peak_residual_percent=residual, t=t, measured=y, simulated=yhat))
+                peak_residual_percent=residual, t=np.arange(shot.start, shot.stop) / recording.fs,
+                measured=y, simulated=yhat))
         out.append(Comparison(label=label,
                               fit_percent=float(fit_percent(measured, simulated)),
                               peak_residual_percent=max(r.peak_residual_percent for r in rows),

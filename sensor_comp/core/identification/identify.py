@@ -262,27 +262,34 @@ def _check_rates(sources: Sequence[ShotSource], task: str) -> float:
 
 @dataclass(eq=False)
 class _Data:
-    """The shot windows of one identification, cut once and shared by every step."""
+    """The calibration windows of one identification, cut once and shared by every step."""
 
+    sources: Sources
     measured: list[tuple[np.ndarray, np.ndarray]]
-    valid: list[tuple[np.ndarray, np.ndarray]]
     fit: list[tuple[np.ndarray, np.ndarray]]
     denoiser: EmdDenoiser | None
 
     @classmethod
     def cut(cls, sources: Sources, *, denoise: bool, progress: ProgressFactory) -> _Data:
-        """Return the calibration and validation windows, EMD-denoised for the fit if asked."""
+        """Return the calibration windows, EMD-denoised for the fit if asked."""
         measured = [seg for s in sources.calibration
                     for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
-        valid = [seg for s in sources.validation
-                 for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
         denoiser = EmdDenoiser() if denoise else None
         fit = measured
         if denoiser is not None:
             with progress('EMD denoising', len(measured)) as bar:
                 denoised = denoiser.map([y for _, y in measured], done=bar.advance)
             fit = [(u, y) for (u, _), y in zip(measured, denoised)]
-        return cls(measured, valid, fit, denoiser)
+        return cls(sources, measured, fit, denoiser)
+
+    def valid(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Return the validation windows, cut when asked: held only while a step reads them."""
+        return [seg for s in self.sources.validation
+                for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
+
+    def release(self) -> None:
+        """Drop the calibration windows once the fits are done, before the validation's."""
+        self.measured = self.fit = []
 
 
 @dataclass(eq=False)
@@ -311,7 +318,7 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     if structure == 'auto':
         with progress('structure selection', 1) as bar:
             selection = select_structure(
-                data.measured, valid_segments=data.valid,
+                data.measured, valid_segments=data.valid(),
                 orders=None if orders is None else [orders],
                 delays=None if delay is None else [delay], criterion=criterion)
             bar.advance()
@@ -543,6 +550,12 @@ def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: 
     draft.check_stable()
     explanation += _check_excitation(draft, calib)
     fit['selection'] = explanation
+    calib_inputs = ([u for u, _ in data.measured] if extension is None else
+                    [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)])
+    calib_fit = float(fit_percent([y for _, y in data.measured],
+                                  simulate_output(draft, calib_inputs)))
+    del calib_inputs
+    data.release()  # the calibration windows go before the validation windows are cut
     comparisons = tuple(compare([draft], s.recording, s.shots, labels=[structure])[0]
                         for s in valid if s.shots)
     valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
@@ -554,15 +567,11 @@ def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: 
         windows = shot_windows([s for s in valid if s.shots])
         fit['validation_fit_percent_disturbance_removed'] = float(fit_percent(
             [w.y for w in windows], extension.predict(windows).total))
-    calib_inputs = ([u for u, _ in data.measured] if extension is None else
-                    [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)])
     model = Model.from_estimate(
         estimate, fs=sources.fs, inputs=inputs,
         charge_sensitivity_pC_per_MPa=draft.charge_sensitivity_pC_per_MPa,
-        fit={**fit, 'calibration_fit_percent': float(fit_percent(
-            [y for _, y in data.measured], simulate_output(draft, calib_inputs))),
-            'validation_fit_percent': valid_fit,
-            'validation_peak_residual_percent': worst},
+        fit={**fit, 'calibration_fit_percent': calib_fit, 'validation_fit_percent': valid_fit,
+             'validation_peak_residual_percent': worst},
         provenance=provenance, effects=entries, created=draft.created)
     return Identification(model=model, calibration=calib, validation=valid,
                           comparisons=comparisons, validation_fit_percent=valid_fit,
