@@ -135,3 +135,25 @@ def test_bad_requests_are_refused():
         compare([model()], rec, shots, labels=['a', 'b'])
     with pytest.raises(ShotError, match='no shots'):
         compare([model()], rec, [])
+
+
+def test_several_models_compare_as_each_alone():
+    # The inputs of a model are freed after the last model reading them: a model with other
+    # inputs between two with the same ones must not change what either gets.
+    rec, _ = make(3000.0)
+    shots = detect_shots(rec)
+    lateral = SimpleNamespace(fs=FS, inputs=('a_x', 'a_z'), b=np.vstack([B, 0.9 * B]), a=A,
+                              nk=1, name='lateral')
+    models = [model(), lateral, model(1.1, 'scaled')]
+    together = compare(models, rec, shots)
+    for m, got in zip(models, together):
+        (alone,) = compare([m], rec, shots)
+        assert got.label == alone.label and got.fit_percent == alone.fit_percent
+        for shot, ref in zip(got.shots, alone.shots):
+            np.testing.assert_array_equal(shot.simulated, ref.simulated)
+            np.testing.assert_array_equal(shot.measured, ref.measured)
+    for shot, window in zip(together[0].shots, shots):
+        np.testing.assert_array_equal(shot.t, np.arange(window.start, window.stop) / FS)
+        np.testing.assert_allclose(shot.simulated, signal.lfilter(
+            np.r_[0.0, B], A, rec.axial[window.window] - window.baseline_acceleration[2]),
+            rtol=1e-12, atol=1e-9 * np.max(np.abs(shot.simulated)))

@@ -1,0 +1,99 @@
+"""
+Identification gives the models it gave before its memory was cut down, to 1e-9 relative.
+
+The expected numbers were recorded on the same simulated run by the code before the
+calibration and validation windows were shared with the fits instead of copied (segments as
+views, windows cut when needed and dropped before the final compare, ARX losses summed block
+by block). Each structure takes its own memory path: EMD-denoised output error (delay
+search, the calibration windows released before the compare), ``auto`` (the validation
+windows cut for the structure selection) and ARX.
+"""
+
+import numpy as np
+import pytest
+
+from sensor_comp.core.identification.identify import identify, ShotSource
+from sensor_comp.sim import RigConfig, simulate, TABLE2
+
+#: Relative tolerance: round-off of sums taken in another order, far below any change of fit.
+REL = 1e-9
+
+#: What the code before gave, per run of :data:`RUNS`.
+EXPECTED = {
+    'oe_emd': {
+        'a': [1.0, -1.9601087399044583, 0.9845770263981571],
+        'b': [0.3448548934155963, 0.004338472398909065],
+        'fit': {
+            'loss': 719721.8977979441,
+            'noise_variance': 720069.50557278,
+            'aic': 111758.1346732604,
+            'aicc': 111758.1395035949,
+            'bic': 111786.22396375095,
+            'fpe': 720417.1133476162,
+            'calibration_fit_percent': 95.64455929415038,
+            'validation_fit_percent': 95.77949746446797,
+            'validation_peak_residual_percent': 19.38982687205072,
+        },
+        'comparisons': [91.72921083256915, 95.53655738146031, 81.36846281476372,
+                        93.73569347741213, 97.79467128690126],
+    },
+    'auto': {
+        'a': [1.0, -1.960038708519055, 0.9845121995273727],
+        'b': [0.3492430237964739],
+        'fit': {
+            'loss': 2549702.255082525,
+            'noise_variance': 2550625.725656622,
+            'aic': 122236.82250505152,
+            'aicc': 122236.82540290228,
+            'bic': 122257.88947291943,
+            'fpe': 2551549.19623072,
+            'calibration_fit_percent': 95.6446444138522,
+            'validation_fit_percent': 95.77820959731199,
+            'validation_peak_residual_percent': 19.386226428757574,
+        },
+        'comparisons': [91.73042132710769, 95.53364409409016, 81.36895165846558,
+                        93.73426167433357, 97.79268179658185],
+    },
+    'arx': {
+        'a': [1.0, -0.5176124090745031, -0.3234429919450608],
+        'b': [12.163589774542784, -9.874399703467791],
+        'fit': {
+            'loss': 4165592.7873431426,
+            'noise_variance': 4167607.097201624,
+            'aic': 126153.84708000754,
+            'aicc': 126153.85191618213,
+            'bic': 126181.931540163,
+            'fpe': 4169621.4070601086,
+            'calibration_fit_percent': 89.44329603250965,
+            'validation_fit_percent': 89.34409522064776,
+            'validation_peak_residual_percent': 21.025686797205996,
+        },
+        'comparisons': [89.50555582742041, 89.33654106507622, 80.95480042683918,
+                        91.02436501901177, 89.34471300538014],
+    },
+}
+
+#: The options of each run.
+RUNS = {'oe_emd': {'structure': 'oe'}, 'auto': {'structure': 'auto', 'denoise': False},
+        'arx': {'structure': 'arx', 'delay': 1, 'denoise': False}}
+
+
+@pytest.fixture(scope='module')
+def source():
+    """Return the Table-2 run at 200 kS/s and its shots."""
+    sim = simulate(RigConfig(shots=TABLE2, fs=200e3, seed=0, pre_trigger_s=0.005,
+                             post_shot_s=0.01))
+    return ShotSource.detect(sim.recording, pre_ms=2.0, post_ms=5.0)
+
+
+@pytest.mark.parametrize('name', RUNS)
+def test_models_and_fits_are_those_of_before(source, name):
+    result = identify([source], **RUNS[name])
+    expected = EXPECTED[name]
+    model = result.model
+    np.testing.assert_allclose(model.a, expected['a'], rtol=REL, atol=0)
+    np.testing.assert_allclose(np.ravel(model.b), expected['b'], rtol=REL, atol=0)
+    for key, value in expected['fit'].items():
+        assert model.fit[key] == pytest.approx(value, rel=REL, abs=0), key
+    got = [shot.fit_percent for c in result.comparisons for shot in c.shots]
+    np.testing.assert_allclose(got, expected['comparisons'], rtol=REL, atol=0)
