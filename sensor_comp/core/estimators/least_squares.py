@@ -18,7 +18,7 @@ from .data import IdentError
 __all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'Filtered', 'LeastSquares',
            'check_orders', 'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
            'lagged_regression', 'minimum_norm', 'normal_equations', 'normal_equations_blocks',
-           'scaled_qr', 'solve_blocks', 'solve_lagged', 'solve_least_squares',
+           'scaled_qr', 'solve_blocks', 'solve_least_squares',
            'triangular_inverse']
 
 #: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
@@ -204,17 +204,6 @@ def solve_least_squares(phi: np.ndarray, target: np.ndarray, *,
         for first in range(0, phi.shape[0], BLOCK_ROWS):
             yield phi[first:first + BLOCK_ROWS], target[first:first + BLOCK_ROWS]
     return solve_blocks(blocks, phi.shape[1], names=names)
-
-
-def solve_lagged(ys: Sequence[np.ndarray], us: Sequence[np.ndarray], *, na: int, nb: int,
-                 nk: int) -> tuple[LeastSquares, list[str]]:
-    """
-    Solve the regression of :func:`lagged_regression` block by block; return it and names.
-
-    Raises IdentError as :func:`lagged_regression` and :func:`solve_least_squares`.
-    """
-    blocks, names = lagged_blocks(ys, us, na=na, nb=nb, nk=nk)
-    return solve_blocks(blocks, len(names), names=names), names
 
 
 def solve_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray]]], p: int, *,

@@ -57,7 +57,7 @@ def test_lagged_blocks_are_the_rows_of_lagged_regression():
     assert block_names == names and max(len(p) for p, _ in parts) == 50
     np.testing.assert_array_equal(np.vstack([p for p, _ in parts]), phi)
     np.testing.assert_array_equal(np.concatenate([t for _, t in parts]), target)
-    solved, _ = ls.solve_lagged(ys, us, na=2, nb=3, nk=4)
+    solved = ls.solve_blocks(blocks, len(names), names=names)
     np.testing.assert_allclose(solved.theta, _whole(phi, target)[0], rtol=1e-10, atol=0)
 
 
