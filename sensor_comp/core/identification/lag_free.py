@@ -20,7 +20,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import signal
 
 from ..effects.base import mechanics_delay_s
 from ..shots.inputs import parse_channel
@@ -74,8 +73,15 @@ class LagFree:
 
     def expand(self, u: np.ndarray) -> np.ndarray:
         """Return the expanded channels ``(Σ sizes, n)`` of one window's channels ``u``."""
-        return np.array([signal.lfilter(t, 1.0, row) for row, taps in zip(u, self._taps)
-                         for t in taps]).reshape(-1, u.shape[1])
+        n = u.shape[1]
+        out = np.zeros((sum(self.sizes), n))
+        index = 0
+        for row, taps in zip(u, self._taps):
+            for t in taps:  # a short FIR from rest, as shifted rows (no filter call)
+                for lag in np.flatnonzero(t[:n]):
+                    out[index, lag:] += t[lag] * row[:n - lag]
+                index += 1
+        return out
 
     def numerators(self, z: np.ndarray) -> np.ndarray:
         """Return the numerators ``(n_channels, nb)`` of expanded coefficients ``z``."""
