@@ -13,7 +13,7 @@ import mmap
 import os
 from pathlib import Path
 import struct
-from typing import Iterable, Iterator, NamedTuple
+from typing import Iterable, Iterator, NamedTuple, Sequence
 import warnings
 import zlib
 
@@ -55,6 +55,7 @@ __all__ = [
     'read_stream_infos',
     'read_streams',
     'require_described',
+    'release_rows',
     'zero_pages',
 ]
 
@@ -628,6 +629,28 @@ def zero_pages(shape: tuple[int, ...]) -> np.ndarray:
     if hasattr(mmap, 'MADV_NOHUGEPAGE'):
         memory.madvise(mmap.MADV_NOHUGEPAGE)
     return np.frombuffer(memory, dtype=np.float64)[:int(np.prod(shape))].reshape(shape)
+
+
+def release_rows(array: np.ndarray, rows: Sequence[int]) -> bool:
+    """
+    Give the whole pages of ``rows`` of a :func:`zero_pages` array back to the system.
+
+    They read as zeros afterwards (a private anonymous mapping); the bytes of a page shared
+    with another row stay. Returns False, doing nothing, for another kind of array.
+    """
+    memory = array
+    while memory is not None and not isinstance(memory, mmap.mmap):
+        memory = memory.obj if isinstance(memory, memoryview) else getattr(memory, 'base', None)
+    if memory is None or not array.flags.c_contiguous or array.ndim != 2 or \
+            not hasattr(mmap, 'MADV_DONTNEED'):
+        return False
+    page, width = mmap.PAGESIZE, array.shape[1] * array.itemsize
+    for row in rows:
+        first = -(-row * width // page) * page
+        last = (row + 1) * width // page * page
+        if last > first:
+            memory.madvise(mmap.MADV_DONTNEED, first, last - first)
+    return True
 
 
 class _StreamFiller:

@@ -87,12 +87,16 @@ def without_lateral(recording: Recording) -> Recording:
     Return a windowed recording without its x and y acceleration (their memory released).
 
     For work that reads only the axial row once the shots are measured; other recordings
-    are returned as they are.
+    are returned as they are. The rows are released in place (a copy of the axial row
+    beside the three rows was the identify command's peak): ``recording`` is consumed, its
+    x and y rows read as zeros afterwards, and only the returned recording may be used.
     """
     from ..core.shots.detection import WindowedRecording
-    from .bag_reader import zero_pages
+    from .bag_reader import release_rows, zero_pages
     if not isinstance(recording, WindowedRecording):
         return recording
+    if release_rows(recording.acceleration, (0, 1)):
+        return replace(recording, rows=(2,))
     acceleration = zero_pages(recording.acceleration.shape)
     for start, stop in recording.kept:
         acceleration[2, start:stop] = recording.axial[start:stop]

@@ -1,6 +1,7 @@
 """Reading a bag for its shot windows only gives the shots and windows of a full read."""
 
 import dataclasses
+import mmap
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ import pytest
 from sensor_comp.core.shots.detection import (
     dead_channel, detect_shots, find_windows, measure_shots, segments, ShotError,
     WindowedRecording)
+from sensor_comp.io.bag_reader import release_rows, zero_pages
 from sensor_comp.io.bag_writer import write_streams
 from sensor_comp.io.recording_file import load_recording, load_recording_windows
 from sensor_comp.streams import G0, Gap, Recording, Stream
@@ -118,3 +120,18 @@ def test_a_csv_export_is_read_whole_and_find_gets_a_copy(tmp_path):
     full = load_recording(path)
     recording = load_recording_windows(path, lambda r: find_windows(r, scratch=True).windows)
     np.testing.assert_array_equal(recording.acceleration, full.acceleration)
+
+
+def test_dropping_the_lateral_rows_releases_them_in_place():
+    rng = np.random.default_rng(3)
+    n = 3 * mmap.PAGESIZE  # rows of several pages: each has whole pages to give back
+    acceleration = zero_pages((3, n))
+    acceleration[:] = rng.standard_normal((3, n))
+    axial = acceleration[2].copy()
+    released = release_rows(acceleration, (0, 1))
+    assert released
+    # Whole pages of rows 0 and 1 read as zeros now; row 2 is untouched.
+    page = mmap.PAGESIZE // 8
+    assert not acceleration[0, :n - page].any() and not acceleration[1, page:n - page].any()
+    np.testing.assert_array_equal(acceleration[2], axial)
+    assert not release_rows(np.ones((3, n)), (0, 1))  # not a zero_pages array: untouched
