@@ -24,11 +24,11 @@ if TYPE_CHECKING:
     from ..shots.windows import Window
 
 __all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FitView', 'FittedModel',
-           'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView',
-           'Search', 'SegmentView', 'SpectrumView', 'TrendView', 'dc_delay_s', 'delta_std',
-           'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s',
-           'modifier_value', 'parameters_text', 'probe_of', 'registry', 'row_of',
-           'segment_of', 'sentence', 'static_gain', 'stored_std', 'tail_share']
+           'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView', 'Search',
+           'SegmentView', 'SpectrumView', 'TrendView', 'centroid', 'dc_delay_s', 'delta_std',
+           'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
+           'parameters_text', 'probe_of', 'registry', 'row_of', 'segment_of', 'sentence',
+           'static_gain', 'stored_std', 'tail_share']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -449,10 +449,14 @@ def modifier_value(model: FittedModel, modifier: str) -> float:
     raise EffectError(f'the model inputs carry no @{modifier}= ({", ".join(model.inputs)})')
 
 
+def centroid(p: np.ndarray) -> float:
+    """Return ``Σ j p_j / Σ p_j``: the group delay at DC of the polynomial ``p(q)``, samples."""
+    return float(np.arange(p.size) @ p / p.sum())
+
+
 def dc_delay_s(a: np.ndarray, num: np.ndarray, fs: float) -> float:
     """Return the group delay at DC of ``num(q)/a(q)`` in s: the centroids' difference."""
-    j_num, j_den = np.arange(num.size), np.arange(a.size)
-    return float((j_num @ num / num.sum() - j_den @ a / a.sum()) / fs)
+    return (centroid(num) - centroid(a)) / fs
 
 
 def mechanics_delay_s(a: np.ndarray, fs: float) -> float:

@@ -211,16 +211,24 @@ class OutputErrorProblem:
         only raise the loss. On the whole regression: the extended fits search this loss on
         fine grids, where the round-off of a block-wise sum moves their minima.
         """
+        try:
+            e = self.profile_residual(f)
+        except IdentError:  # not finite
+            return math.inf
+        return float(e @ e)
+
+    def profile_residual(self, f: np.ndarray) -> np.ndarray:
+        """
+        Return ``y − Φθ`` at the least-squares numerators (and extra coefficients) at ``F``.
+
+        As :meth:`profile_sse` solves them. Raises IdentError when they are not finite.
+        """
         phi = self.regression(f)
         try:
             theta = normal_equations(phi, self.y)
         except IdentError:
-            try:
-                theta = normal_equations(phi, self.y, ridge=1e-10)
-            except IdentError:  # not finite
-                return math.inf
-        e = self.y - phi @ theta
-        return float(e @ e)
+            theta = normal_equations(phi, self.y, ridge=1e-10)
+        return self.y - phi @ theta
 
     def filtered(self, f: np.ndarray) -> list[np.ndarray]:
         """Return every segment's inputs filtered by ``1/F`` from rest (cached)."""

@@ -50,7 +50,7 @@ from scipy import optimize
 from ..effects import EffectError, get_effect, ordered
 from ..effects.base import effect_entry, Effect, ModelSpec, Physical, Search
 from ..estimators import Estimate, fit_oe, IdentError, simulate_output
-from ..estimators.least_squares import normal_equations, scaled_qr
+from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
@@ -547,15 +547,9 @@ class _Fitter:
 
     def _profile_residual(self, values: Mapping[str, float], x: np.ndarray, jacobian: bool):
         """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
-        def at(x):  # one pass: the regression at F gives the output of every coefficient
+        def at(x):
             a = np.concatenate([[1.0], x])
-            problem = self.problem(values, a=a)
-            phi = problem.regression(a)
-            try:
-                theta = normal_equations(phi, problem.y)
-            except IdentError:
-                theta = normal_equations(phi, problem.y, ridge=1e-10)
-            return problem.y - phi @ theta
+            return self.problem(values, a=a).profile_residual(a)
 
         e = at(x)
         if not jacobian:

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..effects.base import mechanics_delay_s
+from ..effects.base import centroid, mechanics_delay_s
 from ..shots.inputs import parse_channel
 
 __all__ = ['LagFree', 'target_lag']
@@ -29,8 +29,7 @@ __all__ = ['LagFree', 'target_lag']
 
 def target_lag(a: np.ndarray, fs: float) -> float:
     """Return ``D(a)``: the numerator centroid, in samples, of a path lagging as ``a``."""
-    j = np.arange(a.size)
-    return float(j @ a / a.sum() + mechanics_delay_s(a, fs) * fs)
+    return centroid(a) + mechanics_delay_s(a, fs) * fs
 
 
 def _free(name: str) -> bool:
@@ -52,7 +51,7 @@ class LagFree:
     """
 
     def __init__(self, names: Sequence[str], a: np.ndarray, nb: int, nk: int, fs: float):
-        self.names, self.nb, self.nk = tuple(names), nb, nk
+        self.names, self.nb = tuple(names), nb
         self.lag = target_lag(np.asarray(a, dtype=np.float64), fs)
         c = np.arange(nk, nk + nb) - self.lag
         held = nb >= 2 and np.all(np.isfinite(c))
