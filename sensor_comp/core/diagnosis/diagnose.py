@@ -460,7 +460,8 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
     with progress('base model', 1) as bar:
         free, held = _base_fits(cw, base_effects, fs, orders, notes)
         bar.advance()
-    free_residual = [w.y - p for w, p in zip(vw, free.predict(vw).total)]
+    free_prediction = free.predict(vw)
+    free_residual = [w.y - p for w, p in zip(vw, free_prediction.total)]
     quiet = _quiet(free_residual, vw, fs)
     if not quiet:
         raise DiagnosisError('no validation window has a pre-trigger of 8 samples or more: '
@@ -468,7 +469,7 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
                              'pre-trigger')
     noise = noise_model(quiet, max(1, round(NOISE_LAG_S * fs)))
     base = held or free
-    prediction = base.predict(vw)
+    prediction = free_prediction if held is None else held.predict(vw)
     residual = [w.y - p for w, p in zip(vw, prediction.total)]
     model = free.model()
     ringing = max(1, round(ringing_time_s(model) * fs))

@@ -102,22 +102,17 @@ class SecondResonance(Effect):
                 return main[0] / 1e3, main[1], main[2] / searched[2], True
             return searched[0] / 1e3, searched[1], searched[2] / main[2], False
 
-        khz, damping, gain, swapped = reading(model.a, model.b)
-
-        def std_of(index: int) -> float | None:
-            return (delta_std(lambda a, b: reading(a, b)[index], model.a, model.b, covariance)
-                    if covariance is not None else None)
-
-        names = ('freq_khz', 'zeta', 'gain')
-        stored = {name: stored_std(model, self.id, name) for name in names}
-        if swapped:
-            stds = [std_of(0) if covariance is not None else stored['freq_khz'],
-                    std_of(1) if covariance is not None else stored['zeta']]
-        else:
-            stds = [stored['freq_khz'], stored['zeta']]
-        stds.append(std_of(2) if covariance is not None else stored['gain'])
-        return {name: (value, std) for name, value, std in zip(names, (khz, damping, gain),
-                                                               stds)}
+        values = reading(model.a, model.b)
+        out = {}
+        for index, name in enumerate(('freq_khz', 'zeta', 'gain')):
+            # A searched value's deviation is the fit's (stored); the others come from the
+            # polynomials' covariance when it is known.
+            searched = index < 2 and not values[3]
+            out[name] = (values[index], stored_std(model, self.id, name)
+                         if covariance is None or searched else
+                         delta_std(lambda a, b, i=index: reading(a, b)[i], model.a, model.b,
+                                   covariance))
+        return out
 
     def implausible(self, fit: FitView) -> str | None:
         """Return why the fit is no second mode: the generic checks or an unresolved gain."""
