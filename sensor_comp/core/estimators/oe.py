@@ -203,27 +203,35 @@ class OutputErrorProblem:
         except IdentError:
             return minimum_norm(self.regression(f), self.y)
 
-    def profile_sse(self, f: np.ndarray) -> float:
+    def profile_sse(self, f: np.ndarray, *, transform: np.ndarray | None = None) -> float:
         """
         Return the least sum of squares over numerators (and extra coefficients) at ``F``.
 
         Cholesky with a 1e-10 ridge where singular; the residual is recomputed, so round-off can
         only raise the loss. On the whole regression: the extended fits search this loss on
-        fine grids, where the round-off of a block-wise sum moves their minima.
+        fine grids, where the round-off of a block-wise sum moves their minima. ``transform``
+        as in :meth:`profile_residual`.
         """
         try:
-            e = self.profile_residual(f)
+            e = self.profile_residual(f, transform=transform)
         except IdentError:  # not finite
             return math.inf
         return float(e @ e)
 
-    def profile_residual(self, f: np.ndarray) -> np.ndarray:
+    def profile_residual(self, f: np.ndarray, *,
+                         transform: np.ndarray | None = None) -> np.ndarray:
         """
         Return ``y − Φθ`` at the least-squares numerators (and extra coefficients) at ``F``.
 
-        As :meth:`profile_sse` solves them. Raises IdentError when they are not finite.
+        As :meth:`profile_sse` solves them. ``transform`` (``(n_inputs·nb, m)``) restricts the
+        numerators to ``b = T z`` (row by row), solved for ``z``: filtering commutes with the
+        fixed FIRs of ``T``, so the inputs are filtered once, not once per column of ``T``.
+        Raises IdentError when they are not finite.
         """
         phi = self.regression(f)
+        if transform is not None:
+            q = self.n_inputs * self.nb
+            phi = np.concatenate([phi[:, :q] @ transform, phi[:, q:]], axis=1)
         try:
             theta = normal_equations(phi, self.y)
         except IdentError:

@@ -383,6 +383,7 @@ class _Fitter:
         self.ys = [w.y for w in windows]
         self.feasible = _feasibility(spec, fs)
         self._channels: dict[tuple[str, ...], list[np.ndarray]] = {}
+        self._problems: dict[tuple[tuple[str, ...], bool], OutputErrorProblem] = {}
 
     def channels(self, values: Mapping[str, float]) -> list[np.ndarray]:
         """Return the input channels of every window at ``values`` (cached)."""
@@ -404,10 +405,23 @@ class _Fitter:
         """
         Return the regression data; ``early``: up to 3 ms after each pulse only.
 
-        For a lag-free spec, ``a`` is the denominator the numerators' lag is held to (its
-        problem is only valid there); without it, the free problem (a start).
+        For a lag-free spec and a denominator ``a``, over the expanded channels whose lag is
+        held to ``a``'s (valid at ``a`` only); else the free problem (kept for the last few
+        parameter sets: its filtered inputs are cached per denominator).
         """
-        us, lag = self.channels(values), self.lag(values, a)
+        lag = self.lag(values, a)
+        if lag is not None:
+            return self._build(values, early, lag)
+        key = (self.spec.channels(values), early)
+        if key not in self._problems:
+            if len(self._problems) >= CHANNEL_CACHE:
+                self._problems.pop(next(iter(self._problems)))
+            self._problems[key] = self._build(values, early, None)
+        return self._problems[key]
+
+    def _build(self, values: Mapping[str, float], early: bool,
+               lag: LagFree | None) -> OutputErrorProblem:
+        us = self.channels(values)
         if not early:
             return _problem(us, self.ys, self.cols, self.spec, lag)
         stops = [w.y.size if w.end is None else min(w.y.size, w.end + round(EARLY_S * self.fs))
@@ -420,7 +434,9 @@ class _Fitter:
     def profile(self, values: Mapping[str, float], a: np.ndarray, *,
                 early: bool = False) -> float:
         """Return the loss at denominator ``a``, the numerators solved exactly."""
-        return self.problem(values, early=early, a=a).profile_sse(a)
+        lag = self.lag(values, a)
+        return self.problem(values, early=early).profile_sse(
+            a, transform=None if lag is None else lag.transform)
 
     def starts(self, values: Mapping[str, float], *,
                base: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
@@ -549,7 +565,8 @@ class _Fitter:
         """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
         def at(x):
             a = np.concatenate([[1.0], x])
-            return self.problem(values, a=a).profile_residual(a)
+            return self.problem(values).profile_residual(
+                a, transform=self.lag(values, a).transform)
 
         e = at(x)
         if not jacobian:

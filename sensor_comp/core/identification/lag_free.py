@@ -98,6 +98,8 @@ class LagFree:
     def covariance(self, covariance: np.ndarray, nf: int) -> np.ndarray:
         """Return the covariance over ``(a1.., b, rest)`` of one over ``(a1.., z, rest)``."""
         g = self._lift(nf, covariance.shape[0] - nf - self.transform.shape[1])
+        if not np.all(np.isfinite(covariance)):  # not identifiable: so is every parameter
+            return np.full((g.shape[0],) * 2, np.inf)
         return g @ covariance @ g.T
 
     def project(self, jacobian: np.ndarray, nf: int) -> np.ndarray:
