@@ -10,7 +10,7 @@ each window's pre-trigger baseline removed. The benchmark measures
    one process; on the first ``--reference-windows`` windows, it takes ~1 s each) and of the
    current one (:data:`~sensor_comp.core.identification.denoise.SIFTING`, stopped at the first
    signal IMF) in one process and shared by
-   :data:`~sensor_comp.core.identification.denoise.PROCESSES` processes (:func:`denoise_windows`),
+   :data:`~sensor_comp.sharing.PROCESSES` processes (:func:`denoise_windows`),
    as wall and CPU seconds per 1 M samples, with the load average (other work on the machine slows
    the wall times);
 2. that the output is unchanged within the tolerance of the method: the RMS difference of

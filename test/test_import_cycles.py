@@ -72,7 +72,8 @@ STAGES = ('shots', 'estimators', 'effects', 'compensation', 'identification', 'd
           'report')
 #: What the core may import from the rest of the package (no ROS, no I/O formats).
 CORE_MAY_USE = {'sensor_comp.errors', 'sensor_comp.files', 'sensor_comp.lazy',
-                'sensor_comp.streams', 'sensor_comp.version', 'sensor_comp.worker'}
+                'sensor_comp.sharing', 'sensor_comp.streams', 'sensor_comp.version',
+                'sensor_comp.worker'}
 
 
 def _all_imports(path: Path, name: str) -> set[str]:

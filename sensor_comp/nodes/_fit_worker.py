@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import os
 
-from ..core.identification.denoise import PROCESSES_ENV
+from ..sharing import PROCESSES_ENV
 from ..core.diagnosis.diagnose import diagnose
 from ..core.identification.identify import identify, ShotSource
 from ..core.identification.model import Model

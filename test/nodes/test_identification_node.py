@@ -323,7 +323,7 @@ def test_the_worker_ignores_sigint_and_reports_errors_with_their_traceback():
     try:
         assert worker.call(os.getpid) == worker.pid
         # EMD without helper processes: they would take the node's cores.
-        assert worker.call(os.getenv, 'SENSOR_COMP_EMD_PROCESSES') == '1'
+        assert worker.call(os.getenv, 'SENSOR_COMP_PROCESSES') == '1'
         os.kill(worker.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
         with pytest.raises(ValueError, match='invalid literal') as raised:
             worker.call(int, 'x')

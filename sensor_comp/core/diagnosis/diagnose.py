@@ -96,6 +96,7 @@ from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseMod
 from ..progress import ProgressFactory, Silent
 from .residual import analyse, model_resonances, ringing_time_s
 from ...errors import SensorCompError
+from ...sharing import pool_size, share
 
 __all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
            'Ranked', 'Skipped', 'diagnose']
@@ -148,6 +149,9 @@ SLOWEST_POLE_S = 1e-3
 #: Least score (fraction of the base residual energy removed) a significant effect needs:
 #: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
 MIN_SCORE = 0.005
+#: Calibration samples × candidate fits from which a helper process shares the fits (about
+#: 2 s of fits here; a helper's start-up is about 0.5 s).
+MIN_SHARED_COST = 400_000
 
 
 class DiagnosisError(SensorCompError, ValueError):
@@ -561,42 +565,57 @@ def _quiet(residual: Sequence[np.ndarray], windows: Sequence[Window],
 
 def _candidates(ids: Sequence[str], ctx: _Context, progress,
                 notes: list[str]) -> tuple[list[Ranked], list[Skipped]]:
-    """Fit and score every candidate; a failing one is a note, the others go on."""
+    """
+    Fit and score every candidate; a failing one is a note, the others go on.
+
+    The fits are independent: they are shared with a helper process when worth it
+    (:mod:`sensor_comp.sharing`; each fit is the same), the scores are computed here.
+    """
     ranked, skipped = [], []
     modes = sorted((m for m in model_resonances(ctx.base.model()) if m[1] < MODE_ZETA),
                    key=lambda m: m[1])
-    token = BASE_CONTEXT.set({'modes_khz': tuple(fn / 1e3 for fn, _ in modes)})
-    try:
-        _fit_each(ids, ctx, progress, notes, ranked, skipped)
-    finally:
-        BASE_CONTEXT.reset(token)
+    context = {'modes_khz': tuple(fn / 1e3 for fn, _ in modes)}
+    fitted = []
+    for effect_id in ids:
+        reason = ('already in the base model' if effect_id in ctx.base_effects
+                  else get_effect(effect_id).applicable(ctx.calibration))
+        if reason is None:
+            fitted.append(effect_id)
+        else:
+            skipped.append(Skipped(effect_id, reason))
+    nf, nb, nk = ctx.orders
+    jobs = [(ctx.calibration, ctx.base_effects + (effect_id,), ctx.fs, (nf, nb, nk),
+             ctx.base.denominators, ctx.lag_free, context) for effect_id in fitted]
+    processes = pool_size(len(jobs) * sum(w.y.size for w in ctx.calibration),
+                          MIN_SHARED_COST)
+    with progress('effects', len(ids)) as bar:
+        for _ in skipped:
+            bar.advance()
+        fits = share(_fit_candidate, jobs, processes=processes, name='diagnosis helper',
+                     done=bar.advance)
+    for effect_id, fit in zip(fitted, fits):
+        if isinstance(fit, str):
+            notes.append(f'{effect_id}: not fitted: {fit}')
+        else:
+            ranked.append(_score(effect_id, fit, ctx))
     ranked.sort(key=lambda r: (not r.significant, -r.score))
     return ranked, skipped
 
 
-def _fit_each(ids: Sequence[str], ctx: _Context, progress, notes: list[str],
-              ranked: list[Ranked], skipped: list[Skipped]) -> None:
-    """Fit and score each candidate into ``ranked`` (or ``skipped``, or a note)."""
-    nf, nb, nk = ctx.orders
-    with progress('effects', len(ids)) as bar:
-        for effect_id in ids:
-            effect = get_effect(effect_id)
-            reason = ('already in the base model' if effect_id in ctx.base_effects
-                      else effect.applicable(ctx.calibration))
-            if reason is not None:
-                skipped.append(Skipped(effect_id, reason))
-            else:
-                try:
-                    fit = fit_extended(ctx.calibration, effects=ctx.base_effects + (effect_id,),
-                                       fs=ctx.fs, nf=nf, nb=nb, nk=nk,
-                                       starts=ctx.base.denominators,
-                                       slowest_pole_s=SLOWEST_POLE_S, lag_free=ctx.lag_free)
-                    ranked.append(_score(effect_id, fit, ctx))
-                except Exception as exc:  # noqa: B902 - one candidate must not stop the others
-                    why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
-                    notes.append(f'{effect_id}: not fitted: {type(exc).__name__}'
-                                 f'{": " + why if why else ""}')
-            bar.advance()
+def _fit_candidate(calibration: Sequence[Window], effects: tuple[str, ...], fs: float,
+                   orders: tuple[int, int, int], starts, lag_free: bool,
+                   context: dict) -> ExtendedFit | str:
+    """Return one candidate's extended fit, or why it failed in one line (a job)."""
+    nf, nb, nk = orders
+    token = BASE_CONTEXT.set(context)
+    try:
+        return fit_extended(calibration, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            starts=starts, slowest_pole_s=SLOWEST_POLE_S, lag_free=lag_free)
+    except Exception as exc:  # noqa: B902 - one candidate must not stop the others
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
+        return f'{type(exc).__name__}{": " + why if why else ""}'
+    finally:
+        BASE_CONTEXT.reset(token)
 
 
 def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.ndarray],

@@ -23,6 +23,7 @@ from .metrics import fit_percent
 from .oe import fit_oe, OutputErrorProblem
 from .polynomials import is_stable
 from .simulate import simulate_output
+from ...sharing import pool_size, share
 
 __all__ = ['METHODS', 'Candidate', 'DelayEstimate', 'Selection', 'estimate_delay',
            'lag_gram', 'profile_losses', 'select_structure']
@@ -44,6 +45,9 @@ def _fit_els(segs, na, nb, nk):
     return fit_armax_els(segs, na=na, nb=nb, nk=nk)
 
 
+#: Samples × grid structures of output error from which a helper process shares the grid
+#: (about 1.7 s of fits here; a helper's start-up is about 0.5 s).
+MIN_SHARED_COST = 1_000_000
 #: Estimators :func:`select_structure` can use, called as ``f(segments, na, nb, nk)``.
 METHODS: dict[str, Callable[[Sequence[Segment], int, int, int], Estimate]] = {
     'oe': _fit_oe, 'arx': _fit_arx, 'gls': _fit_gls, 'els': _fit_els}
@@ -312,13 +316,31 @@ def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
     """
     Return the estimate (or why it failed) of every ``(na, nb, nk)`` of ``grid``.
 
-    Output error is refined from contained structures and neighbouring delays; ``known``
-    fits are reused (``doc/estimators.md``, grid fitting).
+    Output error is refined from contained structures and neighbouring delays of the same
+    ``na`` (``doc/estimators.md``, grid fitting): each ``na`` is a chain of its own, and the
+    chains are shared with a helper process when worth it (:mod:`sensor_comp.sharing`; the
+    fits are the same). ``known`` fits are reused.
     """
     centre = sorted({nk for _, _, nk in grid})
     centre = centre[len(centre) // 2]
-    fits: dict = {key: est for key, est in known.items() if key in set(grid)}
-    for na, nb, nk in sorted(grid, key=lambda k: (k[0], k[1], abs(k[2] - centre), k[2])):
+    chains: dict[int, list] = {}
+    for key in sorted(set(grid), key=lambda k: (k[0], k[1], abs(k[2] - centre), k[2])):
+        chains.setdefault(key[0], []).append(key)
+    jobs = [(segs, method, keys, {k: e for k, e in known.items() if k in keys}, centre)
+            for na, keys in sorted(chains.items(), reverse=True)]  # costliest first
+    processes = 1 if method != 'oe' else pool_size(
+        len(grid) * sum(s.y.size for s in segs), MIN_SHARED_COST)
+    fits: dict = {}
+    for chain in share(_fit_chain, jobs, processes=processes, name='structure grid helper'):
+        fits.update(chain)
+    return fits
+
+
+def _fit_chain(segs, method: str, keys: Sequence[tuple[int, int, int]],
+               known: Mapping[tuple[int, int, int], Estimate], centre: int) -> dict:
+    """Return the fits of one chain of :func:`_fit_grid` (one ``na``), in ``keys``' order."""
+    fits: dict = dict(known)
+    for na, nb, nk in keys:
         if (na, nb, nk) in fits:
             continue
         if method != 'oe':
@@ -336,7 +358,7 @@ def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
             tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk, start=start)))
         good = [est for est in tried if isinstance(est, Estimate)]
         fits[na, nb, nk] = min(good, key=lambda e: e.loss) if good else tried[0]
-    return fits
+    return {key: fits[key] for key in keys}
 
 
 def _attempt(fit: Callable[[], Estimate]) -> Estimate | str:

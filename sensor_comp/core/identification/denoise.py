@@ -10,10 +10,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-import math
-import multiprocessing
-import os
-import threading
 import time
 
 import numpy as np
@@ -21,22 +17,18 @@ from PyEMD import EMD
 
 from ..shots.detection import mad_sigma
 from ...errors import SensorCompError
-from ...worker import Worker
+from ...sharing import pool_size, share
 
-__all__ = ['DEFAULT_FACTOR', 'MAX_SAMPLES', 'MIN_POOL_SAMPLES', 'PROCESSES',
-           'REFERENCE_SIFTING', 'SIFTING', 'DenoiseError', 'DenoiseResult', 'EmdDenoiser',
-           'Sifting', 'denoise_windows', 'emd_denoise', 'pool_size', 'white_noise_energy']
+__all__ = ['DEFAULT_FACTOR', 'MAX_SAMPLES', 'MIN_POOL_SAMPLES', 'REFERENCE_SIFTING',
+           'SIFTING', 'DenoiseError', 'DenoiseResult', 'EmdDenoiser', 'Sifting',
+           'denoise_windows', 'emd_denoise', 'white_noise_energy']
 
 #: Keep IMFs from the first one with more than this multiple of its white-noise energy.
 DEFAULT_FACTOR = 2.0
 #: Longest window EMD is run on (its cost grows faster than the length).
 MAX_SAMPLES = 200_000
-#: Processes sharing the windows of :func:`denoise_windows` (this one included).
-PROCESSES = 2
 #: Fewest samples in all the windows for which helpers are started (~0.7 s of EMD here).
 MIN_POOL_SAMPLES = 500_000
-#: Environment variable overriding :data:`PROCESSES` (1: never start helpers).
-PROCESSES_ENV = 'SENSOR_COMP_EMD_PROCESSES'
 
 
 class DenoiseError(SensorCompError, ValueError):
@@ -191,28 +183,6 @@ def emd_denoise(x: np.ndarray, *, factor: float = DEFAULT_FACTOR,
                          seconds=time.perf_counter() - began)
 
 
-def pool_size(total_samples: int, processes: int | None = None) -> int:
-    """
-    Return how many processes should share windows of ``total_samples`` (1: this one only).
-
-    ``processes`` defaults to ``SENSOR_COMP_EMD_PROCESSES`` or :data:`PROCESSES`, within the
-    cores the load average leaves free.
-    """
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
-    cpus = cpus or 1
-    if processes is None:
-        try:
-            processes = int(os.environ.get(PROCESSES_ENV, PROCESSES))
-        except ValueError:
-            processes = PROCESSES
-        # The load average counts this process: the others leave cpus - load + 1 cores.
-        cpus = min(cpus, math.floor(cpus - os.getloadavg()[0] + 1.5))
-    if (total_samples < MIN_POOL_SAMPLES or multiprocessing.parent_process() is not None
-            or multiprocessing.current_process().daemon):
-        return 1
-    return max(1, min(processes, cpus))
-
-
 def denoise_windows(windows: Sequence[np.ndarray], *, factor: float = DEFAULT_FACTOR,
                     max_samples: int = MAX_SAMPLES, sifting: Sifting = SIFTING,
                     processes: int | None = None,
@@ -220,101 +190,26 @@ def denoise_windows(windows: Sequence[np.ndarray], *, factor: float = DEFAULT_FA
     """
     Denoise many windows, in parallel processes when worth it (``doc/denoising.md``).
 
-    Options as :func:`emd_denoise`; ``processes`` as :func:`pool_size`; ``done`` is called
-    once per window denoised, in this thread. Returns one result per window, in order.
+    Options as :func:`emd_denoise`; ``processes`` as :func:`~sensor_comp.sharing.pool_size`
+    (helpers from :data:`MIN_POOL_SAMPLES` samples in all); ``done`` is called once per
+    window denoised, in this thread. Returns one result per window, in order.
 
     Raises:
         DenoiseError: For the first bad window (in order).
 
     """
     windows = [_check(w, factor, max_samples) for w in windows]
+    size = pool_size(sum(w.size for w in windows), MIN_POOL_SAMPLES, processes)
+    if len(windows) < 3:
+        size = 1
     options = {'factor': factor, 'max_samples': max_samples, 'sifting': sifting}
-    helpers = pool_size(sum(w.size for w in windows), processes) - 1
-    if helpers < 1 or len(windows) < 3:
-        results = []
-        for w in windows:
-            results.append(emd_denoise(w, **options))
-            if done is not None:
-                done()
-        return results
-    return _Pool(windows, options, done).run(helpers)
+    return share(_denoise, [(w, options) for w in windows], processes=size,
+                 name='EMD helper', done=done)
 
 
-class _Pool:
-    """Windows shared between this thread and helper processes fed by feeder threads."""
-
-    def __init__(self, windows: list[np.ndarray], options: dict, done):
-        self.windows, self.options, self.done = windows, options, done
-        self.results: list = [None] * len(windows)
-        self._next = iter(range(len(windows)))
-        self._lock = threading.Lock()
-        self._finished: list[int] = []  # windows done by helpers, not yet reported
-
-    def take(self) -> int | None:
-        """Return the next window to denoise, or None when every one is taken."""
-        with self._lock:
-            return next(self._next, None)
-
-    def run(self, helpers: int) -> list[DenoiseResult]:
-        """Denoise every window with ``helpers`` helper processes; return the results."""
-        workers = [_Helper() for _ in range(helpers)]
-        feeders = [threading.Thread(target=self._feed, args=(w,), daemon=True)
-                   for w in workers]
-        try:
-            for feeder in feeders:
-                feeder.start()
-            while (index := self.take()) is not None:
-                self.results[index] = emd_denoise(self.windows[index], **self.options)
-                self._report(1)
-            for feeder in feeders:
-                feeder.join()
-            self._report(0)
-        finally:
-            for worker in workers:
-                worker.close()
-        # Windows a dead helper left, or whose helper failed: here, in order.
-        for index, result in enumerate(self.results):
-            if not isinstance(result, DenoiseResult):
-                self.results[index] = emd_denoise(self.windows[index], **self.options)
-                self._report(1)
-        return self.results
-
-    def _report(self, own: int) -> None:
-        if self.done is None:
-            return
-        with self._lock:
-            count, self._finished = own + len(self._finished), []
-        for _ in range(count):
-            self.done()
-
-    def _feed(self, worker: _Helper) -> None:
-        while (index := self.take()) is not None:
-            result = worker.call((self.windows[index], self.options))
-            self.results[index] = result
-            if result is None:  # the helper died: the rest goes to this process
-                return
-            with self._lock:
-                self._finished.append(index)
-
-
-class _Helper:
-    """A worker process denoising windows (:mod:`sensor_comp.worker`)."""
-
-    def __init__(self):
-        self._worker = Worker(name='EMD helper', env={PROCESSES_ENV: '1'})
-
-    def call(self, job) -> DenoiseResult | None:
-        """Return the helper's result, or None when it died or failed (redone here)."""
-        window, options = job
-        try:
-            result = self._worker.call(emd_denoise, window, **options)
-        except Exception:  # WorkerDied, or the window's error: raised again here
-            return None
-        return result if isinstance(result, DenoiseResult) else None
-
-    def close(self) -> None:
-        """End the helper (killed if it does not exit)."""
-        self._worker.close()
+def _denoise(window: np.ndarray, options: dict) -> DenoiseResult:
+    """Return :func:`emd_denoise` of one window (a job of :func:`denoise_windows`)."""
+    return emd_denoise(window, **options)
 
 
 class EmdDenoiser:

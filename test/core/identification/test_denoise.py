@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from sensor_comp import sharing
 from sensor_comp.core.identification import denoise
 from sensor_comp.core.identification.denoise import (DenoiseError, denoise_windows, emd_denoise,
-                                                     EmdDenoiser, pool_size, REFERENCE_SIFTING,
+                                                     EmdDenoiser, REFERENCE_SIFTING,
                                                      SIFTING)
 from sensor_comp.streams import G0
 
@@ -135,8 +136,8 @@ def test_windows_in_helper_processes_equal_the_windows_here(monkeypatch):
     windows = [clean + rng.standard_normal(N) * 50.0 for _ in range(4)]
     expected = [emd_denoise(w) for w in windows]
     monkeypatch.setattr(denoise, 'MIN_POOL_SAMPLES', 0)
-    monkeypatch.delenv(denoise.PROCESSES_ENV, raising=False)
-    assert pool_size(10, 2) == min(2, len(os.sched_getaffinity(0)))
+    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
+    assert sharing.pool_size(10, 0, 2) == min(2, len(os.sched_getaffinity(0)))
     calls = []
     results = denoise_windows(windows, processes=2, done=lambda: calls.append(1))
     assert len(calls) == len(windows)
@@ -144,32 +145,3 @@ def test_windows_in_helper_processes_equal_the_windows_here(monkeypatch):
         assert np.array_equal(got.signal, want.signal) and got.removed == want.removed
 
 
-def test_windows_left_by_a_dead_helper_are_denoised_here(monkeypatch):
-    windows = [clean_window() + np.random.default_rng(s).standard_normal(N) for s in range(3)]
-    monkeypatch.setattr(denoise, 'MIN_POOL_SAMPLES', 0)
-
-    class Dead:
-        def call(self, job):
-            return None  # as when the helper process died
-
-        def close(self):
-            pass
-
-    monkeypatch.setattr(denoise, '_Helper', Dead)
-    results = denoise_windows(windows, processes=2)
-    assert [r.removed for r in results] == [emd_denoise(w).removed for w in windows]
-
-
-def test_no_helpers_for_few_samples_on_a_busy_machine_or_when_told(monkeypatch):
-    many = 10 * denoise.MIN_POOL_SAMPLES
-    cpus = len(os.sched_getaffinity(0))
-    monkeypatch.delenv(denoise.PROCESSES_ENV, raising=False)
-    monkeypatch.setattr(os, 'getloadavg', lambda: (1.0, 1.0, 1.0))  # this process alone
-    assert pool_size(denoise.MIN_POOL_SAMPLES - 1) == 1
-    assert pool_size(many) == min(2, cpus)
-    monkeypatch.setattr(os, 'getloadavg', lambda: (cpus + 0.6, 1.0, 1.0))
-    assert pool_size(many) == 1
-    assert pool_size(many, 2) == min(2, cpus)  # asked for explicitly
-    monkeypatch.setattr(os, 'getloadavg', lambda: (1.0, 1.0, 1.0))
-    monkeypatch.setenv(denoise.PROCESSES_ENV, '1')
-    assert pool_size(many) == 1
