@@ -31,9 +31,10 @@ R = 1.5 and 5, and clean rigs in every rate band, cycled (each cycle moves every
 to the next rate band) until ``--cases`` rigs; ``--quick`` is the first cycle, 35 rigs.
 ``--budget MIN`` stops launching cases after that many minutes (the rows so far count);
 ``--case N`` reruns one case of the plan, and ``--summarise`` keeps the last row of a case.
-Then ``--speed N`` speed rigs (:func:`speed_plan`: 10 shots at 1 MS/s) run one at a time in
+First ``--speed N`` speed rigs (:func:`speed_plan`: 10 shots at 1 MS/s) run one at a time in
 this process, as the CLI runs (helper processes may share the work, a pool's worker may not):
-the speed target is timed on them, wall clock on the 2 cores.
+the speed target is timed on them, wall clock on the 2 cores, with the load average at each
+start in its row.
 """
 
 from __future__ import annotations
@@ -269,7 +270,7 @@ def run_case(task: dict, *, via_csv: bool = False) -> dict:
 
     """
     began = time.perf_counter()
-    row = dict(task, status='ok')
+    row = dict(task, status='ok', load=os.getloadavg()[0])
     stage = ['simulate']
     try:
         spec = draw_spec(task['seed'], effect=task['effect'], R=task['R'],
@@ -660,7 +661,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rows, began = [], time.perf_counter()
-    print(f'{len(tasks)} rigs, {args.workers} workers, then {len(speed)} speed rigs; rows to '
+    print(f'{len(speed)} speed rigs, then {len(tasks)} rigs on {args.workers} workers; rows to '
           f'{out}', flush=True)
     with open(out, 'a' if args.append else 'w', encoding='utf-8') as stream:
         def on_row(row):
@@ -668,13 +669,12 @@ def main(argv: list[str] | None = None) -> int:
             stream.write(json.dumps(row) + '\n')
             stream.flush()
             print(_progress(row, len(rows), len(tasks) + len(speed), began), flush=True)
-        budget_s = None if args.budget is None else 60 * args.budget
-        run_pool(tasks, workers=args.workers, timeout=args.timeout, via_csv=args.via_csv,
-                 budget_s=budget_s, on_row=on_row)
-        for task in speed:  # here, alone: helper processes may take the second core
-            if budget_s is not None and time.perf_counter() - began > budget_s:
-                break
+        # First, here and alone (the load average of the pool would keep helpers away):
+        # helper processes may take the second core, as when the CLI runs.
+        for task in speed:
             on_row(run_case(task, via_csv=args.via_csv))
+        run_pool(tasks, workers=args.workers, timeout=args.timeout, via_csv=args.via_csv,
+                 budget_s=None if args.budget is None else 60 * args.budget, on_row=on_row)
     rows.sort(key=lambda r: (bool(r.get('speed')), r['case']))
     total = len(tasks) + len(speed)
     print(f'\n{len(rows)} of {total} rigs in {time.perf_counter() - began:.0f} s\n')
