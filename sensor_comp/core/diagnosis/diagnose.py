@@ -146,6 +146,9 @@ MAINS_HZ = (50.0, 60.0)
 #: a sensor mode is fast (kHz); a slower pole imitates a tail (an amplifier high-pass, a
 #: zero shift), which the base must not absorb while the extensions for it may not.
 SLOWEST_POLE_S = 1e-3
+#: Most damping of the sensor's mode in the lag-free fits: a piezoelectric sensor rings
+#: (ζ of a few %); a pair damped further can trade its damping for a delay or a lag.
+SENSOR_ZETA = 0.2
 #: Least score (fraction of the base residual energy removed) a significant effect needs:
 #: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
 MIN_SCORE = 0.005
@@ -515,7 +518,8 @@ def _base_fits(windows: Sequence[Window], effects: tuple[str, ...], fs: float,
         return free, None
     try:
         held = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            starts=free.denominators, slowest_pole_s=bound, lag_free=True)
+                            starts=free.denominators, slowest_pole_s=bound, lag_free=True,
+                            max_zeta=SENSOR_ZETA)
     except (IdentError, EffectError) as exc:
         notes.append(f'base: numerators free (no lag-free fit: {exc})')
         return free, None
@@ -610,7 +614,8 @@ def _fit_candidate(calibration: Sequence[Window], effects: tuple[str, ...], fs: 
     token = BASE_CONTEXT.set(context)
     try:
         return fit_extended(calibration, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            starts=starts, slowest_pole_s=SLOWEST_POLE_S, lag_free=lag_free)
+                            starts=starts, slowest_pole_s=SLOWEST_POLE_S, lag_free=lag_free,
+                            max_zeta=SENSOR_ZETA if lag_free else None)
     except Exception as exc:  # noqa: B902 - one candidate must not stop the others
         why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
         return f'{type(exc).__name__}{": " + why if why else ""}'
@@ -768,8 +773,8 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
                 f'missing effect: {best.title} ({best.effect}) removes '
                 f'{100 * best.score:.1f} % of the validation residual energy '
                 f'(p = {best.p_value:.2g}); it leaves {best.leftover.describe()}, consistent '
-                f'with the noise', (best.effect,), best.leftover,
-                _share(ctx, best.leftover), ranked)
+                f'with the noise{_alike(best, significant[1:])}', (best.effect,),
+                best.leftover, _share(ctx, best.leftover), ranked)
     second = _second(best, [r for r in ranked if r.relevant and r is not best], ctx)
     if second is not None and second[0].significant:
         other, left = second
@@ -790,6 +795,17 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
             f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
             f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
             f'outside the catalogue remains', (best.effect,), best.leftover, share, ranked)
+
+
+def _alike(best: Ranked, others: Sequence[Ranked]) -> str:
+    """Return a clause naming the other effects that leave noise alike, or ''."""
+    alike = [r for r in others if r.leftover.consistent]
+    if not alike:
+        return ''
+    names = ', '.join(f'{r.title} ({r.effect}, {100 * r.score:.1f} %)' for r in alike)
+    return (f'; {names} also leave{"s" if len(alike) == 1 else ""} only noise: these shots '
+            f'cannot tell {"it" if len(alike) == 1 else "them"} from {best.effect} (check '
+            f'it independently before relying on the name)')
 
 
 def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]

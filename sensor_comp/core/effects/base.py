@@ -180,6 +180,8 @@ class Search:
         grid: Points of the coarse grid before the bounded refinement.
         start: Value used before the first search; default ``low``.
         exclude: A band ``(low, high)`` of values not to try.
+        coupled: The value trades with the poles' damping (a delay with a lag): in a
+            lag-free fit the denominator follows each trial value a few steps.
 
     """
 
@@ -190,6 +192,7 @@ class Search:
     grid: int = 25
     start: float | None = None
     exclude: tuple[float, float] | None = None
+    coupled: bool = False
 
     @property
     def initial(self) -> float:
@@ -224,6 +227,8 @@ class ModelSpec:
         lag_free: Hold every numerator through the mechanics to the mechanics' own lag at DC
             (:mod:`sensor_comp.core.identification.lag_free`): a delay or lead is then an
             effect's, not the sensor path's.
+        max_zeta: Most damping of the model's least damped pole pair (the sensor's mode is
+            lightly damped), or None.
 
     """
 
@@ -238,6 +243,7 @@ class ModelSpec:
     ringing_khz: float | None = None
     slowest_pole_s: float | None = None
     lag_free: bool = False
+    max_zeta: float | None = None
 
     def with_inputs(self, *bases: str) -> ModelSpec:
         """Return the spec with further input channel bases."""

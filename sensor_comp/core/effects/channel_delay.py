@@ -8,6 +8,7 @@ path beyond its mechanics (``doc/effects.md``).
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
 import numpy as np
 
@@ -58,7 +59,8 @@ class ChannelDelay(Effect):
         """Delay every input continuously; numerator on lags 0 … nf."""
         return replace(spec, modifiers=spec.modifiers + (('delay_us', f'{{{KEY}}}'),), nk=0,
                        nb=max(spec.nb, spec.nf + 1),
-                       searches=spec.searches + (Search(KEY, 0.0, MAX_DELAY_US, grid=21),))
+                       searches=spec.searches + (
+                           Search(KEY, 0.0, MAX_DELAY_US, grid=21, coupled=True),))
 
     def physical(self, model: FittedModel, *,
                  covariance: np.ndarray | None = None) -> Physical:
@@ -68,8 +70,14 @@ class ChannelDelay(Effect):
         def delay(a, b):
             return 1e6 * excess_delay_s(model, a, b, row)
 
-        std = (delta_std(delay, model.a, model.b, covariance) if covariance is not None
-               else stored_std(model, self.id, 'delay_us'))
+        # The searched delay's own deviation (stored) adds to the path's: a lag-free path
+        # holds no delay of its own, so its covariance alone would state next to none.
+        searched = stored_std(model, self.id, 'delay_us')
+        std = searched
+        if covariance is not None:
+            std = delta_std(delay, model.a, model.b, covariance)
+            if std is not None and searched is not None:
+                std = math.hypot(std, searched)
         return {'delay_us': (delay(model.a, model.b), std)}
 
     def implausible(self, fit: FitView) -> str | None:

@@ -66,6 +66,11 @@ __all__ = ['DisturbanceFit', 'ExtendedFit', 'Prediction', 'Window', 'fit_extende
 ROUNDS = 2
 #: Most Levenberg-Marquardt iterations of a joint fit.
 MAX_ITERATIONS = 100
+#: Dampings tried for the windows' own ringing as the start of a lightly damped sensor mode.
+RINGING_ZETAS = (0.02, 0.05, 0.1)
+#: Profile Levenberg-Marquardt steps of the denominator at each grid value of a lag-free
+#: search (:meth:`_Fitter.search`).
+SEARCH_STEPS = 2
 #: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
 #: ask for the same ones).
 CHANNEL_CACHE = 4
@@ -347,17 +352,27 @@ def _bound_time_constants(spec: ModelSpec, longest_s: float) -> ModelSpec:
 
 
 def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
-    """Return whether a denominator is stable and no slower than :func:`slowest_pole_s`."""
+    """
+    Return the test of a denominator the fits may take.
+
+    Stable, no pole slower than :func:`slowest_pole_s` and, with ``spec.max_zeta``, a pole
+    pair damped no more than that (the sensor's mode).
+    """
     slowest = slowest_pole_s(spec)
 
     def feasible(a: np.ndarray) -> bool:
         if not max_root_radius(a) < 1.0:
             return False
-        if slowest is None or a.size < 2:
+        if a.size < 2 or (slowest is None and spec.max_zeta is None):
             return True
-        with np.errstate(divide='ignore'):  # a pole at the origin is infinitely fast
-            speeds = np.abs(np.log(np.roots(a).astype(complex))) * fs
-        return bool(np.all(speeds > 1.0 / slowest))
+        with np.errstate(divide='ignore', invalid='ignore'):  # a pole at 0: infinitely fast
+            s = np.log(np.roots(a).astype(complex)) * fs
+        if slowest is not None and not np.all(np.abs(s) > 1.0 / slowest):
+            return False
+        if spec.max_zeta is None:
+            return True
+        pairs = s[s.imag > 0]
+        return bool(pairs.size and np.min(-pairs.real / np.abs(pairs)) <= spec.max_zeta)
     return feasible
 
 
@@ -448,8 +463,9 @@ class _Fitter:
         values of a search, hiding the resonant basin); beyond two poles the pairs are
         padded with poles at the origin, for one pole a grid of real poles is used; and
         the resonant pair retuned to the windows' ringing (:meth:`_ringing_start`). ``base``
-        (denominators of an earlier fit of the same windows) replaces them all. Only
-        feasible denominators (:func:`_feasibility`) are returned.
+        (denominators of an earlier fit of the same windows) replaces them all but, with
+        ``max_zeta``, the retuned pair. Only feasible denominators (:func:`_feasibility`)
+        are returned.
 
         Raises:
             IdentError: When no start can be found.
@@ -458,7 +474,9 @@ class _Fitter:
         problem = self.problem(values)
         firsts = [a for a in base if a.size == problem.nf + 1 and self.feasible(a)]
         if firsts:
-            return firsts
+            if self.spec.max_zeta is not None:  # and the sensor's mode as the windows ring
+                firsts += self._ringing_start(values, RINGING_ZETAS)
+            return _distinct(firsts)
         try:
             a = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
                        nk=problem.nk).a
@@ -466,22 +484,28 @@ class _Fitter:
                 firsts.append(a)
         except IdentError:
             pass
-        # On the windows' early part (pulse and first ringing): a slow tail has not built
-        # up there to pull the grid towards slow pairs.
-        grid = [(self.profile(values, a, early=True), zeta, a)
-                for zeta, a in _grid(problem.nf, self.fs) if self.feasible(a)]
-        grid = [g for g in grid if np.isfinite(g[0])]
-        if grid:
-            firsts.append(min(grid, key=lambda g: g[0])[2])
-            resonant = [g for g in grid if g[1] < 0.5]
-            if resonant:
-                firsts.append(min(resonant, key=lambda g: g[0])[2])
-                firsts += self._ringing_start(values, sorted({g[1] for g in resonant}))
+        firsts += self.grid_starts(values)
         if not firsts:
             raise IdentError(f'no start for a model with nf={problem.nf}: neither output '
                              f'error nor a grid of poles gives a denominator the effects '
                              f'allow')
         return _distinct(firsts)
+
+    def grid_starts(self, values: Mapping[str, float]) -> list[np.ndarray]:
+        """Return the grid's starts of :meth:`starts` (best, best resonant, retuned)."""
+        # On the windows' early part (pulse and first ringing): a slow tail has not built
+        # up there to pull the grid towards slow pairs.
+        grid = [(self.profile(values, a, early=True), zeta, a)
+                for zeta, a in _grid(self.spec.nf, self.fs) if self.feasible(a)]
+        grid = [g for g in grid if np.isfinite(g[0])]
+        if not grid:
+            return []
+        firsts = [min(grid, key=lambda g: g[0])[2]]
+        resonant = [g for g in grid if g[1] < 0.5]
+        if resonant:
+            firsts.append(min(resonant, key=lambda g: g[0])[2])
+            firsts += self._ringing_start(values, sorted({g[1] for g in resonant}))
+        return firsts
 
     def _ringing_start(self, values: Mapping[str, float],
                        zetas: Sequence[float]) -> list[np.ndarray]:
@@ -493,10 +517,15 @@ class _Fitter:
         sensor's mode (bundled case f: an 8 ms high-pass read as 8.2 ms, 5.7× the loss).
         """
         khz = self.spec.ringing_khz
-        if self.spec.nf < 2 or not khz or not khz * 1e3 < 0.45 * self.fs:
+        return self._best_pair(values, [khz] if khz else [], zetas)
+
+    def _best_pair(self, values: Mapping[str, float], khz: Sequence[float],
+                   zetas: Sequence[float]) -> list[np.ndarray]:
+        """Return the feasible pair of the least early loss of ``khz`` × ``zetas``, or none."""
+        if self.spec.nf < 2:
             return []
-        pairs = [np.concatenate([mode_pair(khz, zeta, self.fs), np.zeros(self.spec.nf - 2)])
-                 for zeta in zetas]
+        pairs = [np.concatenate([mode_pair(k, zeta, self.fs), np.zeros(self.spec.nf - 2)])
+                 for k in khz if 0 < k * 1e3 < 0.45 * self.fs for zeta in zetas]
         scored = [(self.profile(values, a, early=True), i) for i, a in enumerate(pairs)
                   if self.feasible(a)]
         scored = [s for s in scored if np.isfinite(s[0])]
@@ -589,7 +618,8 @@ class _Fitter:
         Return the value of ``search`` with the least loss (grid, then bounded).
 
         The grid tries every start denominator; the bounded refinement only the one that
-        was best at the grid's best point (the others lost there already).
+        was best at the grid's best point (the others lost there already). A coupled
+        search in a lag-free fit takes each loss after :meth:`_step` instead.
         """
         def at(x):
             return {**values, search.key: math.exp(x) if search.log else x}
@@ -597,9 +627,15 @@ class _Fitter:
         grid = search.points()
         xs = np.log(grid) if search.log else grid
         table = np.array([[self.profile(at(x), a) for a in starts] for x in xs])
+        chosen = [starts[int(i)] for i in np.argmin(table, axis=1)]
         losses = table.min(axis=1)
+        coupled = search.coupled and self.spec.lag_free
+        if coupled:  # the denominator follows each value a few steps
+            refits = [self._step(at(x), a) for x, a in zip(xs, chosen)]
+            chosen = [a for a, _ in refits]
+            losses = np.minimum(losses, [loss for _, loss in refits])
         best = int(np.argmin(losses))
-        start = starts[int(np.argmin(table[best]))]
+        start = chosen[best]
         low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
         if search.exclude is not None:  # refine on the best point's side of the band
             band = np.log(search.exclude) if search.log else np.asarray(search.exclude)
@@ -607,11 +643,26 @@ class _Fitter:
                 high = min(high, band[0])
             else:
                 low = max(low, band[1])
-        result = optimize.minimize_scalar(lambda x: self.profile(at(x), start),
-                                          bounds=(low, high), method='bounded',
-                                          options={'xatol': 1e-4 * max(high - low, 1e-12)})
+        result = optimize.minimize_scalar(
+            (lambda x: self._step(at(x), start)[1]) if coupled else
+            (lambda x: self.profile(at(x), start)), bounds=(low, high), method='bounded',
+            options={'xatol': 1e-4 * max(high - low, 1e-12)})
         x = result.x if result.fun <= losses[best] else xs[best]
         return float(math.exp(x) if search.log else x)
+
+    def _step(self, values: Mapping[str, float], a: np.ndarray) -> tuple[np.ndarray, float]:
+        """
+        Return the denominator and loss after :data:`SEARCH_STEPS` lag-free profile steps.
+
+        A lag-free search's value and denominator are coupled: at a start denominator that
+        damped itself into a lag, a delay or strain looks worse than none; a few steps let
+        the poles give the lag back (``doc/effects.md``).
+        """
+        result = levenberg_marquardt(
+            lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
+            stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
+            max_iter=SEARCH_STEPS, tol=1e-9)
+        return np.concatenate([[1.0], result.theta]), result.cost
 
     def value_std(self, search: Search, values: Mapping[str, float], f: np.ndarray,
                   variance: float) -> float | None:
@@ -637,7 +688,10 @@ class _Fitter:
                 if not search.low <= v <= search.high:
                     v = value - k * step  # mirror a step beyond a bound (symmetric curvature)
                 values_at.append(v)
-        at = [self.profile({**values, search.key: v}, f) for v in values_at]
+        if search.coupled and self.spec.lag_free:
+            at = [self._step({**values, search.key: v}, f)[1] for v in values_at]
+        else:
+            at = [self.profile({**values, search.key: v}, f) for v in values_at]
         curvature = (at[2] - 2 * at[1] + at[0]) / step ** 2
         if not curvature > 0:
             return None
@@ -656,7 +710,8 @@ def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
 def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,
                  nf: int = 2, nb: int = 2, nk: int = 1,
                  starts: Sequence[np.ndarray] = (),
-                 slowest_pole_s: float | None = None, lag_free: bool = False) -> ExtendedFit:
+                 slowest_pole_s: float | None = None, lag_free: bool = False,
+                 max_zeta: float | None = None) -> ExtendedFit:
     """
     Fit a base output-error model plus effects on shot windows.
 
@@ -676,6 +731,9 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         lag_free: Hold the numerators through the mechanics to the mechanics' own lag at
             DC (:mod:`~sensor_comp.core.identification.lag_free`; the diagnosis does, so
             that a channel delay or base strain is no part of the sensor path).
+        max_zeta: Most damping the least damped pole pair may have (the diagnosis holds
+            its lag-free fits to a lightly damped sensor mode, so that poles cannot damp
+            themselves into a lag); None: no bound.
 
     Returns:
         The fit, with the physical parameters of every effect.
@@ -697,7 +755,7 @@ def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float
         if reason is not None:
             raise EffectError(f'cannot fit {effect.id}: {reason}')
     spec = ModelSpec(nf=nf, nb=nb, nk=nk, fs=fs, ringing_khz=ringing_khz(windows, fs),
-                     slowest_pole_s=slowest_pole_s, lag_free=lag_free)
+                     slowest_pole_s=slowest_pole_s, lag_free=lag_free, max_zeta=max_zeta)
     for effect in chosen:
         spec = effect.extend(spec)
     spec = _bound_time_constants(spec, max(w.y.size for w in windows) / fs)
@@ -753,6 +811,9 @@ def _fit_spec(windows: Sequence[Window], spec: ModelSpec, fs: float,
         trial = dict(values)
         for search in spec.searches:
             trial[search.key] = fitter.search(search, trial, denominators)
+        if spec.lag_free and any(s.coupled for s in spec.searches):
+            # A value that traded with the damping: the mode may lie elsewhere now.
+            denominators = _distinct(denominators + fitter.grid_starts(trial))
         result = fitter.fit(trial, denominators)
         # A later round may wander to a worse basin: keep the round with the lowest loss.
         if best is None or result[0].loss < best[1][0].loss:

@@ -7,6 +7,7 @@ import pytest
 from scipy import signal
 
 from sensor_comp.core.effects.base import dc_delay_s, mechanics_delay_s
+from sensor_comp.core.estimators.oe import OutputErrorProblem
 from sensor_comp.core.identification.extended import fit_extended, Window
 from sensor_comp.core.identification.lag_free import LagFree, target_lag
 from sensor_comp.core.shots.inputs import mode_pair
@@ -91,3 +92,28 @@ def test_a_lead_is_left_to_the_effect_not_taken_by_the_sensor_path():
     assert c == pytest.approx(1e-1 * 2e-6 * 9.80665 * 1e3, rel=0.1)
     b, a = held.estimate.b[0], held.estimate.a
     assert dc_delay_s(a, b, FS) == pytest.approx(mechanics_delay_s(a, FS), abs=1e-9)
+
+
+def test_the_profile_through_the_transform_is_the_expanded_channels_profile():
+    # Filtering commutes with the transform's FIRs: the same least squares, filtered once.
+    a = mode_pair(30.0, 0.07, FS)
+    rng = np.random.default_rng(3)
+    us = [rng.standard_normal((2, 300)) for _ in range(3)]
+    ys = [rng.standard_normal(300) for _ in range(3)]
+    lag = LagFree(['a_z', 'a_x'], a, 3, 0, FS)
+    free = OutputErrorProblem(us, ys, 2, 3, 0)
+    expanded = OutputErrorProblem([lag.expand(u) for u in us], ys, 2, 1, 0)
+    np.testing.assert_allclose(free.profile_residual(a, transform=lag.transform),
+                               expanded.profile_residual(a), rtol=0, atol=1e-10)
+
+
+def test_a_damping_bound_keeps_only_lightly_damped_modes():
+    windows = _windows(lead_s=0.0)
+    fit = fit_extended(windows, effects=(), fs=FS, nf=2, nb=3, nk=0, lag_free=True,
+                       max_zeta=0.2)
+    s = np.log(np.roots(fit.estimate.a).astype(complex)) * FS
+    zeta = -s.real / np.abs(s)
+    assert np.all(zeta <= 0.2 + 1e-9)
+    # The simulated sensor (40 kHz, ζ = 0.05) is inside the bound: found as it is.
+    assert np.abs(s[0]) / (2 * math.pi) == pytest.approx(40e3, rel=0.01)
+    assert zeta[0] == pytest.approx(0.05, abs=0.01)
