@@ -38,6 +38,8 @@ _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 BASE_CONTEXT: ContextVar[Mapping | None] = ContextVar('sensor_comp_base_context', default=None)
 #: A value searched on a log scale within this factor of a bound sits at that bound.
 EDGE_FACTOR = 1.05
+#: An effect's amplitude within this many standard deviations of zero is not resolved.
+AMPLITUDE_Z = 2.0
 #: Physical parameters: name -> (value, standard deviation or None).
 Physical = dict[str, tuple[float, float | None]]
 
@@ -296,6 +298,9 @@ class Effect:
     signature: ClassVar[str] = ''
     #: Physical parameter name -> unit.
     parameters: ClassVar[dict[str, str]] = {}
+    #: The parameter that is zero without the effect (its size): a fit that cannot tell it
+    #: from zero (within :data:`AMPLITUDE_Z` deviations) reads no such effect. None: none.
+    amplitude: ClassVar[str | None] = None
     #: Whether the acceleration drives it (the model predicts it from the acceleration).
     acceleration_driven: ClassVar[bool] = True
     #: Position when several effects extend one spec (lower first).
@@ -359,9 +364,10 @@ class Effect:
         """
         Return why a fit of this effect is no physical reading of it, or None when it is one.
 
-        Unreadable parameters, or a log-searched value at an end of its range or not
-        resolved (its deviation above the value: the data do not tell its decade), mean
-        the extension fits something else (``doc/effects.md``).
+        Unreadable parameters, a log-searched value at an end of its range or not resolved
+        (its deviation above the value: the data do not tell its decade), or an
+        :attr:`amplitude` not told apart from zero mean the extension fits something else
+        (``doc/effects.md``).
         """
         if self.parameters and not fit.parameters(self.id):
             return 'its physical parameters cannot be read from the fitted model'
@@ -375,6 +381,12 @@ class Effect:
             std = fit.value_std.get(search.key)
             if std is not None and std > value:
                 return f'{name} = {value:.4g} ± {std:.2g} is not resolved by these data'
+        if self.amplitude is not None:
+            value, std = fit.parameters(self.id).get(self.amplitude, (None, None))
+            if value is not None and std is not None and math.isfinite(std) and \
+                    not abs(value) > AMPLITUDE_Z * std:
+                return (f'its {self.amplitude} ({value:.3g} ± {std:.2g}) is not told apart '
+                        f'from zero')
         return None
 
     def describe(self) -> str:

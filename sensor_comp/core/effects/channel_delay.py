@@ -52,6 +52,7 @@ class ChannelDelay(Effect):
         'of the output (ε ≈ −delay·dŷ/dt); the residual–input cross-correlation peaks off '
         'lag 0.')
     parameters = {'delay_us': 'µs'}
+    amplitude = 'delay_us'
     order = 0
     probes = (RATE_PROBE,)
 

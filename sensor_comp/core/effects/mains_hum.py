@@ -157,6 +157,7 @@ class MainsHum(Effect):
         '60 Hz (with 150/250 or 180/300 Hz) whose phase runs on from shot to shot; '
         'uncorrelated with the acceleration.')
     parameters = {'freq_hz': 'Hz', 'amplitude_pa': 'Pa'}
+    amplitude = 'amplitude_pa'
     acceleration_driven = False
     order = 70
     probes = tuple(HUM_PROBES.values())

@@ -47,6 +47,7 @@ class NonlinearSensitivity(Effect):
         'amplitude (excess residual ∝ a² across shots); invisible to the residual–input '
         'cross-correlation (even in a) but explained by G·(a|a|).')
     parameters = {'beta_per_g': '1/g'}
+    amplitude = 'beta_per_g'
     order = 20
     probes = (ABS_SQUARE_PROBE,)
 

@@ -72,6 +72,7 @@ class StrainSensitivity(Effect):
         'the fall), proportional to da/dt and steepest at the pulse corners; it grows with '
         'peak/width rather than with the peak alone.')
     parameters = {'pa_per_g_per_ms': 'Pa/(g/ms)'}
+    amplitude = 'pa_per_g_per_ms'
     order = 40
     probes = (JERK_PROBE,)
 

@@ -47,6 +47,7 @@ class TransverseSensitivity(Effect):
         'sensor dynamics and does not correlate with the axial one; it varies from shot to '
         'shot with the lateral motion.')
     parameters = {'ratio': '1', 'angle_deg': 'deg'}
+    amplitude = 'ratio'
     order = 10
     probes = (LATERAL_PROBE,)
 

@@ -65,6 +65,7 @@ class ZeroShift(Effect):
         'ringing has died out, decaying slowly; its size scales with the shot\'s peak '
         'acceleration; the pre-trigger is clean.')
     parameters = {'pa_per_g': 'Pa/g', 'tau_ms': 'ms'}
+    amplitude = 'pa_per_g'
     order = 50
     probes = (OFFSET_PROBE,)
 

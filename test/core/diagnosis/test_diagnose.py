@@ -426,3 +426,19 @@ def test_an_unknown_verdict_is_refused_by_the_demo_and_flagged_by_the_report():
     with pytest.raises(ValueError, match="unknown verdict 'maybe'"):
         next_step(SimpleNamespace(verdict='maybe', explanation='', named=()))
     assert 'class="verdict bad">Verdict: maybe (unknown' in verdict_html({'verdict': 'maybe'})
+
+
+def test_candidates_fitted_in_a_helper_process_rank_as_here(monkeypatch):
+    from sensor_comp.core.diagnosis import diagnose as module
+    effects, fs, noise, accel_noise, _, _ = CASES['nonlinear_sensitivity']
+    (_, calib), (_, valid) = pair(effects, fs, noise, accel_noise)
+    options = {'residual_analysis': False,
+               'candidates': ['second_resonance', 'nonlinear_sensitivity', 'zero_shift']}
+    monkeypatch.setattr(module, 'pool_size', lambda *args: 1)
+    here = diagnose([calib], [valid], **options)
+    monkeypatch.setattr(module, 'pool_size', lambda *args: 2)
+    shared = diagnose([calib], [valid], **options)
+    assert shared.verdict == here.verdict
+    assert [r.effect for r in shared.ranking] == [r.effect for r in here.ranking]
+    np.testing.assert_allclose([r.score for r in shared.ranking],
+                               [r.score for r in here.ranking], rtol=1e-9, atol=1e-12)

@@ -288,3 +288,22 @@ def test_model_file_with_effects_compensates_alike_after_loading(tmp_path):
     first = CompensationFilter.from_model(model).process(acc, pressure)
     second = CompensationFilter.from_model(again).process(acc, pressure)
     assert np.array_equal(first[0], second[0]) and np.array_equal(first[1], second[1])
+
+
+@pytest.mark.parametrize('value, std, resolved', [(0.084, 0.065, False), (-0.3, 0.1, True),
+                                                  (0.2, 0.1, False), (0.21, 0.1, True)])
+def test_an_amplitude_not_told_apart_from_zero_reads_no_effect(value, std, resolved):
+    # A clean rig's strain fit: 0.084 ± 0.065 Pa/(g/ms) removed 13 % of a residual the base
+    # left at the noise and was named; within 2 std of zero it is no reading of an effect.
+    effect = get_effect('nonlinear_sensitivity')
+    fit = SimpleNamespace(spec=ModelSpec(), values={}, value_std={},
+                          parameters=lambda _: {'beta_per_g': (value, std)})
+    why = effect.implausible(fit)
+    assert (why is None) == resolved
+    if not resolved:
+        assert 'not told apart from zero' in why
+
+
+def test_every_effect_with_a_size_names_it_among_its_parameters():
+    for effect in EFFECTS.values():
+        assert effect.amplitude is None or effect.amplitude in effect.parameters
