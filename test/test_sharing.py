@@ -9,7 +9,7 @@ from sensor_comp.worker import WorkerDied
 
 
 def power(base, exponent):
-    """A job: module-level, so a helper process can import it."""
+    """Raise a number to a power: a module-level job, which a helper process can import."""
     if base < 0:
         raise ValueError(f'negative base {base}')
     return base ** exponent

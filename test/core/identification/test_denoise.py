@@ -143,5 +143,3 @@ def test_windows_in_helper_processes_equal_the_windows_here(monkeypatch):
     assert len(calls) == len(windows)
     for got, want in zip(results, expected):
         assert np.array_equal(got.signal, want.signal) and got.removed == want.removed
-
-
