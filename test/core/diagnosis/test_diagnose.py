@@ -364,6 +364,7 @@ def test_a_candidate_whose_fit_fails_is_a_note_and_the_others_go_on(monkeypatch)
         return real(windows, effects=effects, **options)
 
     monkeypatch.setattr(module, 'fit_extended', failing)
+    monkeypatch.setattr(module, 'pool_size', lambda *args: 1)  # a helper has no patch
     effects, fs, noise, accel_noise, _, _ = CASES['nonlinear_sensitivity']
     (_, calib), (_, valid) = pair(effects, fs, noise, accel_noise)
     result = diagnose([calib], [valid], residual_analysis=False,
