@@ -30,6 +30,9 @@ __all__ = ['ARX_MARGIN', 'OutputErrorProblem', 'SteiglitzMcBride', 'fit_oe',
 #: plus one times the minimum found from Steiglitz-McBride (0: only when it is already
 #: better; a start just above it ends in the same minimum, as every rig tried did).
 ARX_MARGIN = 0.0
+#: Most input samples (segments × inputs) for which the filtered inputs of the last ``F``
+#: are kept (32 MB): Levenberg-Marquardt then filters an accepted trial once, not twice.
+KEPT_SAMPLES = 4_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,12 +271,27 @@ class OutputErrorProblem:
             out[self.offsets[s]:self.offsets[s + 1]] = self._output(s, x, b, d)
         return out
 
+    def _inputs(self, f: np.ndarray) -> Iterator[np.ndarray]:
+        """
+        Yield each segment's inputs filtered by ``1/F``, one at a time.
+
+        A problem of at most :data:`KEPT_SAMPLES` input samples keeps them for the last
+        ``F`` (:meth:`filtered`): Levenberg-Marquardt's accepted trial is filtered once for
+        its loss and once more for its Jacobian otherwise. A larger one filters each segment
+        when reached (no whole-length array).
+        """
+        if self.y.size * self.n_inputs <= KEPT_SAMPLES:
+            yield from self.filtered(f)
+            return
+        for u in self.us:
+            yield signal.lfilter([1.0], f, u, axis=-1)
+
     def sse(self, theta: np.ndarray) -> float:
-        """Return ``‖e‖²`` of :meth:`residual`, segment by segment (no whole-length array)."""
+        """Return ``‖e‖²`` of :meth:`residual`, segment by segment (see :meth:`_inputs`)."""
         f, b, d = self.unpack(theta)
         total = 0.0
-        for s, (u, y) in enumerate(zip(self.us, self.ys)):
-            e = y - self._output(s, signal.lfilter([1.0], f, u, axis=-1), b, d)
+        for s, (x, y) in enumerate(zip(self._inputs(f), self.ys)):
+            e = y - self._output(s, x, b, d)
             total += float(e @ e)
         return total
 
@@ -306,10 +324,10 @@ class OutputErrorProblem:
         f, b, d = self.unpack(theta)
         nf, q, p = self.nf, self.n_inputs * self.nb, self.n_parameters
         cost, gram, moment = 0.0, np.zeros((p, p)), np.zeros(p)
-        for s, (u, y) in enumerate(zip(self.us, self.ys)):
+        for s, (x, y) in enumerate(zip(self._inputs(f), self.ys)):
             start, stop = self.offsets[s], self.offsets[s + 1]
             jac = np.empty((stop - start, p), order='F')
-            _lags(jac, nf, signal.lfilter([1.0], f, u, axis=-1), self.nk, self.nb)
+            _lags(jac, nf, x, self.nk, self.nb)
             induced = jac[:, nf:nf + q] @ b.ravel()
             _lags(jac, 0, -signal.lfilter([1.0], f, induced)[None], 1, nf)
             e = y - induced
