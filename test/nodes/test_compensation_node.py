@@ -158,6 +158,11 @@ def test_blocks_before_the_model_are_held_and_a_late_node_gets_the_latched_model
     node = Compensation(context=context, parameter_overrides=params(diagnostics_period=0.1))
     stop = spin(node, probe)
     try:
+        # The held blocks go out the moment the model arrives, and blocks are volatile:
+        # on a slow machine the probe must have found the node's outputs first.
+        wait(lambda: all(node.count_subscribers(f'/rig/{topic}') >= 1 and
+                         probe.count_publishers(f'/rig/{topic}') >= 1
+                         for topic in outputs.blocks), what='the probe to find the outputs')
         play(bag)
         wait(lambda: outputs.samples() == recording.n_samples and
              outputs.samples('pressure/induced') == recording.n_samples,
