@@ -14,7 +14,9 @@ and scored on the VALIDATION shots, which it has never seen:
   amplifier high-pass or a zero shift exactly); and when the base resolves the sensor's
   mode, every numerator through the mechanics lags at DC exactly as the mechanics do
   (:mod:`~sensor_comp.core.identification.lag_free`: a free numerator leads or lags by
-  more, and so takes in a base-strain term or a channel delay, which then are never named).
+  more, and so takes in a base-strain term or a channel delay, which then are never named)
+  and that mode stays lightly damped (:data:`SENSOR_ZETA`: poles damped further trade their
+  damping for a lag).
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
 - **noise**: the base residual before the triggers (a straight line per window and the

@@ -517,15 +517,10 @@ class _Fitter:
         sensor's mode (bundled case f: an 8 ms high-pass read as 8.2 ms, 5.7× the loss).
         """
         khz = self.spec.ringing_khz
-        return self._best_pair(values, [khz] if khz else [], zetas)
-
-    def _best_pair(self, values: Mapping[str, float], khz: Sequence[float],
-                   zetas: Sequence[float]) -> list[np.ndarray]:
-        """Return the feasible pair of the least early loss of ``khz`` × ``zetas``, or none."""
-        if self.spec.nf < 2:
+        if self.spec.nf < 2 or not khz or not khz * 1e3 < 0.45 * self.fs:
             return []
-        pairs = [np.concatenate([mode_pair(k, zeta, self.fs), np.zeros(self.spec.nf - 2)])
-                 for k in khz if 0 < k * 1e3 < 0.45 * self.fs for zeta in zetas]
+        pairs = [np.concatenate([mode_pair(khz, zeta, self.fs), np.zeros(self.spec.nf - 2)])
+                 for zeta in zetas]
         scored = [(self.profile(values, a, early=True), i) for i, a in enumerate(pairs)
                   if self.feasible(a)]
         scored = [s for s in scored if np.isfinite(s[0])]
@@ -575,10 +570,7 @@ class _Fitter:
         method = 'output error from the best start denominator'
         if not self.spec.lag_free:
             return _joint(self.problem(values), a, feasible=self.feasible, method=method)
-        result = levenberg_marquardt(
-            lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
-            stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
-            max_iter=MAX_ITERATIONS, tol=1e-9)
+        result = self._profile_descent(values, a, MAX_ITERATIONS)
         a = np.concatenate([[1.0], result.theta])
         lag = self.lag(values, a)
         estimate, coef, cov = _joint(self.problem(values, a=a), a, feasible=self.feasible,
@@ -589,6 +581,13 @@ class _Fitter:
                         method=f'{method}; lag-free numerators: profile Levenberg-Marquardt '
                                f'over the denominator ({result.evaluations} evaluations)'),
                 coef, cov)
+
+    def _profile_descent(self, values: Mapping[str, float], a: np.ndarray, max_iter: int):
+        """Return Levenberg-Marquardt over the denominator on the lag-free profile loss."""
+        return levenberg_marquardt(
+            lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
+            stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
+            max_iter=max_iter, tol=1e-9)
 
     def _profile_residual(self, values: Mapping[str, float], x: np.ndarray, jacobian: bool):
         """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
@@ -658,10 +657,7 @@ class _Fitter:
         damped itself into a lag, a delay or strain looks worse than none; a few steps let
         the poles give the lag back (``doc/effects.md``).
         """
-        result = levenberg_marquardt(
-            lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
-            stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
-            max_iter=SEARCH_STEPS, tol=1e-9)
+        result = self._profile_descent(values, a, SEARCH_STEPS)
         return np.concatenate([[1.0], result.theta]), result.cost
 
     def value_std(self, search: Search, values: Mapping[str, float], f: np.ndarray,
