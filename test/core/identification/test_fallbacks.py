@@ -164,6 +164,9 @@ def test_an_effect_is_fitted_on_the_base_where_it_reads_as_itself():
     # both modes into nf = 4, where the searched second mode went to 322 kHz with no
     # deviation (the extra poles held the mount mode) although its BIC was lower. The
     # effect is now fitted where it reads as a second mode: on the sensor's two poles.
+    # Why the nf=4 fit lost (it read as no such effect, or it read as one but with a higher
+    # BIC) depends on the basin its search lands in, which differs between CPUs' BLAS
+    # kernels; the outcome may not.
     calib, valid, _ = rig(3941510019, 'second_resonance', 5.0, (1e6, 2e6))
     result = identify([calib], validation=[valid], effects=['second_resonance'])
     assert result.model.orders['na'] == 2
@@ -171,7 +174,8 @@ def test_an_effect_is_fitted_on_the_base_where_it_reads_as_itself():
     for name, truth in (('freq_khz', 8.466), ('zeta', 0.0351), ('gain', -0.439)):
         value, std = entry['parameters'][name], entry['std'][name]
         assert std is not None and abs(value - truth) <= 3 * std, (name, value, std)
-    assert any('reads as no such effect' in note for note in result.notes), result.notes
+    assert any('second_resonance fitted on a base of nf=2' in note
+               for note in result.notes), result.notes
 
 
 def test_an_effect_fit_that_cannot_start_is_one_effect_error(monkeypatch):
