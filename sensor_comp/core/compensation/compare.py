@@ -19,6 +19,8 @@ from ..estimators.metrics import fit_percent
 from ..estimators.polynomials import max_root_radius
 from ..estimators.simulate import simulate_output
 from ..shots.detection import segments, Shot, ShotError
+from ..shots.inputs import peak_reach, reads_peak
+from .recording_start import held_before
 from ...streams import Recording
 
 __all__ = ['Comparison', 'ShotComparison', 'compare', 'format_table']
@@ -111,6 +113,29 @@ def _label(model: LinearModel, position: int) -> str:
     return f'model {position}'
 
 
+def _held_inputs(model: LinearModel, recording: Recording, shots: Sequence[Shot],
+                 measured: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """
+    Return the inputs per shot of a model with a peak channel, its held value read first.
+
+    What the detector held before the recording is unknown: it is the value whose
+    prediction best explains the shots it still reaches
+    (:func:`~sensor_comp.core.compensation.recording_start.held_before`).
+    """
+    inputs = tuple(model.inputs)
+    near = [i for i, shot in enumerate(shots) if shot.start < peak_reach(inputs, recording.fs)]
+    if not near:
+        return [u for u, _ in segments(recording, shots, inputs=inputs)]
+    first = [shots[i] for i in near]
+    top = max(float(np.max(np.abs(recording.acceleration[2, s.window]
+                                  - s.baseline_acceleration[2]))) for s in first)
+    held = held_before(
+        lambda c: simulate_output(model, [u for u, _ in segments(recording, first,
+                                                                 inputs=inputs, held=c)]),
+        [measured[i] for i in near], top)
+    return [u for u, _ in segments(recording, shots, inputs=inputs, held=held)]
+
+
 def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence[Shot], *,
             labels: Sequence[str] | None = None,
             denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Comparison]:
@@ -155,11 +180,14 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     out = []
     for position, (model, label) in enumerate(zip(models, labels)):
         inputs = uses[position]
-        if inputs not in inputs_cache:
-            inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
-        simulated = simulate_output(model, inputs_cache[inputs])
-        if inputs not in uses[position + 1:]:
-            del inputs_cache[inputs]
+        if reads_peak(inputs):  # with what its detector held before the recording
+            simulated = simulate_output(model, _held_inputs(model, recording, shots, measured))
+        else:
+            if inputs not in inputs_cache:
+                inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
+            simulated = simulate_output(model, inputs_cache[inputs])
+            if inputs not in uses[position + 1:]:
+                del inputs_cache[inputs]
         disturbances = window_disturbances(
             model, [s.start for s in shots], [s.baseline_stop - s.start for s in shots],
             [y - yhat for y, yhat in zip(measured, simulated)])

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from .detection import segments
+from .inputs import peak_history
 
 __all__ = ['EARLY_S', 'Window', 'ringing_khz', 'shot_windows']
 
@@ -34,6 +35,9 @@ class Window:
         source: Index of its recording among the windows' recordings.
         label: Name for messages, e.g. ``'calib.mcap shot 3'``.
         end: End of the pulse in window samples (None: unknown).
+        history: What a leaky peak detector of ``|a_z|`` holds of the recording before
+            the window (:func:`~sensor_comp.core.shots.inputs.peak_history`); None: the
+            detector starts from rest, as every other stage does.
 
     """
 
@@ -44,6 +48,7 @@ class Window:
     source: int
     label: str = ''
     end: int | None = None
+    history: np.ndarray | None = field(default=None, repr=False)
 
 
 def shot_windows(sources: Sequence, *,
@@ -62,9 +67,11 @@ def shot_windows(sources: Sequence, *,
         name = getattr(source, 'name', f'recording {index}')
         cut = segments(source.recording, source.shots, inputs=('a_x', 'a_y', 'a_z'),
                        denoise=denoise)
-        for shot, (acc, y) in zip(source.shots, cut):
+        histories = peak_history(source.recording.acceleration[2],
+                                 [shot.start for shot in source.shots])
+        for shot, (acc, y), history in zip(source.shots, cut, histories):
             out.append(Window(acc, y, shot.start, shot.baseline_stop - shot.start, index,
-                              f'{name} shot {shot.index}', shot.end - shot.start))
+                              f'{name} shot {shot.index}', shot.end - shot.start, history))
     return out
 
 
