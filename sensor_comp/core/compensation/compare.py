@@ -19,7 +19,7 @@ from ..estimators.metrics import fit_percent
 from ..estimators.polynomials import max_root_radius
 from ..estimators.simulate import simulate_output
 from ..shots.detection import segments, Shot, ShotError
-from ..shots.inputs import peak_reach, reads_peak
+from ..shots.inputs import held_history, peak_history, peak_reach, reads_peak
 from .recording_start import held_before
 from ...streams import Recording
 
@@ -126,14 +126,18 @@ def _held_inputs(model: LinearModel, recording: Recording, shots: Sequence[Shot]
     near = [i for i, shot in enumerate(shots) if shot.start < peak_reach(inputs, recording.fs)]
     if not near:
         return [u for u, _ in segments(recording, shots, inputs=inputs)]
-    first = [shots[i] for i in near]
-    top = max(float(np.max(np.abs(recording.acceleration[2, s.window]
-                                  - s.baseline_acceleration[2]))) for s in first)
-    held = held_before(
-        lambda c: simulate_output(model, [u for u, _ in segments(recording, first,
-                                                                 inputs=inputs, held=c)]),
-        [measured[i] for i in near], top)
-    return [u for u, _ in segments(recording, shots, inputs=inputs, held=held)]
+    histories = peak_history(recording.acceleration[2], [shot.start for shot in shots])
+
+    def rows(held: float, chosen: Sequence[int]) -> list[np.ndarray]:
+        return [u for u, _ in segments(
+            recording, [shots[i] for i in chosen], inputs=inputs,
+            histories=[held_history(histories[i], shots[i].start, held) for i in chosen])]
+
+    top = max(float(np.max(np.abs(recording.acceleration[2, shots[i].window]
+                                  - shots[i].baseline_acceleration[2]))) for i in near)
+    held = held_before(lambda c: simulate_output(model, rows(c, near)),
+                       [measured[i] for i in near], top)
+    return rows(held, range(len(shots)))
 
 
 def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence[Shot], *,

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .inputs import held_history, input_channels, parse_channel, peak_history, reads_peak
+from .inputs import input_channels, parse_channel, peak_history, reads_peak
 from ...errors import SensorCompError
 from ...streams import G0, Recording
 
@@ -738,22 +738,24 @@ def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, fl
 
 
 def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[str] = ('a_z',),
-             denoise: Callable[[np.ndarray], np.ndarray] | None = None, held: float = 0.0
+             denoise: Callable[[np.ndarray], np.ndarray] | None = None,
+             histories: Sequence[np.ndarray] | None = None
              ) -> list[tuple[np.ndarray, np.ndarray]]:
     """
     Return ``(u, y)`` per shot window, baselines removed: inputs ``(len(inputs), n)``, Pa.
 
     ``denoise`` is applied to each window's pressure (e.g. an ``EmdDenoiser``); None keeps the
     measured pressure. A leaky peak input starts from what it holds of the recording before
-    the window, ``held`` m/s² before the recording's first sample (``doc/model-inputs.md``).
+    each window: ``histories`` per shot (:func:`~.inputs.peak_history`), by default read
+    from the recording, at rest before its first sample (``doc/model-inputs.md``).
     Raises ShotError on a non-finite sample or a window outside the recording.
     """
     if isinstance(recording, WindowedRecording):
         recording.check_inputs(inputs)
-    # A leaky peak detector remembers earlier shocks: it starts from what it holds of them.
-    histories = ([held_history(h, shot.start, held) for h, shot in zip(
-        peak_history(recording.acceleration[2], [shot.start for shot in shots]), shots)]
-        if reads_peak(inputs) else [None] * len(shots))
+    if not reads_peak(inputs):
+        histories = [None] * len(shots)
+    elif histories is None:  # a peak detector remembers earlier shocks
+        histories = peak_history(recording.acceleration[2], [shot.start for shot in shots])
     out = []
     for shot, history in zip(shots, histories):
         if shot.stop > recording.n_samples:
