@@ -89,8 +89,8 @@ def _damped_step(sse: Callable, theta: np.ndarray, cost: float, gram: np.ndarray
 
 def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
                         stable: Callable[[np.ndarray], bool], max_iter: int, tol: float,
-                        normal: Callable | None = None,
-                        sse: Callable | None = None) -> LevenbergMarquardt:
+                        normal: Callable | None = None, sse: Callable | None = None,
+                        steps_only: bool = False) -> LevenbergMarquardt:
     """
     Minimise ``‖e(θ)‖²`` from a stable ``theta``, rejecting steps to unstable parameters.
 
@@ -99,6 +99,9 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
     ``(‖e‖², JᵀJ, Jᵀe)``, and ``sse(theta)``, returning ``‖e‖²``, they are used instead
     (built block by block, neither the errors nor the Jacobian are ever held whole; the
     result's ``e`` and ``jac`` are then None). Stops as ``doc/estimators.md`` says.
+    ``steps_only``: a caller that wants only the point and cost after ``max_iter`` steps
+    (a few steps at each trial value of a search) is spared the last linearisation; the
+    result then has no ``e``, ``jac`` or moments and is not converged.
 
     Raises:
         ValueError: When only one of ``normal`` and ``sse`` is given.
@@ -136,6 +139,10 @@ def levenberg_marquardt(residual: Callable, theta: np.ndarray, *,
         stalled = stalled + 1 if cost - cost_trial <= tol * cost_trial else 0
         theta, cost = trial, cost_trial
         damping = max(damping / 10.0, 1e-12)
+        if steps_only and iterations == max_iter:
+            jac = e = None
+            moments = []
+            break
         jac, e, _, *moments = linearise(theta)
         if stalled == STALL:
             converged = True

@@ -612,12 +612,13 @@ class _Fitter:
                                f'over the denominator ({result.evaluations} evaluations)'),
                 coef, cov)
 
-    def _profile_descent(self, values: Mapping[str, float], a: np.ndarray, max_iter: int):
+    def _profile_descent(self, values: Mapping[str, float], a: np.ndarray, max_iter: int, *,
+                         steps_only: bool = False):
         """Return Levenberg-Marquardt over the denominator on the lag-free profile loss."""
         return levenberg_marquardt(
             lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
             stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
-            max_iter=max_iter, tol=1e-9)
+            max_iter=max_iter, tol=1e-9, steps_only=steps_only)
 
     def _profile_residual(self, values: Mapping[str, float], x: np.ndarray, jacobian: bool):
         """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
@@ -687,7 +688,7 @@ class _Fitter:
         damped itself into a lag, a delay or strain looks worse than none; a few steps let
         the poles give the lag back (``doc/effects.md``).
         """
-        result = self._profile_descent(values, a, SEARCH_STEPS)
+        result = self._profile_descent(values, a, SEARCH_STEPS, steps_only=True)
         return np.concatenate([[1.0], result.theta]), result.cost
 
     def value_std(self, search: Search, values: Mapping[str, float], f: np.ndarray,
