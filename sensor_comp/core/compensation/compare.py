@@ -19,8 +19,6 @@ from ..estimators.metrics import fit_percent
 from ..estimators.polynomials import max_root_radius
 from ..estimators.simulate import simulate_output
 from ..shots.detection import segments, Shot, ShotError
-from ..shots.inputs import held_history, peak_history, peak_reach, reads_peak
-from .recording_start import held_before
 from ...streams import Recording
 
 __all__ = ['Comparison', 'ShotComparison', 'compare', 'format_table']
@@ -113,33 +111,6 @@ def _label(model: LinearModel, position: int) -> str:
     return f'model {position}'
 
 
-def _held_inputs(model: LinearModel, recording: Recording, shots: Sequence[Shot],
-                 measured: Sequence[np.ndarray]) -> list[np.ndarray]:
-    """
-    Return the inputs per shot of a model with a peak channel, its held value read first.
-
-    What the detector held before the recording is unknown: it is the value whose
-    prediction best explains the shots it still reaches
-    (:func:`~sensor_comp.core.compensation.recording_start.held_before`).
-    """
-    inputs = tuple(model.inputs)
-    near = [i for i, shot in enumerate(shots) if shot.start < peak_reach(inputs, recording.fs)]
-    if not near:
-        return [u for u, _ in segments(recording, shots, inputs=inputs)]
-    histories = peak_history(recording.acceleration[2], [shot.start for shot in shots])
-
-    def rows(held: float, chosen: Sequence[int]) -> list[np.ndarray]:
-        return [u for u, _ in segments(
-            recording, [shots[i] for i in chosen], inputs=inputs,
-            histories=[held_history(histories[i], shots[i].start, held) for i in chosen])]
-
-    top = max(float(np.max(np.abs(recording.acceleration[2, shots[i].window]
-                                  - shots[i].baseline_acceleration[2]))) for i in near)
-    held = held_before(lambda c: simulate_output(model, rows(c, near)),
-                       [measured[i] for i in near], top)
-    return rows(held, range(len(shots)))
-
-
 def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence[Shot], *,
             labels: Sequence[str] | None = None,
             denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Comparison]:
@@ -184,14 +155,11 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     out = []
     for position, (model, label) in enumerate(zip(models, labels)):
         inputs = uses[position]
-        if reads_peak(inputs):  # with what its detector held before the recording
-            simulated = simulate_output(model, _held_inputs(model, recording, shots, measured))
-        else:
-            if inputs not in inputs_cache:
-                inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
-            simulated = simulate_output(model, inputs_cache[inputs])
-            if inputs not in uses[position + 1:]:
-                del inputs_cache[inputs]
+        if inputs not in inputs_cache:
+            inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
+        simulated = simulate_output(model, inputs_cache[inputs])
+        if inputs not in uses[position + 1:]:
+            del inputs_cache[inputs]
         disturbances = window_disturbances(
             model, [s.start for s in shots], [s.baseline_stop - s.start for s in shots],
             [y - yhat for y, yhat in zip(measured, simulated)])

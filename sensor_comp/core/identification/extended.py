@@ -54,8 +54,7 @@ from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
-from ..compensation.recording_start import held_before
-from ..shots.inputs import held_history, input_channels, mode_pair, peak_reach, reads_peak
+from ..shots.inputs import input_channels, mode_pair
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
@@ -201,11 +200,10 @@ class ExtendedFit:
         The acceleration-driven part is simulated from rest in each window. A disturbance's
         phase belongs to its recording, so its coefficients are estimated again by least
         squares on these windows' residual (per recording, the frequency kept from the
-        fit); :attr:`Prediction.disturbance_parameters` counts them. So is what a leaky peak
-        detector held before each recording (:meth:`held`).
+        fit); :attr:`Prediction.disturbance_parameters` counts them.
         """
-        induced = simulate_output(self.estimate,
-                                  _channels(windows, self.inputs, self.fs, self.held(windows)))
+        us = _channels(windows, self.inputs, self.fs)
+        induced = simulate_output(self.estimate, us)
         if self.disturbance is None:
             return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0)
         sources = 1 + max(w.source for w in windows)
@@ -217,37 +215,9 @@ class ExtendedFit:
         coef[used] = _lstsq(phi[:, used], target)[0]
         return Prediction(induced, [c.T @ coef for c in cols], int(used.size))
 
-    def held(self, windows: Sequence[Window]) -> dict[int, float]:
-        """
-        Return per recording what the model's peak detector held before its first sample.
 
-        Unknown, so read from the recording's windows
-        (:func:`~sensor_comp.core.compensation.recording_start.held_before`); empty for a
-        model without a peak channel.
-        """
-        if not reads_peak(self.inputs):
-            return {}
-        reach, out = peak_reach(self.inputs, self.fs), {}
-        for source in sorted({w.source for w in windows}):
-            mine = [w for w in windows if w.source == source and w.history is not None
-                    and w.start < reach]
-            if mine:
-                out[source] = held_before(
-                    lambda c, mine=mine, source=source: simulate_output(
-                        self.estimate, _channels(mine, self.inputs, self.fs, {source: c})),
-                    [w.y for w in mine], max(float(np.max(np.abs(w.acceleration[2])))
-                                             for w in mine))
-        return out
-
-
-def _channels(windows: Sequence[Window], names: Sequence[str], fs: float,
-              held: Mapping[int, float] | None = None) -> list[np.ndarray]:
-    """Return each window's input rows; ``held``: a peak detector's value per recording."""
-    held = held or {}
-    return [input_channels(names, w.acceleration, {}, fs=fs, baseline=w.baseline,
-                           history=None if w.history is None else
-                           held_history(w.history, w.start, held.get(w.source, 0.0)))
-            for w in windows]
+def _channels(windows: Sequence[Window], names: Sequence[str], fs: float) -> list[np.ndarray]:
+    return [input_channels(names, w.acceleration, {}, fs=fs) for w in windows]
 
 
 def _columns(window: Window, effects: Sequence[Effect], choices: Sequence[Mapping],

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .inputs import input_channels, parse_channel, peak_history, reads_peak
+from .inputs import input_channels, parse_channel
 from ...errors import SensorCompError
 from ...streams import G0, Recording
 
@@ -738,26 +738,18 @@ def shots_from_windows(recording: Recording, windows_s: Iterable[tuple[float, fl
 
 
 def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[str] = ('a_z',),
-             denoise: Callable[[np.ndarray], np.ndarray] | None = None,
-             histories: Sequence[np.ndarray] | None = None
+             denoise: Callable[[np.ndarray], np.ndarray] | None = None
              ) -> list[tuple[np.ndarray, np.ndarray]]:
     """
     Return ``(u, y)`` per shot window, baselines removed: inputs ``(len(inputs), n)``, Pa.
 
     ``denoise`` is applied to each window's pressure (e.g. an ``EmdDenoiser``); None keeps the
-    measured pressure. A leaky peak input starts from what it holds of the recording before
-    each window: ``histories`` per shot (:func:`~.inputs.peak_history`), by default read
-    from the recording, at rest before its first sample (``doc/model-inputs.md``).
-    Raises ShotError on a non-finite sample or a window outside the recording.
+    measured pressure. Raises ShotError on a non-finite sample or a window outside the recording.
     """
     if isinstance(recording, WindowedRecording):
         recording.check_inputs(inputs)
-    if not reads_peak(inputs):
-        histories = [None] * len(shots)
-    elif histories is None:  # a peak detector remembers earlier shocks
-        histories = peak_history(recording.acceleration[2], [shot.start for shot in shots])
     out = []
-    for shot, history in zip(shots, histories):
+    for shot in shots:
         if shot.stop > recording.n_samples:
             raise ShotError(f'shot {shot.index}: window ends at sample {shot.stop}, beyond '
                             f'the {recording.n_samples}-sample recording')
@@ -770,8 +762,7 @@ def segments(recording: Recording, shots: Sequence[Shot], *, inputs: Sequence[st
             raise ShotError(f'shot {shot.index}: {"; ".join(_non_finite(recording, shot.window))}'
                             f'; leave the shot out or give windows that avoid the gap '
                             f'(--window START STOP)')
-        u = input_channels(inputs, acc, {}, fs=recording.fs, history=history,
-                           baseline=shot.baseline_stop - shot.start)
+        u = input_channels(inputs, acc, {}, fs=recording.fs)
         out.append((u, y if denoise is None else np.asarray(denoise(y), dtype=np.float64)))
     return out
 

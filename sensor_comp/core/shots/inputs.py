@@ -18,17 +18,11 @@ from scipy import signal
 
 from ...errors import SensorCompError
 
-__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'carried_peak',
-           'fractional_delay', 'held_history', 'input_channels', 'mode_pair', 'needs_rate',
-           'parse_channel', 'peak_history', 'peak_reach', 'reads_peak']
+__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'fractional_delay',
+           'input_channels', 'mode_pair', 'needs_rate', 'parse_channel']
 
 #: Row of each axis in an acceleration block.
 AXES = {'x': 0, 'y': 1, 'z': 2}
-
-#: Decay times after which a held value no longer counts (e^-15: 3e-7 of it).
-REACH_TAUS = 15.0
-#: Samples :func:`peak_history` reads at a time.
-HISTORY_CHUNK = 1 << 20
 
 #: Order of the Lagrange fractional-delay interpolator (order + 1 taps).
 LAGRANGE_ORDER = 7
@@ -140,17 +134,6 @@ def mode_pair(freq_khz: float, zeta: float, fs: float) -> np.ndarray:
     return np.array([1.0, -2 * z.real, abs(z) ** 2])
 
 
-def reads_peak(names: Sequence[str]) -> bool:
-    """Return whether any of ``names`` is a leaky peak channel (a detector with memory)."""
-    return any(parse_channel(name).kind == 'peak' for name in names)
-
-
-def peak_reach(names: Sequence[str], fs: float) -> int:
-    """Return how many samples a value a peak channel of ``names`` holds still counts."""
-    taus = [parse_channel(name).tau_ms for name in names if parse_channel(name).kind == 'peak']
-    return math.ceil(REACH_TAUS * max(taus, default=0.0) * 1e-3 * fs)
-
-
 def needs_rate(names: Sequence[str]) -> bool:
     """Return whether any of ``names`` needs the sample rate; raise InputError on unknown ones."""
     return any(parse_channel(name).needs_rate for name in names)
@@ -245,78 +228,13 @@ def _leaky_peak(tau_ms: float, fs: float):
     return stage
 
 
-def peak_history(axial: np.ndarray, starts: Sequence[int]) -> list[np.ndarray]:
-    """
-    Return, per window start, what a leaky peak detector of ``|axial|`` holds of the past.
-
-    For each of ``starts`` a ``(2, m)`` array: distances before the start (samples, ≥ 1) and
-    magnitudes of the samples before it that can be the detector's value at the start for
-    some decay time, the upper hull of ``(position, log |a|)`` (:func:`carried_peak`). One
-    pass over the recording; non-finite samples count as zero.
-    """
-    out: list[np.ndarray] = [np.empty((2, 0))] * len(starts)
-    position, log_value = np.empty(0, dtype=np.int64), np.empty(0)
-    last = 0
-    for i in np.argsort(starts, kind='stable'):
-        stop = int(starts[i])
-        for begin in range(last, stop, HISTORY_CHUNK):  # bounded temporaries on long gaps
-            end = min(begin + HISTORY_CHUNK, stop)
-            part = np.abs(np.nan_to_num(np.asarray(axial[begin:end], dtype=np.float64),
-                                        nan=0.0, posinf=0.0, neginf=0.0))[::-1]
-            running = np.maximum.accumulate(part)
-            # Records seen from the end backwards: what a detector of any decay can hold.
-            record = np.flatnonzero(np.concatenate(([True], part[1:] > running[:-1]))
-                                    & (part > 0))[::-1]
-            keep = log_value > (math.log(running[-1]) if running[-1] > 0 else -math.inf)
-            position = np.concatenate((position[keep], end - 1 - record))
-            log_value = np.concatenate((log_value[keep], np.log(part[record])))
-            position, log_value = _upper_hull(position, log_value)
-        last = max(last, stop)
-        out[i] = np.vstack((stop - position, np.exp(log_value)))
-    return out
-
-
-def _upper_hull(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return the upper convex hull of points sorted by ``x`` with ``y`` falling (chain)."""
-    keep: list[int] = []
-    for i in range(x.size):
-        while len(keep) >= 2:
-            j, k = keep[-2], keep[-1]
-            if (y[k] - y[j]) * (x[i] - x[j]) > (y[i] - y[j]) * (x[k] - x[j]):
-                break
-            keep.pop()
-        keep.append(i)
-    return x[keep], y[keep]
-
-
-def held_history(history: np.ndarray, start: int, held: float) -> np.ndarray:
-    """Return a window's ``history`` with the detector holding ``held`` before its recording."""
-    if not held > 0:
-        return history
-    return np.hstack((history, [[start + 1.0], [held]]))
-
-
-def carried_peak(history: np.ndarray, tau_ms: float, fs: float) -> float:
-    """Return a leaky peak detector's value just before a window, from its ``history``."""
-    if history.shape[1] == 0:
-        return 0.0
-    log_rho = -1e3 / (tau_ms * fs)
-    return float(np.exp(np.max(np.log(history[1]) + (history[0] - 1) * log_rho)))
-
-
 def input_channels(names: Sequence[str], acceleration: np.ndarray,
-                   state: MutableMapping[str, object], *, fs: float | None = None,
-                   history: np.ndarray | None = None, baseline: int = 0) -> np.ndarray:
+                   state: MutableMapping[str, object], *, fs: float | None = None) -> np.ndarray:
     """
     Return the ``(len(names), w)`` model input rows for one ``(3, w)`` acceleration block.
 
     ``state`` is carried across the blocks of one stream and updated in place (a fresh dict
     per stream or window); ``fs`` is needed by derivatives, time constants and delays.
-
-    A shot window (``history`` of :func:`peak_history` given) starts every stage from rest
-    but a leaky peak detector: its memory of earlier shocks is what it models, so it starts
-    from the value the stream would carry, and the pre-trigger mean over ``baseline``
-    samples is removed from it as from the window's pressure (``doc/model-inputs.md``).
 
     Raises:
         InputError: On an unknown name, a block that is not ``(3, w)``, or an input that
@@ -346,12 +264,7 @@ def input_channels(names: Sequence[str], acceleration: np.ndarray,
                 x = np.diff(a, prepend=previous) * fs
                 state[key] = a[-1]
         else:
-            key = f'{name}|peak'
-            if history is not None and key not in state:
-                state[key] = carried_peak(history, channel.tau_ms, fs)
-            x = _runs(a, state, key, _leaky_peak(channel.tau_ms, fs))
-            if history is not None and baseline > 0:
-                x -= np.mean(x[:baseline])
+            x = _runs(a, state, f'{name}|peak', _leaky_peak(channel.tau_ms, fs))
         for index, (modifier, value) in enumerate(channel.modifiers):
             if modifier == 'delay_us':
                 stage = _fir(fractional_delay(value * 1e-6 * fs))

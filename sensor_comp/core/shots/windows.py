@@ -14,7 +14,6 @@ import math
 import numpy as np
 
 from .detection import segments
-from .inputs import peak_history
 
 __all__ = ['EARLY_S', 'Window', 'ringing_khz', 'shot_windows']
 
@@ -35,9 +34,6 @@ class Window:
         source: Index of its recording among the windows' recordings.
         label: Name for messages, e.g. ``'calib.mcap shot 3'``.
         end: End of the pulse in window samples (None: unknown).
-        history: What a leaky peak detector of ``|a_z|`` holds of the recording before
-            the window (:func:`~sensor_comp.core.shots.inputs.peak_history`); None: the
-            detector starts from rest, as every other stage does.
 
     """
 
@@ -48,7 +44,6 @@ class Window:
     source: int
     label: str = ''
     end: int | None = None
-    history: np.ndarray | None = field(default=None, repr=False)
 
 
 def shot_windows(sources: Sequence, *,
@@ -67,11 +62,9 @@ def shot_windows(sources: Sequence, *,
         name = getattr(source, 'name', f'recording {index}')
         cut = segments(source.recording, source.shots, inputs=('a_x', 'a_y', 'a_z'),
                        denoise=denoise)
-        histories = peak_history(source.recording.acceleration[2],
-                                 [shot.start for shot in source.shots])
-        for shot, (acc, y), history in zip(source.shots, cut, histories):
+        for shot, (acc, y) in zip(source.shots, cut):
             out.append(Window(acc, y, shot.start, shot.baseline_stop - shot.start, index,
-                              f'{name} shot {shot.index}', shot.end - shot.start, history))
+                              f'{name} shot {shot.index}', shot.end - shot.start))
     return out
 
 
