@@ -68,6 +68,30 @@ def test_levenberg_marquardt_on_blocks_ends_where_the_whole_jacobian_does():
     np.testing.assert_allclose(blocks.normal[0], whole.normal[0], rtol=1e-10)
 
 
+def test_steps_only_ends_at_the_same_point_without_the_last_linearisation():
+    problem = _problem()
+    start = np.array([1.0, -1.0, 0.3])
+    theta = np.concatenate([start[1:], problem.linear(start)])
+    calls = []
+
+    def residual(th, jacobian=False):
+        calls.append(jacobian)
+        return problem.residual(th, jacobian)
+
+    runs = []
+    for steps_only in (False, True):
+        calls.clear()
+        runs.append((levenberg_marquardt(residual, theta, max_iter=2, tol=1e-14,
+                                         stable=lambda th: is_stable(problem.unpack(th)[0]),
+                                         steps_only=steps_only), calls.count(True)))
+    (full, full_jacobians), (steps, step_jacobians) = runs
+    assert full.iterations == steps.iterations == 2 and not steps.converged
+    np.testing.assert_array_equal(steps.theta, full.theta)
+    assert steps.cost == full.cost
+    assert steps.jac is None and steps.e is None and steps.normal == ()
+    assert step_jacobians == full_jacobians - 1 == 2
+
+
 @pytest.mark.parametrize('exact', [True, False])
 def test_steiglitz_mcbride_on_blocks_is_that_of_the_whole_regression(exact):
     problem = _problem()
