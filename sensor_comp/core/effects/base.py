@@ -184,6 +184,8 @@ class Search:
         exclude: A band ``(low, high)`` of values not to try.
         coupled: The value trades with the poles' damping (a delay with a lag): in a
             lag-free fit the denominator follows each trial value a few steps.
+        lag_unit_s: The value is a lag in these seconds per unit: when the sensor's mode
+            sits at its damping bound, the lag its poles took adds to the deviation.
 
     """
 
@@ -195,6 +197,7 @@ class Search:
     start: float | None = None
     exclude: tuple[float, float] | None = None
     coupled: bool = False
+    lag_unit_s: float | None = None
 
     @property
     def initial(self) -> float:

@@ -61,7 +61,8 @@ class ChannelDelay(Effect):
         return replace(spec, modifiers=spec.modifiers + (('delay_us', f'{{{KEY}}}'),), nk=0,
                        nb=max(spec.nb, spec.nf + 1),
                        searches=spec.searches + (
-                           Search(KEY, 0.0, MAX_DELAY_US, grid=21, coupled=True),))
+                           Search(KEY, 0.0, MAX_DELAY_US, grid=21, coupled=True,
+                                  lag_unit_s=1e-6),))
 
     def physical(self, model: FittedModel, *,
                  covariance: np.ndarray | None = None) -> Physical:
