@@ -89,7 +89,8 @@ from scipy import stats
 from ..effects import Effect, EffectError, EFFECTS, get_effect, Outcome, Physical
 from ..effects.base import BASE_CONTEXT
 from ..effects.mains_hum import line_columns
-from ..identification.extended import ExtendedFit, fit_extended, Prediction, shot_windows, Window
+from ..identification.extended import (ExtendedFit, fit_extended, Prediction, SENSOR_ZETA,
+                                       shot_windows, SLOWEST_POLE_S, Window)
 from ..estimators import estimate_delay, fit_percent, IdentError
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
@@ -144,13 +145,6 @@ MODE_ZETA = 0.2
 BEFORE_SHARE, BEFORE_Z = 0.5, 4.0
 #: Mains frequencies whose lines are removed from the noise before the triggers, Hz.
 MAINS_HZ = (50.0, 60.0)
-#: Slowest time constant the sensor's own poles may take in every fit of the diagnosis, s:
-#: a sensor mode is fast (kHz); a slower pole imitates a tail (an amplifier high-pass, a
-#: zero shift), which the base must not absorb while the extensions for it may not.
-SLOWEST_POLE_S = 1e-3
-#: Most damping of the sensor's mode in the lag-free fits: a piezoelectric sensor rings
-#: (ζ of a few %); a pair damped further can trade its damping for a delay or a lag.
-SENSOR_ZETA = 0.2
 #: Least excess, in noise energies, of the lag-free base over the free-numerator base that
 #: is a lead or a lag the free numerators took, not their shaping of the accelerometer noise
 #: (a few hundredths: 1.14 against 1.11 on a clean 213 kS/s rig). An effect leaving as

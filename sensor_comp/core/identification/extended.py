@@ -59,9 +59,17 @@ from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
 
-__all__ = ['DisturbanceFit', 'ExtendedFit', 'Prediction', 'Window', 'fit_extended',
-           'ringing_khz', 'robust_uncertainty', 'shot_windows']
+__all__ = ['SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit', 'ExtendedFit', 'Prediction',
+           'Window', 'fit_extended', 'ringing_khz', 'robust_uncertainty', 'shot_windows']
 
+#: Slowest time constant the sensor's own poles may take in the diagnosis's fits (and a
+#: lag-free fit), s: a sensor mode is fast (kHz); a slower pole imitates a tail (an
+#: amplifier high-pass, a zero shift), which the base must not absorb while the extensions
+#: for it may not.
+SLOWEST_POLE_S = 1e-3
+#: Most damping of the sensor's mode in the lag-free fits: a piezoelectric sensor rings
+#: (ζ of a few %); a pair damped further can trade its damping for a delay or a lag.
+SENSOR_ZETA = 0.2
 #: Rounds of (scalar searches, refit) when the spec has 1-D parameters.
 ROUNDS = 2
 #: Most Levenberg-Marquardt iterations of a joint fit.

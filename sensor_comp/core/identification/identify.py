@@ -18,7 +18,7 @@ import numpy as np
 from ..compensation.compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
-from .extended import fit_extended, robust_uncertainty
+from .extended import fit_extended, robust_uncertainty, SENSOR_ZETA, SLOWEST_POLE_S
 from ..shots.windows import shot_windows
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                           fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
@@ -498,6 +498,13 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
               for nf, fit in fits.items()}
     chosen = min([nf for nf in fits if doubts[nf] is None] or fits,
                  key=lambda nf: _bic(fits[nf]))
+    held = None if doubts[chosen] is None else _lag_free(windows, effects, sources.fs)
+    if held is not None:
+        if data.denoiser is not None:
+            held = robust_uncertainty(held, measured)
+        return held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
+                      f'numerators, a lightly damped mode): with free numerators, on every '
+                      f'base tried, it read as no such effect ({doubts[chosen]})']
     notes = []
     if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
         fits[chosen] = robust_uncertainty(fits[chosen], measured)
@@ -516,6 +523,25 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                          f'instead of the nf={base.na} chosen without them: BIC lower by '
                          f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} ({why})')
     return fits[chosen], notes
+
+
+def _lag_free(windows, effects: Sequence[str], fs: float):
+    """
+    Return the effects fitted as the diagnosis fits them, or None (no fit, or a doubt).
+
+    Free numerators can take a lag or a lead into the sensor's own path (a channel delay,
+    base strain), where the effect then reads as nothing (a 41 µs delay read 9 ± 9 µs);
+    numerators held to the lag of the sensor's poles leave it to the effect
+    (``doc/effects.md``, lag-free numerators).
+    """
+    try:
+        fit = fit_extended(windows, effects=effects, fs=fs, nf=2, nb=3, nk=0,
+                           slowest_pole_s=SLOWEST_POLE_S, lag_free=True, max_zeta=SENSOR_ZETA)
+    except (IdentError, EffectError):
+        return None
+    if any(e.implausible(fit) is not None for e in ordered(effects)):
+        return None
+    return fit
 
 
 def _bic(fit) -> float:

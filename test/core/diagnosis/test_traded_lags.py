@@ -1,5 +1,6 @@
 """
-A delay the sensor's poles could trade for damping is named, on rigs of another simulator.
+A delay the sensor's poles could trade for damping is named and read, on rigs of another
+simulator.
 
 The rig (:mod:`bench.independent_rig`, drawn as the generalisation benchmark's case 20):
 383 kS/s, a 59.8 kHz sensor (ζ = 0.067) behind a 38 kHz anti-alias filter, the pressure
@@ -9,7 +10,9 @@ lightly damped mode and lets the denominator follow each trial delay.
 
 The second rig (250 kS/s, a 47.5 kHz mode behind a 25 kHz anti-alias filter, the pressure
 60 µs late, R = 1.5) hides its mode: free numerators take the whole delay to the noise, and
-the lag-free poles damp themselves to their bound and keep 3 µs of it.
+the lag-free poles damp themselves to their bound and keep 3 µs of it. ``identify
+--effect channel_delay`` with free numerators read it as 9 ± 22 µs (no such effect), so it
+fits it as the diagnosis does.
 """
 
 import math
@@ -18,7 +21,7 @@ import pytest
 
 from bench.independent_rig import draw_spec, simulate
 from sensor_comp.core.diagnosis.diagnose import diagnose
-from sensor_comp.core.identification.identify import ShotSource
+from sensor_comp.core.identification.identify import identify, ShotSource
 
 SEED = 1013476761
 #: The rig whose mode hides behind the anti-alias filter.
@@ -76,3 +79,15 @@ def test_a_delay_free_numerators_absorb_is_named_with_the_lag_its_poles_took(hid
     # few per cent of the delay), and the truth lies within two of it.
     assert std is not None and 0.01 * true < std < 0.1 * true
     assert abs(value - true) <= 2 * std
+
+
+def test_identify_reads_that_delay_as_the_diagnosis_does_and_says_how(hidden_mode_rig):
+    truth, (calibration, validation) = hidden_mode_rig
+    result = identify([calibration], validation=[validation], effects=['channel_delay'])
+    entry = result.model.effects[0]
+    value, std = entry['parameters']['delay_us'], entry['std']['delay_us']
+    true = truth['parameters']['delay_us']
+    # Resolved (free numerators gave 9 ± 22 µs) and the truth within two deviations.
+    assert std is not None and std < 0.15 * true
+    assert abs(value - true) <= 2 * std
+    assert any('as the diagnosis fits it' in note for note in result.notes), result.notes
