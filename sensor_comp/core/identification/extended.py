@@ -81,8 +81,9 @@ RINGING_ZETAS = (0.02, 0.05, 0.1)
 SEARCH_STEPS = 2
 #: A mode damped at least this share of the fits' damping bound sits at the bound.
 BOUND_SHARE = 0.999
-#: Tolerance of a coupled search's polish, fraction of its grid spacing.
-POLISH_TOLERANCE = 1e-3
+#: Tolerance of a coupled search's polish, and its first step each side of the value,
+#: fractions of the search's grid spacing.
+POLISH_TOLERANCE, POLISH_STEP = 1e-3, 1e-2
 #: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
 #: ask for the same ones).
 CHANNEL_CACHE = 4
@@ -675,20 +676,33 @@ class _Fitter:
         value = values[search.key]
         spacing = (search.high - search.low) / max(search.grid - 1, 1)
         low, high = max(search.low, value - spacing), min(search.high, value + spacing)
-        last = [a]
 
-        def loss(v):
-            result = self._profile_descent({**values, search.key: v}, last[0], MAX_ITERATIONS)
-            last[0] = np.concatenate([[1.0], result.theta])
-            return result.cost
+        def loss(v, a0):
+            result = self._profile_descent({**values, search.key: v}, a0, MAX_ITERATIONS)
+            return result.cost, np.concatenate([[1.0], result.theta])
 
-        at_value = loss(value)
-        start = last[0]
-        found = optimize.minimize_scalar(loss, bounds=(low, high), method='bounded',
+        at_value, start = loss(value, a)
+        # Most searches end within a step of the converged minimum (a value at 0 on a rig
+        # without a delay): three losses say so, and their parabola places it.
+        step = POLISH_STEP * spacing
+        down, up = (loss(v, start)[0] if low <= v <= high else math.inf
+                    for v in (value - step, value + step))
+        if min(down, up) >= at_value:
+            curvature = up - 2 * at_value + down
+            shift = 0.0 if not math.isfinite(curvature) or curvature <= 0 else \
+                0.5 * step * (down - up) / curvature
+            return value + float(np.clip(shift, -step, step)), start
+        last = [start]
+
+        def traced(v):
+            cost, last[0] = loss(v, last[0])
+            return cost
+
+        found = optimize.minimize_scalar(traced, bounds=(low, high), method='bounded',
                                          options={'xatol': POLISH_TOLERANCE * spacing})
-        if not found.fun < at_value:
+        if not found.fun < min(at_value, down, up):
             return value, start
-        loss(found.x)
+        traced(found.x)
         return float(found.x), last[0]
 
     def _step(self, values: Mapping[str, float], a: np.ndarray) -> tuple[np.ndarray, float]:
