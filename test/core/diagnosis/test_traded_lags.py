@@ -1,6 +1,5 @@
 """
-A delay the sensor's poles could trade for damping is named and read, on rigs of another
-simulator.
+A delay the sensor's poles could trade for damping is named and read, on independent rigs.
 
 The rig (:mod:`bench.independent_rig`, drawn as the generalisation benchmark's case 20):
 383 kS/s, a 59.8 kHz sensor (ζ = 0.067) behind a 38 kHz anti-alias filter, the pressure
