@@ -670,8 +670,10 @@ class _Fitter:
 
         The search's few steps per value leave the denominator short of following it, which
         biases the value (a 41 µs delay read as 38.6 µs at 1 MS/s) and bends the loss the
-        deviation is taken from; a bounded search within a grid step of the value, the
-        denominator descended to convergence at each trial from the last one, ends both.
+        deviation is taken from. The loss with the denominator descended to convergence
+        at the value and :data:`POLISH_STEP` each side places a value that is already its
+        least; otherwise a bounded search within a grid step of the value takes it at each
+        trial, the denominator warm-started from the last one.
         """
         value = values[search.key]
         spacing = (search.high - search.low) / max(search.grid - 1, 1)
