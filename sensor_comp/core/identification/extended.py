@@ -378,15 +378,26 @@ def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
             return False
         if a.size < 2 or (slowest is None and spec.max_zeta is None):
             return True
-        with np.errstate(divide='ignore', invalid='ignore'):  # a pole at 0: infinitely fast
-            s = np.log(np.roots(a).astype(complex)) * fs
+        s = _continuous_poles(a, fs)
         if slowest is not None and not np.all(np.abs(s) > 1.0 / slowest):
             return False
         if spec.max_zeta is None:
             return True
-        pairs = s[s.imag > 0]
-        return bool(pairs.size and np.min(-pairs.real / np.abs(pairs)) <= spec.max_zeta)
+        least = _least_damping(s)
+        return least is not None and least <= spec.max_zeta
     return feasible
+
+
+def _continuous_poles(a: np.ndarray, fs: float) -> np.ndarray:
+    """Return the s-plane poles of the denominator ``a`` at the rate ``fs``."""
+    with np.errstate(divide='ignore', invalid='ignore'):  # a pole at 0: infinitely fast
+        return np.log(np.roots(a).astype(complex)) * fs
+
+
+def _least_damping(s: np.ndarray) -> float | None:
+    """Return the least damping ratio of the pole pairs among ``s``, or None (no pair)."""
+    pairs = s[s.imag > 0]
+    return float(np.min(-pairs.real / np.abs(pairs))) if pairs.size else None
 
 
 class _Fitter:
@@ -767,11 +778,8 @@ def _with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: flo
     if (std is None or not search.lag_unit_s or not spec.lag_free or spec.max_zeta is None
             or f.size < 3):
         return std
-    with np.errstate(divide='ignore', invalid='ignore'):
-        s = np.log(np.roots(f).astype(complex)) * fs
-    pairs = s[s.imag > 0]
-    least = np.min(-pairs.real / np.abs(pairs)) if pairs.size else 0.0
-    if least < BOUND_SHARE * spec.max_zeta:
+    least = _least_damping(_continuous_poles(f, fs))
+    if least is None or least < BOUND_SHARE * spec.max_zeta:
         return std
     return math.hypot(std, max(mechanics_delay_s(f, fs), 0.0) / search.lag_unit_s)
 

@@ -500,29 +500,33 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                  key=lambda nf: _bic(fits[nf]))
     held = None if doubts[chosen] is None else _lag_free(windows, effects, sources.fs)
     if held is not None:
-        if data.denoiser is not None:
-            held = robust_uncertainty(held, measured)
-        return held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
-                      f'numerators, a lightly damped mode): with free numerators, on every '
-                      f'base tried, it read as no such effect ({doubts[chosen]})']
-    notes = []
+        fit, notes = held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
+                            f'numerators, a lightly damped mode): with free numerators, on '
+                            f'every base tried, it read as no such effect ({doubts[chosen]})']
+    else:
+        fit, notes = fits[chosen], _base_notes(names, base.na, chosen, fits, failed, doubts)
     if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
-        fits[chosen] = robust_uncertainty(fits[chosen], measured)
-    if chosen != base.na:
-        if base.na in failed:
-            notes.append(f'fallback: {names} fitted on a base of nf={chosen} instead of '
-                         f'nf={base.na}, which could not be fitted ({failed[base.na]})')
-        elif doubts[base.na] is not None and doubts[chosen] is None:
-            notes.append(f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
-                         f'instead of the nf={base.na} chosen without them, on which the '
-                         f'effect reads as no such effect ({doubts[base.na]})')
-        else:
-            why = ('the extra poles imitated the effect' if base.na > 2 else
-                   'with the effect in, the mode needs both poles')
-            notes.append(f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
-                         f'instead of the nf={base.na} chosen without them: BIC lower by '
-                         f'{_bic(fits[base.na]) - _bic(fits[chosen]):.1f} ({why})')
-    return fits[chosen], notes
+        fit = robust_uncertainty(fit, measured)
+    return fit, notes
+
+
+def _base_notes(names: str, asked: int, chosen: int, fits: dict, failed: dict,
+                doubts: dict) -> list[str]:
+    """Return why the effects went on a base of ``chosen`` poles, not ``asked`` (or [])."""
+    if chosen == asked:
+        return []
+    if asked in failed:
+        return [f'fallback: {names} fitted on a base of nf={chosen} instead of '
+                f'nf={asked}, which could not be fitted ({failed[asked]})']
+    if doubts[asked] is not None and doubts[chosen] is None:
+        return [f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
+                f'instead of the nf={asked} chosen without them, on which the '
+                f'effect reads as no such effect ({doubts[asked]})']
+    why = ('the extra poles imitated the effect' if asked > 2 else
+           'with the effect in, the mode needs both poles')
+    return [f'{names} fitted on a base of nf={chosen} (the sensor\'s own mode) '
+            f'instead of the nf={asked} chosen without them: BIC lower by '
+            f'{_bic(fits[asked]) - _bic(fits[chosen]):.1f} ({why})']
 
 
 def _lag_free(windows, effects: Sequence[str], fs: float):
