@@ -683,7 +683,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
         evidence = Effect.evidence(effect, None, outcome)
     units = {k: effect.parameters.get(k, '') for k in parameters}
-    doubt = effect.implausible(fit)
+    doubt = effect.implausible(fit) or effect.rival(analysis)
     if doubt is None and not effect.acceleration_driven:
         doubt = _after_triggers(prediction, residual, ctx)
     if doubt is not None:

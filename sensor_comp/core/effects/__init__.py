@@ -15,8 +15,8 @@ from .base import (Effect, EffectError, ModelSpec, Outcome, Physical, registry, 
                    Search)
 from .probe import ProbeData, ProbeSpec
 
-__all__ = ['EFFECTS', 'PROBES', 'Effect', 'EffectError', 'ModelSpec', 'Outcome', 'Physical',
-           'ProbeData', 'ProbeSpec', 'ResidualView', 'Search', 'describe_effects',
+__all__ = ['EFFECTS', 'PROBES', 'RIVALS', 'Effect', 'EffectError', 'ModelSpec', 'Outcome',
+           'Physical', 'ProbeData', 'ProbeSpec', 'ResidualView', 'Search', 'describe_effects',
            'disturbance_trackers', 'get_effect', 'ordered', 'probe_owner']
 
 for _module in pkgutil.iter_modules(__path__):
@@ -27,10 +27,10 @@ EFFECTS: dict[str, Effect] = {
     cls.id: cls() for cls in sorted(registry().values(), key=lambda c: (c.order, c.id))}
 
 
-def _declared_probes() -> dict[str, ProbeSpec]:
+def _declared_probes(kind: str) -> dict[str, ProbeSpec]:
     found: dict[str, ProbeSpec] = {}
     for effect in EFFECTS.values():
-        for probe in effect.probes:
+        for probe in getattr(effect, kind):
             if probe.name in found:
                 raise TypeError(f'residual probe {probe.name!r} is declared twice')
             found[probe.name] = probe
@@ -38,7 +38,9 @@ def _declared_probes() -> dict[str, ProbeSpec]:
 
 
 #: The residual probes the effects declare, by name, in signal-path order.
-PROBES: dict[str, ProbeSpec] = _declared_probes()
+PROBES: dict[str, ProbeSpec] = _declared_probes('probes')
+#: The probes of forms outside the catalogue that pass for an effect (``Effect.rivals``).
+RIVALS: dict[str, ProbeSpec] = _declared_probes('rivals')
 
 
 def probe_owner(name: str) -> str | None:

@@ -24,11 +24,11 @@ if TYPE_CHECKING:
     from ..shots.windows import Window
 
 __all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FitView', 'FittedModel',
-           'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView', 'Search',
-           'SegmentView', 'SpectrumView', 'TrendView', 'centroid', 'dc_delay_s', 'delta_std',
-           'effect_entry', 'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
-           'parameters_text', 'probe_of', 'registry', 'row_of', 'segment_of', 'sentence',
-           'static_gain', 'stored_std', 'tail_share']
+           'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView',
+           'RIVAL_MARGIN', 'RIVAL_SHARE', 'Search', 'SegmentView', 'SpectrumView', 'TrendView',
+           'centroid', 'dc_delay_s', 'delta_std', 'effect_entry', 'entry_of', 'excess_delay_s',
+           'mechanics_delay_s', 'modifier_value', 'parameters_text', 'probe_of', 'registry',
+           'row_of', 'segment_of', 'sentence', 'static_gain', 'stored_std', 'tail_share']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -40,6 +40,12 @@ BASE_CONTEXT: ContextVar[Mapping | None] = ContextVar('sensor_comp_base_context'
 EDGE_FACTOR = 1.05
 #: An effect's amplitude within this many standard deviations of zero is not resolved.
 AMPLITUDE_Z = 2.0
+#: A rival probe must explain this many noise variances (Wald χ²) more of the base residual
+#: than the effect's own probe, and :data:`RIVAL_SHARE` more, to make the effect doubtful:
+#: a 5-sigma margin, and one above the share by which the two forms' shapes differ over a
+#: pulse (``a|a|`` against ``a³``: 2.4 % of their energy), which a model misfit of a
+#: percent must not cross.
+RIVAL_MARGIN, RIVAL_SHARE = 25.0, 0.02
 #: Physical parameters: name -> (value, standard deviation or None).
 Physical = dict[str, tuple[float, float | None]]
 
@@ -93,6 +99,10 @@ class ProbeView(Protocol):
 
     @property
     def fraction(self) -> float:
+        ...
+
+    @property
+    def statistic(self) -> float:
         ...
 
 
@@ -310,6 +320,9 @@ class Effect:
     order: ClassVar[int] = 50
     #: The residual probes that are its signature (:mod:`sensor_comp.core.effects.probe`).
     probes: ClassVar[tuple[ProbeSpec, ...]] = ()
+    #: Probes of forms outside the catalogue that pass for this effect (a cubic drive for
+    #: the ``a|a|`` one): see :meth:`rival`.
+    rivals: ClassVar[tuple[ProbeSpec, ...]] = ()
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -390,6 +403,27 @@ class Effect:
                     not abs(value) > AMPLITUDE_Z * std:
                 return (f'its {self.amplitude} ({value:.3g} ± {std:.2g}) is not told apart '
                         f'from zero')
+        return None
+
+    def rival(self, analysis: ResidualView | None) -> str | None:
+        """
+        Return why the residual follows another form than this effect's, or None.
+
+        A rival probe that explains more of the base residual than the effect's first probe,
+        by :data:`RIVAL_MARGIN` noise variances and :data:`RIVAL_SHARE`, says the effect's
+        extension only passes for it (``doc/effects.md``): the diagnosis then does not count
+        the effect.
+        """
+        own = probe_of(analysis, self.probes[0]) if self.probes else None
+        if own is None:
+            return None
+        for spec in self.rivals:
+            other = probe_of(analysis, spec)
+            if other is not None and \
+                    other.statistic > (1 + RIVAL_SHARE) * own.statistic + RIVAL_MARGIN:
+                return (f'the base residual follows {spec.words} more closely than '
+                        f'{self.probes[0].words} (Wald χ² {other.statistic:.3g} against '
+                        f'{own.statistic:.3g}): another form than this effect\'s')
         return None
 
     def describe(self) -> str:

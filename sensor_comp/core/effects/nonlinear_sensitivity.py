@@ -13,7 +13,7 @@ from .base import (delta_std, Effect, EffectError, FittedModel, ModelSpec, Outco
 from .probe import ProbeData, ProbeSpec
 from ...streams import G0
 
-__all__ = ['ABS_SQUARE_PROBE', 'NonlinearSensitivity']
+__all__ = ['ABS_SQUARE_PROBE', 'CUBE_PROBE', 'NonlinearSensitivity']
 
 CHANNEL = 'a_z_abs_a_z'
 
@@ -27,6 +27,18 @@ ABS_SQUARE_PROBE = ProbeSpec(
     'abs_square', tests='G·(a_z|a_z|): sensitivity changing with the load',
     words='G·(a|a|) (sensitivity changing with load)', regressors=_abs_square,
     reading=lambda c, _: {'beta_per_g': G0 * c[0]})
+
+
+def _cube(data: ProbeData, _) -> list[np.ndarray]:
+    return [g[np.newaxis] for g in data.through([a ** 3 / G0 for a in data.axial])]
+
+
+#: A cubic drive ``a + κ a³``: over a pulse its shape differs from ``a|a|`` by a few percent
+#: of the effect's energy, which a strong effect resolves (the rival of ``a|a|``).
+CUBE_PROBE = ProbeSpec(
+    'cube', tests='G·a_z³: a cubic drive (a nonlinearity of another form than a|a|)',
+    words='G·a³ (a cubic drive)', regressors=_cube,
+    reading=lambda c, _: {'kappa_per_g2': G0 * c[0]})
 
 
 class NonlinearSensitivity(Effect):
@@ -50,6 +62,7 @@ class NonlinearSensitivity(Effect):
     amplitude = 'beta_per_g'
     order = 20
     probes = (ABS_SQUARE_PROBE,)
+    rivals = (CUBE_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the ``a_z·|a_z|`` input through the common dynamics."""

@@ -5,7 +5,7 @@ from dataclasses import fields, is_dataclass
 import numpy as np
 import pytest
 
-from sensor_comp.core.effects import EFFECTS, PROBES, probe_owner
+from sensor_comp.core.effects import EFFECTS, PROBES, probe_owner, RIVALS
 from sensor_comp.core.effects import base
 from sensor_comp.core.effects.mains_hum import HARMONICS
 from sensor_comp.core.identification.extended import ExtendedFit
@@ -45,8 +45,11 @@ def test_every_probe_belongs_to_exactly_one_effect_or_is_generic():
     declared = [p.name for effect in EFFECTS.values() for p in effect.probes]
     assert len(set(declared)) == len(declared) == len(PROBES)
     assert not set(generic) & set(declared)
-    assert sorted(residual.PROBES) == sorted(generic + declared)
-    assert all(probe_owner(name) is None for name in generic)
+    rivals = [p.name for effect in EFFECTS.values() for p in effect.rivals]
+    assert len(set(rivals)) == len(rivals) == len(RIVALS)
+    assert not set(rivals) & set(generic + declared)
+    assert sorted(residual.PROBES) == sorted(generic + declared + rivals)
+    assert all(probe_owner(name) is None for name in generic + rivals)
     for effect in EFFECTS.values():
         assert all(probe_owner(p.name) == effect.id for p in effect.probes)
 

@@ -17,7 +17,7 @@ from scipy import stats
 from .dynamics import Dynamics, through
 from .results import Probe
 from .statistics import ALPHA
-from ...effects import ProbeData, PROBES as EFFECT_PROBES, ProbeSpec
+from ...effects import ProbeData, PROBES as EFFECT_PROBES, ProbeSpec, RIVALS
 from ...effects.probe import PROBE_TIME_CONSTANTS_MS
 from ..noise_floor import NoiseModel
 from ...shots.detection import Shot
@@ -49,9 +49,11 @@ GENERIC_PROBES = (
               words='G·a² (quadratic nonlinearity)', regressors=_squares,
               reading=lambda c, _: {'beta_per_g': G0 * c[0]}),
 )
-#: Every probe run, by name: ``gain``, the effects' in signal-path order, the other generic.
+#: Every probe run, by name: ``gain``, the effects' in signal-path order, the other generic,
+#: the effects' rivals.
 ALL_PROBES: dict[str, ProbeSpec] = {
-    p.name: p for p in (GENERIC_PROBES[0], *EFFECT_PROBES.values(), *GENERIC_PROBES[1:])}
+    p.name: p for p in (GENERIC_PROBES[0], *EFFECT_PROBES.values(), *GENERIC_PROBES[1:],
+                        *RIVALS.values())}
 #: Probe name → what it tests (regressor; G = the model's a_z dynamics).
 PROBES = {name: p.tests for name, p in ALL_PROBES.items()}
 
