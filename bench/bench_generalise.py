@@ -269,6 +269,8 @@ def run_case(task: dict, *, via_csv: bool = False) -> dict:
         exception type and message).
 
     """
+    from sensor_comp.sharing import close_idle
+    close_idle()  # no helper kept warm by the rig before: each rig pays its own start-ups
     began = time.perf_counter()
     row = dict(task, status='ok', load=os.getloadavg()[0])
     stage = ['simulate']

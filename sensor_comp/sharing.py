@@ -7,27 +7,37 @@ calls of one module-level function. :func:`share` runs them here and in helper
 caller's ``__main__``) and returns the results in order, each equal to the call made here.
 A helper that dies or fails leaves its call to this process, so a failing call raises here,
 as it would without helpers. When helpers are worth starting: :func:`pool_size`
-(``doc/outputs-and-workers.md``). No ROS import.
+(``doc/outputs-and-workers.md``). A helper stays for the next share for :data:`IDLE_S`: the
+shares of one identification and diagnosis follow each other within seconds, and a start-up
+(a fresh interpreter importing numpy and scipy) costs about a second. No ROS import.
 """
 
 from __future__ import annotations
 
+import atexit
 from collections.abc import Callable, Sequence
 import math
 import multiprocessing
 import os
 import threading
+import time
 
 from .worker import Worker
 
-__all__ = ['PROCESSES', 'PROCESSES_ENV', 'pool_size', 'share']
+__all__ = ['IDLE_S', 'PROCESSES', 'PROCESSES_ENV', 'close_idle', 'pool_size', 'share']
 
 #: Processes sharing the calls (this one included).
 PROCESSES = 2
 #: Environment variable overriding :data:`PROCESSES` (1: never start helpers).
 PROCESSES_ENV = 'SENSOR_COMP_PROCESSES'
+#: Seconds an idle helper is kept for the next share before it is closed.
+IDLE_S = 20.0
 #: Not a result (a helper's call failed or the helper died): redone here.
 _MISSING = object()
+#: Idle helpers as ``(time they went idle, helper)``, oldest first, and who guards them.
+_idle: list[tuple[float, Worker]] = []
+_idle_lock = threading.Lock()
+_reaper: list[threading.Timer] = []
 
 
 def pool_size(cost: float, least: float, processes: int | None = None) -> int:
@@ -101,9 +111,10 @@ class _Pool:
 
     def run(self, helpers: int, name: str) -> list:
         """Run every job with ``helpers`` helper processes; return the results."""
-        workers = [Worker(name=name, env={PROCESSES_ENV: '1'}) for _ in range(helpers)]
+        workers = _take(helpers, name)
         feeders = [threading.Thread(target=self._feed, args=(w,), daemon=True)
                    for w in workers]
+        finished = False
         try:
             for feeder in feeders:
                 feeder.start()
@@ -112,10 +123,14 @@ class _Pool:
                 self._report(1)
             for feeder in feeders:
                 feeder.join()
+            finished = True
             self._report(0)
         finally:
-            for worker in workers:
-                worker.close()
+            if finished:
+                _release(workers)
+            else:  # interrupted: a helper may be mid-call, so none is kept
+                for worker in workers:
+                    worker.close()
         # Jobs a dead helper left, or whose call failed there: here, in order.
         for index, result in enumerate(self.results):
             if result is _MISSING:
@@ -139,3 +154,70 @@ class _Pool:
                 return
             with self._lock:
                 self._finished += 1
+
+
+def _take(count: int, name: str) -> list[Worker]:
+    """Return ``count`` helpers named ``name``: idle ones still running first, then new."""
+    taken, dead = [], []
+    with _idle_lock:
+        while _idle and len(taken) < count:
+            worker = _idle.pop()[1]
+            (taken if worker.alive else dead).append(worker)
+    for worker in dead:
+        worker.close()
+    for worker in taken:
+        worker.name = name
+    return taken + [Worker(name=name, env={PROCESSES_ENV: '1'})
+                    for _ in range(count - len(taken))]
+
+
+def _release(workers: Sequence[Worker]) -> None:
+    """Keep the helpers for the next share; each is closed after :data:`IDLE_S` idle."""
+    now = time.monotonic()
+    with _idle_lock:
+        _idle.extend((now, worker) for worker in workers)
+        _schedule(now)
+
+
+def _schedule(now: float) -> None:
+    """Set the reaper for when the oldest idle helper's time is up (the lock held)."""
+    for timer in _reaper:
+        timer.cancel()
+    _reaper.clear()
+    if _idle:
+        timer = threading.Timer(max(_idle[0][0] + IDLE_S - now, 0.0), _reap)
+        timer.daemon = True
+        timer.start()
+        _reaper.append(timer)
+
+
+def _reap() -> None:
+    """Close the helpers idle for :data:`IDLE_S`; come back for the others."""
+    now = time.monotonic()
+    with _idle_lock:
+        old = [worker for since, worker in _idle if now - since >= IDLE_S]
+        _idle[:] = [(since, worker) for since, worker in _idle if now - since < IDLE_S]
+        _schedule(now)
+    for worker in old:
+        worker.close()
+
+
+def close_idle() -> None:
+    """Close every idle helper now (at exit, or to free their memory at once)."""
+    with _idle_lock:
+        workers = [worker for _, worker in _idle]
+        _idle.clear()
+    for worker in workers:
+        worker.close()
+
+
+def _forget_in_child() -> None:
+    """A forked child shares the parent's pipes to its helpers: it must not use or close them."""
+    global _idle_lock
+    _idle_lock = threading.Lock()  # another thread may have held it at the fork
+    _idle.clear()
+    _reaper.clear()
+
+
+atexit.register(close_idle)
+os.register_at_fork(after_in_child=_forget_in_child)

@@ -1,6 +1,7 @@
 """Calls shared with helper processes: the same results, in order, whatever befalls a helper."""
 
 import os
+import time
 
 import pytest
 
@@ -13,6 +14,12 @@ def power(base, exponent):
     if base < 0:
         raise ValueError(f'negative base {base}')
     return base ** exponent
+
+
+def slow_pid(seconds):
+    """Return the process id after a pause: a job long enough for a helper to take some."""
+    time.sleep(seconds)
+    return os.getpid()
 
 
 def test_results_in_order_and_each_job_reported_once():
@@ -30,6 +37,8 @@ def test_a_failing_job_raises_here_as_without_helpers():
 
 def test_jobs_a_dead_helper_leaves_are_run_here(monkeypatch):
     class Dead:
+        alive = False
+
         def __init__(self, **_):
             pass
 
@@ -55,3 +64,30 @@ def test_no_helpers_for_small_work_on_a_busy_machine_or_when_told(monkeypatch):
     monkeypatch.setattr(os, 'getloadavg', lambda: (1.0, 1.0, 1.0))
     monkeypatch.setenv(sharing.PROCESSES_ENV, '1')
     assert sharing.pool_size(10, 10) == 1
+
+
+def test_a_helper_serves_the_next_share_then_exits_when_idle(monkeypatch):
+    sharing.close_idle()
+    assert sharing.share(power, [(b, 2) for b in range(4)], processes=2) == [0, 1, 4, 9]
+    helpers = [worker.pid for _, worker in sharing._idle]
+    assert len(helpers) == 1
+    # The next share within IDLE_S takes the same helper (no new start-up), and its jobs
+    # run there once it is free: a slow job leaves it some.
+    pids = sharing.share(slow_pid, [(0.3,)] * 12, processes=2)
+    assert [worker.pid for _, worker in sharing._idle] == helpers
+    assert set(pids) <= {os.getpid(), helpers[0]}
+    monkeypatch.setattr(sharing, 'IDLE_S', 0.2)
+    sharing.share(power, [(b, 2) for b in range(4)], processes=2)  # idle again, for 0.2 s
+    deadline = time.monotonic() + 10.0
+    while _running(helpers[0]) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not sharing._idle
+    assert not _running(helpers[0])  # closed and reaped: no such process
+
+
+def _running(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
