@@ -44,10 +44,11 @@ def pool_size(cost: float, least: float, processes: int | None = None) -> int:
     """
     Return how many processes should share work of size ``cost`` (1: this one only).
 
-    Helpers start only when ``cost`` reaches ``least`` (their start-up, ~0.5 s, must pay),
+    Helpers start only when ``cost`` reaches ``least`` (their start-up, ~1 s, must pay),
     not inside a ``multiprocessing`` worker or daemon (the caller already runs in parallel),
-    and within the cores the load average leaves free. ``processes`` defaults to
-    ``SENSOR_COMP_PROCESSES`` or :data:`PROCESSES` (given, the load is not consulted).
+    and within the cores other programs leave free (:func:`_busy_elsewhere`). ``processes``
+    defaults to ``SENSOR_COMP_PROCESSES`` or :data:`PROCESSES` (given, the load is not
+    consulted).
     """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
     cpus = cpus or 1
@@ -56,12 +57,53 @@ def pool_size(cost: float, least: float, processes: int | None = None) -> int:
             processes = int(os.environ.get(PROCESSES_ENV, PROCESSES))
         except ValueError:
             processes = PROCESSES
-        # The load average counts this process: the others leave cpus - load + 1 cores.
-        cpus = min(cpus, math.floor(cpus - os.getloadavg()[0] + 1.5))
+        busy = _busy_elsewhere()
+        if busy is None:  # no /proc: the load average, which counts this process
+            cpus = min(cpus, math.floor(cpus - os.getloadavg()[0] + 1.5))
+        else:
+            cpus = min(cpus, cpus - busy)
     if (cost < least or multiprocessing.parent_process() is not None
             or multiprocessing.current_process().daemon):
         return 1
     return max(1, min(processes, cpus))
+
+
+def _busy_elsewhere() -> int | None:
+    """
+    Return how many threads of other programs are runnable now, or None without ``/proc``.
+
+    Not the load average: that minute-long mean counts this process's own helpers of the
+    last shares, so a run that shared once would see its own past load and share no more
+    (measured: helpers refused from a load of 1.5 on, for most of a diagnosis). A runnable
+    thread (``R``: running or waiting for a core) of a process that is neither this one nor
+    its child is counted; a CPU-bound program is runnable whenever it is sampled.
+    """
+    me = os.getpid()
+    try:
+        pids = [int(name) for name in os.listdir('/proc') if name.isdigit()]
+    except OSError:
+        return None
+    busy = 0
+    for pid in pids:
+        if pid == me:
+            continue
+        try:
+            with open(f'/proc/{pid}/stat', 'rb') as stream:
+                fields = stream.read().rpartition(b')')[2].split()
+            if int(fields[1]) == me:  # a helper of ours
+                continue
+            busy += sum(_runnable(pid, task) for task in os.listdir(f'/proc/{pid}/task'))
+        except (OSError, ValueError, IndexError):  # the process ended meanwhile
+            continue
+    return busy
+
+
+def _runnable(pid: int, task: str) -> bool:
+    try:
+        with open(f'/proc/{pid}/task/{task}/stat', 'rb') as stream:
+            return stream.read().rpartition(b')')[2].split()[0] == b'R'
+    except (OSError, IndexError):
+        return False
 
 
 def share(function: Callable, jobs: Sequence[tuple], *, processes: int = 1, name: str = 'helper',

@@ -1,6 +1,9 @@
 """Calls shared with helper processes: the same results, in order, whatever befalls a helper."""
 
 import os
+import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -55,15 +58,44 @@ def test_jobs_a_dead_helper_leaves_are_run_here(monkeypatch):
 def test_no_helpers_for_small_work_on_a_busy_machine_or_when_told(monkeypatch):
     cpus = len(os.sched_getaffinity(0))
     monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
-    monkeypatch.setattr(os, 'getloadavg', lambda: (1.0, 1.0, 1.0))  # this process alone
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
     assert sharing.pool_size(9, 10) == 1
+    assert sharing.pool_size(10, 10) == min(2, cpus)
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: cpus - 1)
+    assert sharing.pool_size(10, 10) == 1
+    assert sharing.pool_size(10, 10, 2) == min(2, cpus)  # asked for explicitly
+    # Without /proc, the load average (which counts this process) decides.
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: None)
+    monkeypatch.setattr(os, 'getloadavg', lambda: (1.0, 1.0, 1.0))  # this process alone
     assert sharing.pool_size(10, 10) == min(2, cpus)
     monkeypatch.setattr(os, 'getloadavg', lambda: (cpus + 0.6, 1.0, 1.0))
     assert sharing.pool_size(10, 10) == 1
-    assert sharing.pool_size(10, 10, 2) == min(2, cpus)  # asked for explicitly
-    monkeypatch.setattr(os, 'getloadavg', lambda: (1.0, 1.0, 1.0))
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
     monkeypatch.setenv(sharing.PROCESSES_ENV, '1')
     assert sharing.pool_size(10, 10) == 1
+
+
+def _spinning(grandchild: bool) -> subprocess.Popen:
+    spin = f'{sys.executable} -c "while True: pass"'
+    return subprocess.Popen(['sh', '-c', f'{spin} & wait'] if grandchild else
+                            ['sh', '-c', f'exec {spin}'], start_new_session=True)
+
+
+def _count_while(process: subprocess.Popen) -> int:
+    try:
+        time.sleep(0.5)  # started and spinning
+        return min(sharing._busy_elsewhere() for _ in range(5))
+    finally:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait(10)
+
+
+def test_a_busy_program_counts_and_this_ones_helpers_do_not():
+    # A CPU-bound child of this process is one of its helpers; a grandchild is another
+    # program (the minimum of five samples drops programs that ran for an instant).
+    as_helper = _count_while(_spinning(grandchild=False))
+    other = _count_while(_spinning(grandchild=True))
+    assert other >= as_helper + 1
 
 
 def test_a_helper_serves_the_next_share_then_exits_when_idle(monkeypatch):
