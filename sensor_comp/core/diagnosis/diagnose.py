@@ -683,14 +683,21 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
         evidence = Effect.evidence(effect, None, outcome)
     units = {k: effect.parameters.get(k, '') for k in parameters}
-    doubt = effect.implausible(fit) or effect.rival(analysis)
+    left = ctx.leftover(residual)
+    doubt, rival = effect.implausible(fit), effect.rival(analysis)
+    if doubt is None and rival is not None:
+        # A rival form only questions a name that would be the whole answer: beside a
+        # leftover above the noise, the base residual's misfit sways the probes.
+        if left.consistent:
+            doubt = rival
+        else:
+            evidence = f'{evidence} Beside what it leaves, {rival}.'
     if doubt is None and not effect.acceleration_driven:
         doubt = _after_triggers(prediction, residual, ctx)
     if doubt is not None:
         evidence = f'{evidence} Not counted: {doubt}.'
     relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
                 and doubt is None and ctx.as_free(sse))
-    left = ctx.leftover(residual)
     # Against the extended model's own noise floor: the accelerometer noise through a
     # wrong base can raise the base's floor above the residual's own mean square.
     share = _share(ctx, left) or 0.0
