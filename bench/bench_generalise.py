@@ -144,11 +144,7 @@ def _split(case, *, via_csv: bool, folder: str | None):
     """Return the calibration and validation sources: the shots' first half and the rest."""
     from sensor_comp.cli.sources import load_shots
     from sensor_comp.core.identification.identify import ShotSource
-    windows = case.truth['windows']
-    half = len(windows) // 2
-    cut = (windows[half - 1][1] + windows[half][0]) // 2
-    recording = case.recording
-    parts = (recording.slice(0, cut), recording.slice(cut, recording.n_samples))
+    cut, parts = case.halves()
     if not via_csv:
         return [ShotSource.detect(r) for r in parts], cut
     paths = [write_csv(r, os.path.join(folder, f'{name}.csv'))

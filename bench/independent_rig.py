@@ -230,6 +230,19 @@ class Case:
     induced_pressure: np.ndarray
     effect_pressure: np.ndarray
 
+    def halves(self) -> tuple[int, tuple[Recording, Recording]]:
+        """
+        Return the cut and the recording before and after it: calibration and validation.
+
+        The first half of the shots calibrates, the rest validates; the cut lies half-way
+        between the last calibration window and the first validation one.
+        """
+        windows = self.truth['windows']
+        half = len(windows) // 2
+        cut = (windows[half - 1][1] + windows[half][0]) // 2
+        return cut, (self.recording.slice(0, cut),
+                     self.recording.slice(cut, self.recording.n_samples))
+
 
 # Drawing a rig.
 

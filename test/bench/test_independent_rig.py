@@ -72,3 +72,15 @@ def test_csv_reads_back_through_the_import(tmp_path):
     assert np.allclose(recording.pressure, case.recording.pressure, rtol=1e-8, atol=1e-3)
     assert np.allclose(recording.acceleration, case.recording.acceleration, rtol=1e-8,
                        atol=1e-3)
+
+
+def test_halves_cut_between_the_shots_and_keep_every_sample():
+    case = simulate(draw_spec(3, effect=CLEAN, fs=200e3))
+    cut, (calibration, validation) = case.halves()
+    windows = case.truth['windows']
+    half = len(windows) // 2
+    assert windows[half - 1][1] <= cut <= windows[half][0]
+    assert calibration.n_samples == cut
+    assert calibration.n_samples + validation.n_samples == case.recording.n_samples
+    np.testing.assert_array_equal(np.concatenate([calibration.pressure, validation.pressure]),
+                                  case.recording.pressure)

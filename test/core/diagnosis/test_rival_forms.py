@@ -25,12 +25,7 @@ BAND = (1e5, 3e5)
 
 def _halves(effect, seed, R=1.5):
     case = simulate(draw_spec(seed, effect=effect, R=R, rate_range=BAND))
-    windows = case.truth['windows']
-    half = len(windows) // 2
-    cut = (windows[half - 1][1] + windows[half][0]) // 2
-    recording = case.recording
-    parts = (recording.slice(0, cut), recording.slice(cut, recording.n_samples))
-    return case.truth, [ShotSource.detect(r) for r in parts]
+    return case.truth, [ShotSource.detect(r) for r in case.halves()[1]]
 
 
 def _analysis(own: float, cube: float):

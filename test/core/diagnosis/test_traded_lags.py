@@ -29,12 +29,7 @@ HIDDEN_SEED, HIDDEN_FS = 3071615436, 250e3
 
 def _halves(spec):
     case = simulate(spec)
-    windows = case.truth['windows']
-    half = len(windows) // 2
-    cut = (windows[half - 1][1] + windows[half][0]) // 2
-    recording = case.recording
-    parts = (recording.slice(0, cut), recording.slice(cut, recording.n_samples))
-    return case.truth, [ShotSource.detect(r) for r in parts]
+    return case.truth, [ShotSource.detect(r) for r in case.halves()[1]]
 
 
 @pytest.fixture(scope='module')
