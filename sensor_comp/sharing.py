@@ -73,8 +73,8 @@ def _busy_elsewhere() -> int | None:
     Return how many threads of other programs are runnable now, or None without ``/proc``.
 
     Not the load average: that minute-long mean counts this process's own helpers of the
-    last shares, so a run that shared once would see its own past load and share no more
-    (measured: helpers refused from a load of 1.5 on, for most of a diagnosis). A runnable
+    last shares, so a run that shared would see its own past load and share less (speed
+    rigs run one after another started at loads of 1.0-1.6 of their own). A runnable
     thread (``R``: running or waiting for a core) of a process that is neither this one nor
     its child is counted; a CPU-bound program is runnable whenever it is sampled.
     """
