@@ -254,7 +254,7 @@ def close_idle() -> None:
 
 
 def _forget_in_child() -> None:
-    """A forked child shares the parent's pipes to its helpers: it must not use or close them."""
+    """Forget the parent's idle helpers in a forked child: their pipes are the parent's."""
     global _idle_lock
     _idle_lock = threading.Lock()  # another thread may have held it at the fork
     _idle.clear()
