@@ -412,7 +412,8 @@ class Effect:
         A rival probe that explains more of the base residual than the effect's first probe,
         by :data:`RIVAL_MARGIN` noise variances and :data:`RIVAL_SHARE`, says the effect's
         extension only passes for it (``doc/effects.md``): the diagnosis then does not count
-        the effect.
+        an effect that would be the whole answer, and adds the reason to the evidence of one
+        that leaves more than the noise.
         """
         own = probe_of(analysis, self.probes[0]) if self.probes else None
         if own is None:
