@@ -89,8 +89,9 @@ from scipy import stats
 from ..effects import Effect, EffectError, EFFECTS, get_effect, Outcome, Physical
 from ..effects.base import BASE_CONTEXT
 from ..effects.mains_hum import line_columns
-from ..identification.extended import (ExtendedFit, fit_extended, Prediction, SENSOR_ZETA,
-                                       shot_windows, SLOWEST_POLE_S, Window)
+from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, fit_extended,
+                                       Prediction, SENSOR_ZETA, shot_windows, SLOWEST_POLE_S,
+                                       Window)
 from ..estimators import estimate_delay, fit_percent, IdentError
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
@@ -104,8 +105,6 @@ from ...sharing import pool_size, share
 __all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
            'Ranked', 'Skipped', 'diagnose']
 
-#: Base structure ``(nf, nb)`` and delay: a sampled 2nd-order sensor, exactly.
-BASE_ORDERS, BASE_DELAY = (2, 3), 0
 #: Family-wise false-alarm probability over all candidates.
 ALPHA = 1e-3
 #: Possible verdicts.

@@ -59,9 +59,13 @@ from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
 
-__all__ = ['SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit', 'ExtendedFit', 'Prediction',
-           'Window', 'fit_extended', 'ringing_khz', 'robust_uncertainty', 'shot_windows']
+__all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit',
+           'ExtendedFit', 'Prediction', 'Window', 'fit_extended', 'ringing_khz',
+           'robust_uncertainty', 'shot_windows']
 
+#: The diagnosis's base structure ``(nf, nb)`` and delay (and a lag-free fit's): a sampled
+#: 2nd-order sensor, exactly.
+BASE_ORDERS, BASE_DELAY = (2, 3), 0
 #: Slowest time constant the sensor's own poles may take in the diagnosis's fits (and a
 #: lag-free fit), s: a sensor mode is fast (kHz); a slower pole imitates a tail (an
 #: amplifier high-pass, a zero shift), which the base must not absorb while the extensions

@@ -18,7 +18,8 @@ import numpy as np
 from ..compensation.compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
-from .extended import fit_extended, robust_uncertainty, SENSOR_ZETA, SLOWEST_POLE_S
+from .extended import (BASE_DELAY, BASE_ORDERS, fit_extended, robust_uncertainty,
+                       SENSOR_ZETA, SLOWEST_POLE_S)
 from ..shots.windows import shot_windows
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                           fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
@@ -539,7 +540,8 @@ def _lag_free(windows, effects: Sequence[str], fs: float):
     (``doc/effects.md``, lag-free numerators).
     """
     try:
-        fit = fit_extended(windows, effects=effects, fs=fs, nf=2, nb=3, nk=0,
+        (nf, nb), nk = BASE_ORDERS, BASE_DELAY
+        fit = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
                            slowest_pole_s=SLOWEST_POLE_S, lag_free=True, max_zeta=SENSOR_ZETA)
     except (IdentError, EffectError):
         return None
