@@ -18,7 +18,7 @@ from .data import IdentError
 __all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'Filtered', 'LeastSquares',
            'check_orders', 'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
            'lagged_regression', 'minimum_norm', 'normal_equations', 'normal_equations_blocks',
-           'scaled_qr', 'solve_blocks', 'solve_least_squares',
+           'scaled_qr', 'solve_blocks', 'solve_least_squares', 'solve_normal',
            'triangular_inverse']
 
 #: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
@@ -327,18 +327,24 @@ def normal_equations(phi: np.ndarray, target: np.ndarray, *, ridge: float = 0.0)
     (``doc/estimators.md``). Raises IdentError when the scaled Gram matrix is not positive
     definite.
     """
-    return _solve_normal(phi.T @ phi, phi.T @ target, ridge)
+    return solve_normal(phi.T @ phi, phi.T @ target, ridge)
 
 
-def _solve_normal(gram: np.ndarray, moment: np.ndarray, ridge: float) -> np.ndarray:
-    """Solve ``gram θ = moment`` scaled to a unit diagonal, by Cholesky (plus ``ridge``)."""
+def solve_normal(gram: np.ndarray, moment: np.ndarray, ridge: float) -> np.ndarray:
+    """
+    Solve ``gram θ = moment`` scaled to a unit diagonal, by Cholesky (plus ``ridge``).
+
+    Raises IdentError when the scaled matrix is not finite or not positive definite.
+    """
     scale = np.sqrt(np.diag(gram))
     scale[~(scale > 0)] = 1.0
     gram = gram / np.outer(scale, scale)
     if ridge:
         gram[np.diag_indices_from(gram)] += ridge
+    if not np.all(np.isfinite(gram)):
+        raise IdentError('normal equations that are not finite')
     try:
-        factor = linalg.cho_factor(gram)
+        factor = linalg.cho_factor(gram, check_finite=False)
     except linalg.LinAlgError:
         raise IdentError('singular normal equations') from None
     return linalg.cho_solve(factor, moment / scale) / scale
@@ -355,7 +361,7 @@ def normal_equations_blocks(blocks: Callable[[], Iterator[tuple[np.ndarray, np.n
     for phi, target in blocks():
         gram += phi.T @ phi
         moment += phi.T @ target
-    return _solve_normal(gram, moment, ridge)
+    return solve_normal(gram, moment, ridge)
 
 
 def minimum_norm(phi: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -18,8 +18,9 @@ from scipy import signal
 from .arx import fit_arx
 from .data import as_segments, IdentError, Segment
 from .estimate import Estimate
+from .lagged import lagged_products, lagged_sum
 from .least_squares import (BLOCK_ROWS, check_orders, Filtered, lagged_blocks, minimum_norm,
-                            normal_equations, normal_equations_blocks, solve_blocks)
+                            normal_equations_blocks, solve_blocks, solve_normal)
 from .levenberg_marquardt import levenberg_marquardt, scale_normal_equations
 from .polynomials import is_stable, reflect_unstable
 
@@ -145,6 +146,10 @@ class OutputErrorProblem:
         self.extra = None if extra is None else np.concatenate(
             [np.asarray(c, dtype=np.float64).T for c in extra])
         self.n_extra = 0 if self.extra is None else self.extra.shape[1]
+        # Each segment's extra columns as contiguous rows, for the lagged products.
+        self._extra_rows = None if self.extra is None else [
+            np.ascontiguousarray(self.extra[a:b].T)
+            for a, b in zip(self.offsets[:-1], self.offsets[1:])]
         self.n_parameters = nf + self.n_inputs * nb + self.n_extra
         self._last: tuple[bytes, list[np.ndarray]] | None = None
 
@@ -211,9 +216,8 @@ class OutputErrorProblem:
         Return the least sum of squares over numerators (and extra coefficients) at ``F``.
 
         Cholesky with a 1e-10 ridge where singular; the residual is recomputed, so round-off can
-        only raise the loss. On the whole regression: the extended fits search this loss on
-        fine grids, where the round-off of a block-wise sum moves their minima. ``transform``
-        as in :meth:`profile_residual`.
+        only raise the loss (the extended fits search it on fine grids). ``transform`` as in
+        :meth:`profile_residual`.
         """
         try:
             e = self.profile_residual(f, transform=transform)
@@ -229,22 +233,52 @@ class OutputErrorProblem:
         As :meth:`profile_sse` solves them. ``transform`` (``(n_inputs·nb, m)``) restricts the
         numerators to ``b = T z`` (row by row), solved for ``z``: filtering commutes with the
         fixed FIRs of ``T``, so the inputs are filtered once, not once per column of ``T``.
+        The normal equations come from the lagged products (:mod:`.lagged`), never the matrix.
         Raises IdentError when they are not finite.
         """
-        phi = self.regression(f)
+        q = self.n_inputs * self.nb
+        p = q + self.n_extra
+        gram, moment = np.zeros((p, p)), np.zeros(p)
+        for s, x in enumerate(self.filtered(f)):
+            g, m = self._products(s, x, self.ys[s])
+            gram += g
+            moment += m
         if transform is not None:
-            # In Fortran order, as the regression is: the Gram product runs 2-3x faster on
-            # it than on the C-ordered array a concatenation makes.
-            q, m = self.n_inputs * self.nb, transform.shape[1]
-            narrowed = np.empty((phi.shape[0], m + self.n_extra), order='F')
-            narrowed[:, :m] = (transform.T @ phi[:, :q].T).T
-            narrowed[:, m:] = phi[:, q:]
-            phi = narrowed
+            narrow = np.zeros((p, transform.shape[1] + self.n_extra))
+            narrow[:q, :transform.shape[1]] = transform
+            narrow[q:, transform.shape[1]:] = np.eye(self.n_extra)
+            gram, moment = narrow.T @ gram @ narrow, narrow.T @ moment
         try:
-            theta = normal_equations(phi, self.y)
+            theta = solve_normal(gram, moment, 0.0)
         except IdentError:
-            theta = normal_equations(phi, self.y, ridge=1e-10)
-        return self.y - phi @ theta
+            theta = solve_normal(gram, moment, 1e-10)
+        if transform is not None:
+            theta = np.concatenate([transform @ theta[:transform.shape[1]],
+                                    theta[transform.shape[1]:]])
+        b, d = theta[:q].reshape(self.n_inputs, self.nb), theta[q:]
+        out = np.empty(self.y.size)
+        for s, x in enumerate(self.filtered(f)):
+            out[self.offsets[s]:self.offsets[s + 1]] = self._output(s, x, b, d)
+        if not np.all(np.isfinite(out)):
+            raise IdentError('the profile residual is not finite')
+        return np.subtract(self.y, out, out=out)
+
+    def _products(self, s: int, x: np.ndarray, target: np.ndarray,
+                  z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return segment ``s``'s ``(ΦᵀΦ, Φᵀ target)`` by lagged products (:mod:`.lagged`).
+
+        The columns: lags 1..nf of ``z`` (when given), the lags of the filtered inputs ``x``,
+        the extra columns.
+        """
+        lagged = [] if z is None else [(z, 1, self.nf)]
+        extra = None if self.extra is None else self._extra_rows[s]
+        if self.nk == 0 and self.nb == 1:  # inputs used as they are: one matrix product
+            fixed = x if extra is None else np.concatenate([x, extra])
+        else:
+            lagged += [(row, self.nk, self.nb) for row in x]
+            fixed = extra
+        return lagged_products(lagged, fixed, target)
 
     def filtered(self, f: np.ndarray) -> list[np.ndarray]:
         """Return every segment's inputs filtered by ``1/F`` from rest (cached)."""
@@ -256,15 +290,9 @@ class OutputErrorProblem:
 
     def _output(self, s: int, x: np.ndarray, b: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Return the model output over segment ``s`` from its filtered inputs ``x``."""
-        start, stop = self.offsets[s], self.offsets[s + 1]
-        part = np.zeros(stop - start)
-        n = part.size
-        for i in range(self.n_inputs):
-            for j in range(self.nb):
-                lag = self.nk + j
-                if lag < n:
-                    part[lag:] += b[i, j] * x[i, :n - lag]
+        part = lagged_sum(x, b, self.nk)
         if self.extra is not None:
+            start, stop = self.offsets[s], self.offsets[s + 1]
             part += self.extra[start:stop] @ d
         return part
 
@@ -323,25 +351,22 @@ class OutputErrorProblem:
         """
         Return ``(‖e‖², JᵀJ, Jᵀe)`` of :meth:`residual` with ``jacobian``, segment by segment.
 
-        Only one segment's errors and Jacobian are held at a time (the whole Jacobian is as
-        large as the data times the parameters).
+        The Jacobian's columns are lags of the filtered inputs and of the filtered model
+        output, so its products are lagged products (:mod:`.lagged`): it is never built.
         """
         f, b, d = self.unpack(theta)
-        nf, q, p = self.nf, self.n_inputs * self.nb, self.n_parameters
+        p = self.n_parameters
         cost, gram, moment = 0.0, np.zeros((p, p)), np.zeros(p)
         for s, (x, y) in enumerate(zip(self._inputs(f), self.ys)):
-            start, stop = self.offsets[s], self.offsets[s + 1]
-            jac = np.empty((stop - start, p), order='F')
-            _lags(jac, nf, x, self.nk, self.nb)
-            induced = jac[:, nf:nf + q] @ b.ravel()
-            _lags(jac, 0, -signal.lfilter([1.0], f, induced)[None], 1, nf)
+            induced = lagged_sum(x, b, self.nk)
+            z = -signal.lfilter([1.0], f, induced)
             e = y - induced
             if self.extra is not None:
-                jac[:, nf + q:] = self.extra[start:stop]
-                e -= self.extra[start:stop] @ d
+                e -= self.extra[self.offsets[s]:self.offsets[s + 1]] @ d
+            g, m = self._products(s, x, e, z)
             cost += float(e @ e)
-            gram += jac.T @ jac
-            moment += jac.T @ e
+            gram += g
+            moment += m
         return cost, gram, moment
 
 
