@@ -48,6 +48,11 @@ def _fit_els(segs, na, nb, nk):
 #: Samples × grid structures of output error from which a helper process shares the grid
 #: (about 1.7 s of fits here; a helper's start-up is about 0.5 s).
 MIN_SHARED_COST = 1_000_000
+#: Noise variances (of the calibration loss) below which an output-error fit of the grid
+#: stops gaining: a criterion difference of this size is far below ``criterion_margin``,
+#: and a descent in an over-parameterised valley would crawl on for dozens of steps. The
+#: chosen structure is refined to :func:`fit_oe`'s own tolerance.
+GRID_GAIN = 0.05
 #: Estimators :func:`select_structure` can use, called as ``f(segments, na, nb, nk)``.
 METHODS: dict[str, Callable[[Sequence[Segment], int, int, int], Estimate]] = {
     'oe': _fit_oe, 'arx': _fit_arx, 'gls': _fit_gls, 'els': _fit_els}
@@ -349,13 +354,14 @@ def _fit_chain(segs, method: str, keys: Sequence[tuple[int, int, int]],
         starts = [fits.get(k) for k in [(na, nb - 1, nk), (na, nb - 1, nk + 1)]
                   + [(na, nb, d) for d in range(nk - 2, nk + 3) if d != nk]]
         starts = [est.a for est in starts if isinstance(est, Estimate)]
-        tried = []
+        tried, tol = [], GRID_GAIN / sum(s.y.size for s in segs)
         if nk == centre or not starts:
-            tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk)))
+            tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk, tol=tol)))
         if starts:
             problem = OutputErrorProblem([s.u for s in segs], [s.y for s in segs], na, nb, nk)
             start = min(starts, key=problem.profile_sse)
-            tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk, start=start)))
+            tried.append(_attempt(lambda: fit_oe(segs, nf=na, nb=nb, nk=nk, start=start,
+                                                 tol=tol)))
         good = [est for est in tried if isinstance(est, Estimate)]
         fits[na, nb, nk] = min(good, key=lambda e: e.loss) if good else tried[0]
     return {key: fits[key] for key in keys}
@@ -442,8 +448,20 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     chosen = min(near, key=lambda i: (candidates[i].n_parameters, candidates[i].criterion))
     explanation = _explain(candidates, usable, pool, chosen, lowest, method, criterion,
                            valid is not None, fit_tolerance, criterion_margin)
-    return Selection(estimates[chosen], method, criterion, tuple(candidates), chosen,
-                     explanation)
+    return Selection(_refined(estimates[chosen], segs, method, grid[chosen]), method,
+                     criterion, tuple(candidates), chosen, explanation)
+
+
+def _refined(est: Estimate, segs, method: str, key: tuple[int, int, int]) -> Estimate:
+    """Return the grid's output-error fit descended on to :func:`fit_oe`'s tolerance."""
+    if method != 'oe':
+        return est
+    na, nb, nk = key
+    try:
+        refined = fit_oe(segs, nf=na, nb=nb, nk=nk, start=est.a)
+    except IdentError:
+        return est
+    return refined if refined.loss <= est.loss else est
 
 
 def _explain(candidates, usable, pool, chosen, lowest, method, criterion, validated,

@@ -78,6 +78,10 @@ SENSOR_ZETA = 0.2
 ROUNDS = 2
 #: Most Levenberg-Marquardt iterations of a joint fit.
 MAX_ITERATIONS = 100
+#: Noise variances below which a joint or profile descent stops gaining (its tolerance over
+#: the samples): differences this small move no verdict, search or uncertainty, and a
+#: descent along an ill-conditioned valley would crawl on for dozens of steps.
+GAIN = 0.01
 #: Dampings tried for the windows' own ringing as the start of a lightly damped sensor mode.
 RINGING_ZETAS = (0.02, 0.05, 0.1)
 #: Profile Levenberg-Marquardt steps of the denominator at each grid value of a lag-free
@@ -287,7 +291,7 @@ def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
     x0 = np.concatenate([a0[1:], problem.linear(a0)])
     result = levenberg_marquardt(
         problem.residual, x0, stable=lambda theta: feasible(problem.unpack(theta)[0]),
-        max_iter=max_iter, tol=1e-9)
+        max_iter=max_iter, tol=GAIN / problem.y.size)
     theta, cost, e, jac = result.theta, result.cost, result.e, result.jac
     n, p = e.size, theta.size
     variance = cost / max(n - p, 1)
@@ -616,7 +620,7 @@ class _Fitter:
         return levenberg_marquardt(
             lambda x, jacobian=False: self._profile_residual(values, x, jacobian), a[1:],
             stable=lambda x: self.feasible(np.concatenate([[1.0], x])),
-            max_iter=max_iter, tol=1e-9, steps_only=steps_only)
+            max_iter=max_iter, tol=GAIN / self.problem(values).y.size, steps_only=steps_only)
 
     def _profile_residual(self, values: Mapping[str, float], x: np.ndarray, jacobian: bool):
         """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
