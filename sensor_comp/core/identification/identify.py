@@ -10,7 +10,7 @@ excitation and units checks with their numbers: ``doc/identification.md``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import math
 
 import numpy as np
@@ -20,7 +20,7 @@ from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
 from .extended import (BASE_DELAY, BASE_ORDERS, fit_extended, robust_uncertainty,
                        SENSOR_ZETA, SLOWEST_POLE_S)
-from ..shots.windows import shot_windows
+from ..shots.windows import EARLY_S, shot_windows
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                           fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
                           Selection, simulate_output)
@@ -269,6 +269,8 @@ class _Data:
     measured: list[tuple[np.ndarray, np.ndarray]]
     fit: list[tuple[np.ndarray, np.ndarray]]
     denoiser: EmdDenoiser | None
+    #: Samples of each calibration window up to :data:`EARLY_S` after its pulse.
+    early_stops: list[int] = field(default_factory=list)
 
     @classmethod
     def cut(cls, sources: Sources, *, denoise: bool, progress: ProgressFactory) -> _Data:
@@ -281,7 +283,13 @@ class _Data:
             with progress('EMD denoising', len(measured)) as bar:
                 denoised = denoiser.map([y for _, y in measured], done=bar.advance)
             fit = [(u, y) for (u, _), y in zip(measured, denoised)]
-        return cls(sources, measured, fit, denoiser)
+        stops = [min(shot.stop, shot.end + round(EARLY_S * s.recording.fs)) - shot.start
+                 for s in sources.calibration for shot in s.shots]
+        return cls(sources, measured, fit, denoiser, stops)
+
+    def early(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Return the measured calibration windows up to :data:`EARLY_S` after each pulse."""
+        return [(u[:, :n], y[:n]) for (u, y), n in zip(self.measured, self.early_stops)]
 
     def valid(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Return the validation windows, cut when asked: held only while a step reads them."""
@@ -319,13 +327,16 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     if structure == 'auto':
         with progress('structure selection', 1) as bar:
             selection = select_structure(
-                data.measured, valid_segments=data.valid(),
+                data.early(), valid_segments=data.valid(),
                 orders=None if orders is None else [orders],
                 delays=None if delay is None else [delay], criterion=criterion)
             bar.advance()
         chosen = selection.candidates[selection.chosen]
         na, nb, delay = chosen.na, chosen.nb, chosen.nk
-        explanation = f'output error chosen by {criterion.upper()}: {selection.explanation}'
+        explanation = (f'output error chosen by {criterion.upper()} on each calibration '
+                       f'window up to {1e3 * EARLY_S:g} ms after its pulse (the sensor\'s '
+                       f'ringing; the model is fitted to whole windows): '
+                       f'{selection.explanation}')
         provisional = selection.estimate
     else:
         if delay is None:
@@ -344,7 +355,8 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
         else:
             how = 'delay given'
         explanation = f'{structure} with na={na} nb={nb} nk={delay} as asked; {how}'
-    reuse = (provisional if provisional is not None and data.denoiser is None
+    reuse = (provisional if search is not None and provisional is not None
+             and data.denoiser is None
              and (provisional.na, provisional.nb, provisional.nk) == (na, nb, delay) else None)
     estimate, na, nb, notes = _robust_fit('oe' if structure == 'auto' else structure, data,
                                           na, nb, delay, fitted=reuse)

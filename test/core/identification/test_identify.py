@@ -27,6 +27,7 @@ from sensor_comp.bundled import bundled_bag
 from sensor_comp.core.estimators import fit_percent, IdentError
 from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.core.shots.detection import ShotError
+from sensor_comp.core.shots.windows import EARLY_S
 from sensor_comp.io.bag_reader import read_recording
 from sensor_comp.io.bag_writer import write_recording
 from sensor_comp.sim import random_shots, RigConfig, simulate, TABLE2
@@ -154,6 +155,23 @@ def test_auto_structure_reaches_the_noise_ceiling_and_the_true_sensor(run):
     check_against_truth(ident, sim)
     assert ident.selection is not None
     assert ident.model.structure == 'oe'
+
+
+def test_auto_chooses_the_structure_on_the_pulses_and_their_ringing(run):
+    """The grid sees each window up to EARLY_S after its pulse; the model the whole windows."""
+    sim, source = run
+    long = rig(sim.recording.fs, 4)[0].recording  # 15 ms after each pulse: a long rest
+    long_source = ShotSource.detect(long, pre_ms=2.0, post_ms=15.0)
+    ident = identify([long_source], structure='auto', denoise=False)
+    fs = long.fs
+    shots = [shot for s in ident.calibration for shot in s.shots]
+    whole = sum(shot.stop - shot.start for shot in shots)
+    early = sum(min(shot.stop, shot.end + round(EARLY_S * fs)) - shot.start for shot in shots)
+    assert early < 0.8 * whole
+    assert ident.selection.estimate.n_samples == early
+    assert ident.model.fit['n_samples'] == whole
+    assert f'up to {1e3 * EARLY_S:g} ms after its pulse' in ident.model.fit['selection']
+    assert ident.model.a.size - 1 == 2  # the simulated sensor's two poles
 
 
 @pytest.mark.parametrize('fs', RATES, ids=('1MSps', '200kSps'))
