@@ -326,10 +326,15 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     selection = search = provisional = None
     if structure == 'auto':
         with progress('structure selection', 1) as bar:
+            # The delay is read on whole windows: on the pulses alone a sensor whose mode
+            # the shots barely excite trades delay for a pole (doc/identification.md).
+            if delay is None:
+                search = estimate_delay(data.measured)
             selection = select_structure(
                 data.early(), valid_segments=data.valid(),
                 orders=None if orders is None else [orders],
-                delays=None if delay is None else [delay], criterion=criterion)
+                delays=[delay] if search is None else
+                range(max(search.nk - 1, 0), search.nk + 2), criterion=criterion)
             bar.advance()
         chosen = selection.candidates[selection.chosen]
         na, nb, delay = chosen.na, chosen.nb, chosen.nk
@@ -337,7 +342,11 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
                        f'window up to {1e3 * EARLY_S:g} ms after its pulse (the sensor\'s '
                        f'ringing; the model is fitted to whole windows): '
                        f'{selection.explanation}')
-        provisional = selection.estimate
+        if search is not None:
+            explanation += (f'; delays tried around the one read on whole windows '
+                            f'({search.explanation})')
+            if data.denoiser is None:
+                provisional = search.estimates.get(delay)
     else:
         if delay is None:
             with progress('delay search', 1) as bar:
@@ -355,8 +364,7 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
         else:
             how = 'delay given'
         explanation = f'{structure} with na={na} nb={nb} nk={delay} as asked; {how}'
-    reuse = (provisional if search is not None and provisional is not None
-             and data.denoiser is None
+    reuse = (provisional if provisional is not None and data.denoiser is None
              and (provisional.na, provisional.nb, provisional.nk) == (na, nb, delay) else None)
     estimate, na, nb, notes = _robust_fit('oe' if structure == 'auto' else structure, data,
                                           na, nb, delay, fitted=reuse)

@@ -158,7 +158,7 @@ def test_auto_structure_reaches_the_noise_ceiling_and_the_true_sensor(run):
 
 
 def test_auto_chooses_the_structure_on_the_pulses_and_their_ringing(run):
-    """The grid sees each window up to EARLY_S after its pulse; the model the whole windows."""
+    """The orders are chosen up to EARLY_S after each pulse; delay and model on whole windows."""
     sim, source = run
     long = rig(sim.recording.fs, 4)[0].recording  # 15 ms after each pulse: a long rest
     long_source = ShotSource.detect(long, pre_ms=2.0, post_ms=15.0)
@@ -171,6 +171,9 @@ def test_auto_chooses_the_structure_on_the_pulses_and_their_ringing(run):
     assert ident.selection.estimate.n_samples == early
     assert ident.model.fit['n_samples'] == whole
     assert f'up to {1e3 * EARLY_S:g} ms after its pulse' in ident.model.fit['selection']
+    # The delays tried are read on the whole windows: the one found there, ±1.
+    nk = ident.delay.nk
+    assert {c.nk for c in ident.selection.candidates} == set(range(max(nk - 1, 0), nk + 2))
     assert ident.model.a.size - 1 == 2  # the simulated sensor's two poles
 
 
