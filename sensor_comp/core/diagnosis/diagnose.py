@@ -99,6 +99,7 @@ from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseMod
                           PRACTICAL_SHARE, segment_bounds)
 from ..progress import ProgressFactory, Silent
 from .residual import analyse, model_resonances, ringing_time_s
+from .rival_forms import rival_remains
 from ...errors import SensorCompError
 from ...sharing import pool_size, share
 
@@ -684,6 +685,16 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     units = {k: effect.parameters.get(k, '') for k in parameters}
     left = ctx.leftover(residual)
     doubt, rival = effect.implausible(fit), effect.rival(analysis)
+    if rival is not None:
+        # The base's misfit sways the probes: the rival must remain in what the fit leaves.
+        remains = rival_remains(effect, fit.model(), prediction.total, ctx.validation,
+                                ctx.bounds, ctx.noise, alpha=ctx.alpha)
+        if remains is None:
+            evidence = (f'{evidence} Although {rival}, what this fit leaves does not follow '
+                        f'that form: the base\'s misfit swayed the probes.')
+            rival = None
+        else:
+            rival = f'{rival}; {remains}'
     if doubt is None and rival is not None:
         # A rival form only questions a name that would be the whole answer: beside a
         # leftover above the noise, the base residual's misfit sways the probes.

@@ -28,6 +28,7 @@ __all__ = [
     'GENERIC_PROBES',
     'PROBES',
     'TIME_CONSTANTS_MS',
+    'run_probe',
     'run_probes',
 ]
 
@@ -117,6 +118,21 @@ def _probe(result: tuple, parameters: Mapping[str, float], *, searched: int = 1)
                  {k: float(v) for k, v in parameters.items()})
 
 
+def run_probe(spec: ProbeSpec, data: ProbeData, e: Sequence[np.ndarray],
+              noise: NoiseModel) -> Probe:
+    """Return one probe's result on residual windows ``e`` (its best grid value, if any)."""
+    output = [y[np.newaxis] for y in data.simulated]
+    run = functools.partial(_probe_stats, e, noise=noise,
+                            nuisance=output if spec.with_output else None)
+    if spec.grid:
+        # The value explaining most over the grid; the p-value pays for the search.
+        result, value = max(((run(spec.regressors(data, v)), v) for v in spec.grid),
+                            key=lambda r: r[0][0])
+    else:
+        result, value = run(spec.regressors(data, None)), None
+    return _probe(result, spec.reading(result[4], value), searched=max(len(spec.grid), 1))
+
+
 def run_probes(e: list[np.ndarray], simulated: list[np.ndarray], accel: list[np.ndarray],
                shots: Sequence[Shot], bounds: list[tuple[int, int, int, int, int]],
                dyn: Dynamics, noise: NoiseModel, fs: float) -> dict[str, Probe]:
@@ -126,18 +142,6 @@ def run_probes(e: list[np.ndarray], simulated: list[np.ndarray], accel: list[np.
                      peak_g=[s.peak_g for s in shots],
                      resonances_hz=tuple(fn for fn, _ in dyn.resonances),
                      through=functools.partial(through, dyn.path))
-    output = [y[np.newaxis] for y in simulated]
-    probes = {}
-    for name, spec in ALL_PROBES.items():
-        run = functools.partial(_probe_stats, e, noise=noise,
-                                nuisance=output if spec.with_output else None)
-        if spec.grid:
-            # The value explaining most over the grid; the p-value pays for the search.
-            result, value = max(((run(spec.regressors(data, v)), v) for v in spec.grid),
-                                key=lambda r: r[0][0])
-        else:
-            result, value = run(spec.regressors(data, None)), None
-        probes[name] = _probe(result, spec.reading(result[4], value),
-                              searched=max(len(spec.grid), 1))
+    probes = {name: run_probe(spec, data, e, noise) for name, spec in ALL_PROBES.items()}
     level = ALPHA / len(probes)
     return {name: p._replace(significant=p.p_value < level) for name, p in probes.items()}

@@ -1,0 +1,60 @@
+"""
+Rival forms judged on what an extension leaves: is a form outside the catalogue still there?
+
+The rival probes (:meth:`~sensor_comp.core.effects.Effect.rival`) compare forms on the base
+residual, where the base's own misfit sways them: on an ``a|a|`` rig at R = 5 (187 kS/s)
+G·a³ explained 6.6 % more of it than G·(a|a|). A form the extension only stands in for
+leaves the difference of the two shapes in the extension's residual; the effect itself
+leaves noise. So a rival counts only while its regressor, beyond a gain correction of the
+extended prediction, is significant in the extension's validation residual (Wald χ²
+against the noise model; ``doc/diagnosis.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import functools
+
+import numpy as np
+
+from .noise_floor import NoiseModel
+from .residual.dynamics import dynamics, through
+from .residual.probes import run_probe
+from ..effects import Effect, ProbeData
+from ..identification.model import Model
+from ..shots.windows import Window
+from ...streams import G0
+
+__all__ = ['rival_remains']
+
+
+def rival_remains(effect: Effect, model: Model, prediction: Sequence[np.ndarray],
+                  windows: Sequence[Window], bounds: Sequence[tuple[int, int, int, int, int]],
+                  noise: NoiseModel, *, alpha: float) -> str | None:
+    """
+    Return how a rival form still explains the extension's residual, or None when none does.
+
+    Args:
+        effect: The effect whose :attr:`~sensor_comp.core.effects.Effect.rivals` are tested.
+        model: The extended model (its ``a_z`` path carries the rival's regressor).
+        prediction: The extended model's prediction per validation window, Pa.
+        windows: The validation windows.
+        bounds: Their segment bounds (``noise_floor.segment_bounds``).
+        noise: The noise model of the base residual.
+        alpha: Significance level.
+
+    """
+    dyn = dynamics(model)
+    residual = [w.y - p for w, p in zip(windows, prediction)]
+    data = ProbeData(fs=model.fs, simulated=list(prediction),
+                     acceleration=[w.acceleration for w in windows],
+                     starts=[w.start for w in windows], bounds=list(bounds),
+                     peak_g=[float(np.max(np.abs(w.acceleration[2]))) / G0 for w in windows],
+                     resonances_hz=tuple(fn for fn, _ in dyn.resonances),
+                     through=functools.partial(through, dyn.path))
+    for spec in effect.rivals:
+        probe = run_probe(spec, data, residual, noise)
+        if probe.p_value < alpha:
+            return (f'{spec.words} still explains {100 * probe.fraction:.1f} % of what it '
+                    f'leaves (Wald χ² {probe.statistic:.3g}, p = {probe.p_value:.2g})')
+    return None
