@@ -1,5 +1,5 @@
 """
-Rival forms judged on what an extension leaves: is a form outside the catalogue still there?
+Rival forms judged on what an extension leaves: is a form outside the catalogue still there.
 
 The rival probes (:meth:`~sensor_comp.core.effects.Effect.rival`) compare forms on the base
 residual, where the base's own misfit sways them: on an ``a|a|`` rig at R = 5 (187 kS/s)
