@@ -10,7 +10,7 @@ excitation and units checks with their numbers: ``doc/identification.md``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -270,7 +270,7 @@ class _Data:
     fit: list[tuple[np.ndarray, np.ndarray]]
     denoiser: EmdDenoiser | None
     #: Samples of each calibration window up to :data:`EARLY_S` after its pulse.
-    early_stops: list[int] = field(default_factory=list)
+    early_stops: list[int]
 
     @classmethod
     def cut(cls, sources: Sources, *, denoise: bool, progress: ProgressFactory) -> _Data:
