@@ -87,6 +87,10 @@ class DelayEstimate:
     estimates: Mapping[int, Estimate] = field(default_factory=dict, repr=False,
                                               compare=False)
 
+    def neighbourhood(self) -> range:
+        """Return the delays a structure grid tries around this one: ``nk`` ±1, none below 0."""
+        return range(max(self.nk - 1, 0), self.nk + 2)
+
 
 def profile_losses(segments: Sequence[Segment], f: np.ndarray, delays: Sequence[int],
                    nb: int) -> np.ndarray:
@@ -422,7 +426,7 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     known = {}
     if delays is None:
         search = estimate_delay(segs, method=method)
-        delays = range(max(search.nk - 1, 0), search.nk + 2)
+        delays = search.neighbourhood()
         known = {(2, 1, nk): est for nk, est in search.estimates.items()}
     delays = tuple(int(d) for d in delays)
     if not orders or not delays:

@@ -333,8 +333,8 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
             selection = select_structure(
                 data.early(), valid_segments=data.valid(),
                 orders=None if orders is None else [orders],
-                delays=[delay] if search is None else
-                range(max(search.nk - 1, 0), search.nk + 2), criterion=criterion)
+                delays=[delay] if search is None else search.neighbourhood(),
+                criterion=criterion)
             bar.advance()
         chosen = selection.candidates[selection.chosen]
         na, nb, delay = chosen.na, chosen.nb, chosen.nk
