@@ -54,7 +54,7 @@ from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
-from ..shots.inputs import input_channels, mode_pair
+from ..shots.inputs import carried_state, input_channels, mode_pair, parse_channel
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
@@ -104,6 +104,11 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
+#: Highest zero-shift level a recording's first window is searched to start from, times
+#: that window's peak acceleration (an earlier, harder shot).
+CARRY_IN_LIMIT = 4.0
+#: Least drop of a first window's squared error, in noise variances, for a carried-in level.
+CARRY_IN_GAIN = 9.0
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -143,12 +148,15 @@ class Prediction:
         induced: Acceleration-driven part per window (simulated from rest), Pa.
         disturbance: Disturbance estimate per window (zeros without disturbances), Pa.
         disturbance_parameters: Coefficients estimated on these windows' own residual.
+        carried_in: Zero-shift level (m/s² of peak ``|a_z|``) fitted per recording for its
+            first window: left by shots before it, unknown to a compensation from rest.
 
     """
 
     induced: list[np.ndarray]
     disturbance: list[np.ndarray]
     disturbance_parameters: int
+    carried_in: Mapping[int, float] = field(default_factory=dict)
 
     @property
     def total(self) -> list[np.ndarray]:
@@ -218,15 +226,17 @@ class ExtendedFit:
         """
         Return the prediction over ``windows`` (e.g. validation shots).
 
-        The acceleration-driven part is simulated from rest in each window. A disturbance's
+        The acceleration-driven part is simulated from rest in each window, but for a zero
+        shift's leaky peak: it carries over between the windows of a recording, and the level
+        its first window starts from (left by shots before it) is fitted. A disturbance's
         phase belongs to its recording, so its coefficients are estimated again by least
         squares on these windows' residual (per recording, the frequency kept from the
         fit); :attr:`Prediction.disturbance_parameters` counts them.
         """
-        us = _channels(windows, self.inputs, self.fs)
-        induced = simulate_output(self.estimate, us)
+        carry = _carried_in(self.estimate, windows, self.inputs, self.fs)
+        induced = simulate_output(self.estimate, _channels(windows, self.inputs, self.fs, carry))
         if self.disturbance is None:
-            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0)
+            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry)
         sources = 1 + max(w.source for w in windows)
         cols = [self.disturbance.columns(w, fs=self.fs, sources=sources) for w in windows]
         phi = np.concatenate(cols, axis=1).T
@@ -234,11 +244,65 @@ class ExtendedFit:
         used = np.flatnonzero(np.any(phi != 0, axis=0))
         coef = np.zeros(phi.shape[1])
         coef[used] = _lstsq(phi[:, used], target)[0]
-        return Prediction(induced, [c.T @ coef for c in cols], int(used.size))
+        return Prediction(induced, [c.T @ coef for c in cols], int(used.size), carry)
 
 
-def _channels(windows: Sequence[Window], names: Sequence[str], fs: float) -> list[np.ndarray]:
-    return [input_channels(names, w.acceleration, {}, fs=fs) for w in windows]
+def _channels(windows: Sequence[Window], names: Sequence[str], fs: float,
+              carry_in: Mapping[int, float] | None = None) -> list[np.ndarray]:
+    """
+    Return each window's input rows, as the compensation filter computes them on the stream.
+
+    A leaky peak carries over from the window before in the same recording (the first one
+    starts from ``carry_in[source]``, default rest) and, like the pressure, has its
+    pre-trigger mean removed.
+    """
+    peaks = [row for row, name in enumerate(names) if parse_channel(name).kind == 'peak']
+    out: list[np.ndarray] = [np.empty(0)] * len(windows)
+    last: dict[int, tuple[dict, int]] = {}
+    for index in sorted(range(len(windows)), key=lambda i: (windows[i].source, windows[i].start)):
+        w = windows[index]
+        level = (carry_in or {}).get(w.source, 0.0)
+        state, stop = last.get(w.source, ({f'{n}|peak': level for n in names}, w.start))
+        state = carried_state(state, names, w.start - stop, fs=fs) if peaks else {}
+        u = input_channels(names, w.acceleration, state, fs=fs)
+        if peaks and w.baseline > 0:
+            u[peaks] -= u[peaks, :w.baseline].mean(axis=1, keepdims=True)
+        last[w.source] = (state, w.start + w.y.size)
+        out[index] = u
+    return out
+
+
+def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
+                fs: float) -> dict[int, float]:
+    """
+    Return per recording the leaky-peak level (m/s²) its first window starts from.
+
+    Shots before a recording's first window leave a zero shift that is not in it; the level
+    minimising that window's output error is taken where it lowers the error by more than
+    :data:`CARRY_IN_GAIN` times the estimate's noise variance (a chance improvement of one
+    parameter stays far below).
+    """
+    if not any(parse_channel(name).kind == 'peak' for name in names):
+        return {}
+    first: dict[int, Window] = {}
+    for w in windows:
+        if w.source not in first or w.start < first[w.source].start:
+            first[w.source] = w
+    out = {}
+    for source, w in first.items():
+        top = float(np.max(np.abs(w.acceleration[2]))) if w.y.size else 0.0
+        if not top > 0:
+            continue
+
+        def sse(level, w=w):
+            u = _channels([w], names, fs, {w.source: level})[0]
+            r = w.y - simulate_output(estimate, [u])[0]
+            return float(r @ r)
+        found = optimize.minimize_scalar(sse, bounds=(0.0, CARRY_IN_LIMIT * top),
+                                         method='bounded', options={'xatol': 1e-3 * top})
+        if found.success and sse(0.0) - found.fun > CARRY_IN_GAIN * estimate.noise_variance:
+            out[source] = float(found.x)
+    return out
 
 
 def _columns(window: Window, effects: Sequence[Effect], choices: Sequence[Mapping],

@@ -8,7 +8,7 @@ The grammar and the numerics: ``doc/model-inputs.md``.
 
 from __future__ import annotations
 
-from collections.abc import MutableMapping, Sequence
+from collections.abc import Mapping, MutableMapping, Sequence
 from dataclasses import dataclass
 import math
 import re
@@ -18,8 +18,8 @@ from scipy import signal
 
 from ...errors import SensorCompError
 
-__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'fractional_delay',
-           'input_channels', 'mode_pair', 'needs_rate', 'parse_channel']
+__all__ = ['AXES', 'LAGRANGE_ORDER', 'Channel', 'InputError', 'carried_state',
+           'fractional_delay', 'input_channels', 'mode_pair', 'needs_rate', 'parse_channel']
 
 #: Row of each axis in an acceleration block.
 AXES = {'x': 0, 'y': 1, 'z': 2}
@@ -226,6 +226,24 @@ def _leaky_peak(tau_ms: float, fs: float):
         y = np.exp(top + k * log_rho)
         return y, float(y[-1])
     return stage
+
+
+def carried_state(state: Mapping[str, object], names: Sequence[str], samples: int, *,
+                  fs: float) -> dict[str, object]:
+    """
+    Return what of a stream's ``state`` outlasts ``samples`` samples of rest.
+
+    A leaky peak decays over the gap (a zero shift can outlast the time between shots);
+    every other stage restarts from rest, as the acceleration is at its baseline between
+    shot windows.
+    """
+    out: dict[str, object] = {}
+    for name in names:
+        channel = parse_channel(name)
+        key = f'{name}|peak'
+        if channel.kind == 'peak' and isinstance(state.get(key), float) and samples >= 0:
+            out[key] = state[key] * math.exp(-1e3 * samples / (channel.tau_ms * fs))
+    return out
 
 
 def input_channels(names: Sequence[str], acceleration: np.ndarray,

@@ -21,8 +21,8 @@ from sensor_comp.core.effects import (describe_effects, disturbance_trackers, EF
 from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, mechanics_delay_s,
                                            ModelSpec, ResidualView)
 from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
-from sensor_comp.core.shots.inputs import (fractional_delay, input_channels, InputError, mode_pair,
-                                           needs_rate, parse_channel)
+from sensor_comp.core.shots.inputs import (carried_state, fractional_delay, input_channels,
+                                           InputError, mode_pair, needs_rate, parse_channel)
 from sensor_comp.core.identification.model import load, Model
 from sensor_comp.streams import G0
 
@@ -161,6 +161,23 @@ def test_highpass_leaky_peak_and_mode_follow_their_closed_forms():
     peak = input_channels(['peak_a_z(tau_ms=1.0)'], impulse, {}, fs=FS)[0]
     assert np.allclose(peak[10:], 5.0 * np.exp(-np.arange(n - 10) / (1e-3 * FS)))
     assert np.all(peak[:10] == 0)
+
+
+def test_a_leaky_peak_carried_over_a_gap_equals_the_stream():
+    # Two windows cut from one stream: the second computed from the first's carried state
+    # equals the stream's own leaky peak; the delay's FIR state restarts from rest.
+    acc = shocks(3000)
+    acc[:, 1200:1800] = 0.0  # the gap between the windows is at rest
+    names = ['peak_a_z(tau_ms=20.0)', 'a_z@delay_us=20.0']
+    whole = input_channels(names, acc, {}, fs=FS)
+    state: dict = {}
+    input_channels(names, acc[:, :1200], state, fs=FS)
+    carried = carried_state(state, names, 600, fs=FS)
+    assert set(carried) == {'peak_a_z(tau_ms=20.0)|peak'}
+    second = input_channels(names, acc[:, 1800:], carried, fs=FS)
+    assert np.allclose(second[0], whole[0, 1800:], rtol=1e-12, atol=0)
+    assert whole[0, 1800] > 0.5 * np.max(np.abs(acc[2, :1200]))  # 20 ms outlast the gap
+    assert carried_state(state, names, -1, fs=FS) == {}
 
 
 def test_channels_restart_from_rest_after_missing_samples():
