@@ -446,12 +446,13 @@ def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Win
     """
     Return the base orders ``(nf, nb, nk)`` and effects the candidates are compared with.
 
-    Without ``base``: ``orders`` and ``delay``. With it: its effects on a sensor base of at
-    most one mode (``nf`` at most that of :data:`BASE_ORDERS`; fewer when the model was
-    identified with fewer, as the data support) with the numerator on lags ``0 .. nf`` (the
-    exact structure of an ``nf``-th order sensor sampled with its input interpolated
-    linearly): poles beyond the sensor's mode or an input delay stand in for an effect (a
-    second mode, a slow tail, a channel delay), which the diagnosis is there to name.
+    Without ``base``: ``orders`` and ``delay``. With it: its effects on a sensor base of one
+    mode (``nf`` of :data:`BASE_ORDERS`) with the numerator on lags ``0 .. nf`` (the exact
+    structure of an ``nf``-th order sensor sampled with its input interpolated linearly):
+    poles beyond the sensor's mode or an input delay stand in for an effect (a second mode,
+    a slow tail, a channel delay), which the diagnosis is there to name. A model identified
+    with one pole (its mode above the pulses' band) gets the mode too: one pole lags like a
+    channel delay, which a lag-free mode cannot imitate.
     """
     if base is None:
         nf, nb = orders
@@ -461,7 +462,7 @@ def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Win
     base_effects = tuple(e['id'] for e in base.effects if e.get('id') in EFFECTS)
     given = tuple(int(base.fit.get(f'base_{key}', value)) for key, value in (
         ('nf', base.a.size - 1), ('nb', base.b.shape[1]), ('nk', base.nk)))
-    nf = min(given[0], BASE_ORDERS[0])
+    nf = BASE_ORDERS[0]
     physical = (nf, nf + 1, 0)
     text = (f'base: nf={physical[0]}, nb={physical[1]}, nk={physical[2]} with the given '
             f'model\'s effects ({", ".join(base_effects) or "none"}), refitted on the '
