@@ -150,6 +150,9 @@ MAINS_HZ = (50.0, 60.0)
 #: (a few hundredths: 1.14 against 1.11 on a clean 213 kS/s rig). An effect leaving as
 #: little as the free base, within the practical share, is then named.
 FREE_GAP = 0.1
+#: ... or within this share of that excess: the free numerators also shape the noise, by a
+#: few hundredths of its energy beside a lag worth several (1.10 against 1.05 beside 4.46).
+FREE_SHARE = 0.05
 #: Least score (fraction of the base residual energy removed) a significant effect needs:
 #: a smaller improvement, even if beyond noise, is a structural detail, not an effect.
 MIN_SCORE = 0.005
@@ -381,13 +384,15 @@ class _Context:
         With lag-free numerators an effect must leave less than the free-numerator base
         does, or, when that base leaves less than the lag-free one by more than
         :data:`FREE_GAP` noise energies (its numerators took a lead or a lag), no more
-        than the practical share of the noise more than it.
+        than the practical share of the noise, or :data:`FREE_SHARE` of that excess, more
+        than it.
         """
         if not self.lag_free or sse < self.free_sse:
             return True
         energy = self.samples * self.noise.variance
-        return (self.sse - self.free_sse > FREE_GAP * energy
-                and sse - self.free_sse <= PRACTICAL_SHARE * energy)
+        gap = self.sse - self.free_sse
+        return (gap > FREE_GAP * energy
+                and sse - self.free_sse <= max(PRACTICAL_SHARE * energy, FREE_SHARE * gap))
 
     @property
     def samples(self) -> int:
