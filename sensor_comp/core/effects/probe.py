@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -61,7 +62,8 @@ class ProbeSpec:
         words: The phrase naming it in the analysis's sentences.
         regressors: ``(data, grid value or None) -> one (k, n) block per window``.
         reading: ``(coefficients, grid value or None) -> physical parameters``.
-        grid: Values searched (the best wins; the p-value pays for their number).
+        grid: Values searched, numbers or tuples of them (the best wins; the p-value pays
+            for their number).
         with_output: Fit it together with ŷ; only the generic ``gain`` probe stands alone.
 
     """
@@ -69,7 +71,7 @@ class ProbeSpec:
     name: str
     tests: str
     words: str
-    regressors: Callable[[ProbeData, float | None], list[np.ndarray]]
-    reading: Callable[[np.ndarray, float | None], Mapping[str, float]]
-    grid: tuple[float, ...] = ()
+    regressors: Callable[[ProbeData, Any], list[np.ndarray]]
+    reading: Callable[[np.ndarray, Any], Mapping[str, float]]
+    grid: tuple[Any, ...] = ()
     with_output: bool = True

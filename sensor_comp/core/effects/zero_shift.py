@@ -19,7 +19,7 @@ from .probe import PROBE_TIME_CONSTANTS_MS, ProbeData, ProbeSpec
 from ..shots.inputs import parse_channel
 from ...streams import G0
 
-__all__ = ['OFFSET_PROBE', 'ZeroShift']
+__all__ = ['DRIFT_PROBE', 'OFFSET_PROBE', 'ZeroShift']
 
 KEY = 'zero_shift.tau_ms'
 
@@ -49,6 +49,32 @@ OFFSET_PROBE = ProbeSpec(
     grid=PROBE_TIME_CONSTANTS_MS)
 
 
+#: Rise and decay times (ms) of the drift the zero shift's rival probe tries.
+DRIFT_TIMES_MS = tuple((rise, decay) for rise in (1.0, 3.0, 8.0) for decay in (10.0, 30.0, 100.0))
+
+
+def _drifts(data: ProbeData, times: tuple[float, float]) -> list[np.ndarray]:
+    rise, decay = times
+    out = []
+    for (_, onset, _, _, n), g in zip(data.bounds, data.peak_g):
+        after = np.arange(n - onset) * (1e3 / data.fs)
+        x = np.zeros(n)
+        x[onset:] = abs(g) * (np.exp(-after / decay) - np.exp(-after / rise))
+        out.append(x[np.newaxis])
+    return out
+
+
+#: A drift ∝ the peak g that rises over milliseconds after the onset (heating of the
+#: sensor, outside the catalogue): a zero shift jumps with the pulse instead, so a zero
+#: shift that only passes for a drift leaves its rise (the rival of ``zero_shift``).
+DRIFT_PROBE = ProbeSpec(
+    'drift', tests='a drift ∝ the peak g rising over ms after the onset and decaying '
+    f'(a thermal drift; rise × decay times {len(DRIFT_TIMES_MS)} pairs of 1–8 and 10–100 ms)',
+    words='a drift rising after each impact', regressors=_drifts,
+    reading=lambda c, times: {'pa_per_g': c[0], 'rise_ms': times[0], 'decay_ms': times[1]},
+    grid=DRIFT_TIMES_MS)
+
+
 class ZeroShift(Effect):
     """A decaying offset after each shock (see the module docs)."""
 
@@ -68,6 +94,7 @@ class ZeroShift(Effect):
     amplitude = 'pa_per_g'
     order = 50
     probes = (OFFSET_PROBE,)
+    rivals = (DRIFT_PROBE,)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Add the leaky-peak channel, its decay time searched."""

@@ -327,18 +327,17 @@ def _drift_pair(effects=(), pa_per_g=2.0, rise_ms=4.0, decay_ms=30.0):
 
 
 def test_an_effect_outside_the_catalogue_is_not_named_with_confidence():
-    # The drift rises over 4 ms where a zero shift jumps with the pulse. At 2 Pa/g a zero
-    # shift, its leaky peak carried from shot to shot as compensation computes it, follows
-    # the drift to 1.18x the noise energy (tolerance 1.30): six shots cannot tell the two
-    # apart. At 4 Pa/g it leaves 1.66x (tolerance 1.52), where the drift rises.
-    calib, valid = _drift_pair(pa_per_g=4.0)
-    result = diagnose([calib], [valid], residual_analysis=False)
+    calib, valid = _drift_pair()
+    result = diagnose([calib], [valid])
     assert result.verdict in ('unexplained', 'partly_explained'), result.summary()
     assert not result.leftover.consistent
-    assert result.leftover.energy_ratio > result.leftover.tolerance
-    assert 'ringing after the pulse' in result.leftover.describe()
-    assert 'slow' in result.leftover.shape
+    assert 'tail' in result.leftover.describe() and 'slow' in result.leftover.shape
+    # A zero shift, its leaky peak carried from shot to shot, follows the drift to 1.18x the
+    # noise energy (within the tolerance, 1.30), but leaves the drift's rise over the
+    # first milliseconds, which its rival probe still finds in what it leaves: not counted.
     # Mains-hum regressors follow the drift too, but only after the triggers.
+    zero_shift = result.entry('zero_shift')
+    assert not zero_shift.significant and 'drift rising after each impact' in zero_shift.doubt
     assert not result.entry('mains_hum').significant
 
 
