@@ -690,8 +690,8 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         evidence = Effect.evidence(effect, None, outcome)
     if prediction.carried_in:
         evidence = (f'{evidence} The first shot of {len(prediction.carried_in)} validation '
-                    f'recording(s) starts from the offset of shots before it (fitted here); '
-                    f'compensating a recording from its start leaves that offset in its first '
+                    f'recording(s) starts from a slow state the shots before it left (fitted '
+                    f'here); compensating a recording from its start leaves it in its first '
                     f'shot.')
     units = {k: effect.parameters.get(k, '') for k in parameters}
     left = ctx.leftover(residual)

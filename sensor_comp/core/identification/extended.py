@@ -148,8 +148,9 @@ class Prediction:
         induced: Acceleration-driven part per window (simulated from rest), Pa.
         disturbance: Disturbance estimate per window (zeros without disturbances), Pa.
         disturbance_parameters: Coefficients estimated on these windows' own residual.
-        carried_in: Zero-shift level (m/s² of peak ``|a_z|``) fitted per recording for its
-            first window: left by shots before it, unknown to a compensation from rest.
+        carried_in: The state fitted per recording for its first window (a zero shift's
+            level in m/s² of peak ``|a_z|``, or the high-pass's output offset in Pa): left
+            by shots before it, unknown to a compensation from rest.
 
     """
 
@@ -227,14 +228,17 @@ class ExtendedFit:
         Return the prediction over ``windows`` (e.g. validation shots).
 
         The acceleration-driven part is simulated from rest in each window, but for a zero
-        shift's leaky peak: it carries over between the windows of a recording, and the level
-        its first window starts from (left by shots before it) is fitted. A disturbance's
+        shift's leaky peak, which carries over between the windows of a recording: the
+        slow state a recording's first window starts from (left by shots before it: that
+        leaky peak's level, or a high-pass's charge) is fitted. A disturbance's
         phase belongs to its recording, so its coefficients are estimated again by least
         squares on these windows' residual (per recording, the frequency kept from the
         fit); :attr:`Prediction.disturbance_parameters` counts them.
         """
         carry = _carried_in(self.estimate, windows, self.inputs, self.fs)
         induced = simulate_output(self.estimate, _channels(windows, self.inputs, self.fs, carry))
+        carry.update(_highpass_carried_in(self.estimate, windows, self.inputs, self.fs,
+                                          induced))
         if self.disturbance is None:
             return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry)
         sources = 1 + max(w.source for w in windows)
@@ -302,6 +306,41 @@ def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[s
                                          method='bounded', options={'xatol': 1e-3 * top})
         if found.success and sse(0.0) - found.fun > CARRY_IN_GAIN * estimate.noise_variance:
             out[source] = float(found.x)
+    return out
+
+
+def _highpass_carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
+                         fs: float, induced: list[np.ndarray]) -> dict[int, float]:
+    """
+    Add to ``induced`` the decay of each recording's high-pass charge; return its size, Pa.
+
+    The ``a_z`` path's high-pass state at a recording's first window is unknown; its decay
+    through the model is one regressor, fitted by least squares where it lowers that
+    window's error by more than :data:`CARRY_IN_GAIN` noise variances (as a zero shift's
+    carried level, :func:`_carried_in`).
+    """
+    channel = parse_channel(names[0])
+    tau_ms = dict(channel.modifiers).get('highpass_ms')
+    if tau_ms is None:
+        return {}
+    first: dict[int, int] = {}
+    for index, w in enumerate(windows):
+        if w.source not in first or w.start < windows[first[w.source]].start:
+            first[w.source] = index
+    out = {}
+    for source, index in first.items():
+        w = windows[index]
+        u = np.zeros((len(names), w.y.size))
+        u[0] = math.exp(-1e3 / (tau_ms * fs)) ** np.arange(w.y.size)
+        r = simulate_output(estimate, [u])[0]
+        if w.baseline > 0:
+            r -= r[:w.baseline].mean()
+        e = w.y - induced[index]
+        energy = float(r @ r)
+        if energy > 0 and float(r @ e) ** 2 / energy > CARRY_IN_GAIN * estimate.noise_variance:
+            size = float(r @ e) / energy
+            induced[index] = induced[index] + size * r
+            out[source] = size
     return out
 
 

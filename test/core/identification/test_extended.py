@@ -7,6 +7,7 @@ with the simulator's (15 %); streaming compensation with an extended model is co
 with the whole signal at 1e-9 of its peak (round-off), block sizes down to one sample.
 """
 
+import dataclasses
 import functools
 import math
 
@@ -18,7 +19,7 @@ from sensor_comp.core.compensation.filter import CompensationFilter, compensate_
 from sensor_comp.core.effects import EffectError
 from sensor_comp.core.identification import extended
 from sensor_comp.core.identification.extended import fit_extended, shot_windows
-from sensor_comp.core.estimators import fit_percent
+from sensor_comp.core.estimators import fit_percent, simulate_output
 from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.core.identification.model import load
 from sensor_comp.io.bag_reader import read_recording
@@ -301,3 +302,35 @@ def test_a_zero_shift_outlasting_the_gap_between_shots_is_carried_as_on_the_stre
     monkeypatch.setattr(extended, 'CARRY_IN_GAIN', math.inf)
     prediction, ratios = first_two()
     assert not prediction.carried_in and min(ratios) > 1.5, ratios
+
+
+def test_a_high_pass_charge_left_before_a_recording_is_fitted_in_its_first_window():
+    # The same fit predicts the same shots twice: as recorded, and with the decay of a
+    # 3 kPa charge of the high-pass (as earlier shots would leave it) added to the first
+    # window. The prediction fits that charge and leaves that window's residual as before.
+    sim, source = run(('amplifier_highpass:tau_ms=50',))
+    fit = fit_extended(shot_windows([source]), effects=['amplifier_highpass'], fs=FS,
+                       nf=2, nb=3, nk=0)
+    windows = shot_windows([source])
+    plain = fit.predict(windows)
+    first = min(range(len(windows)), key=lambda i: windows[i].start)
+    w = windows[first]
+    tau_ms = fit.parameters('amplifier_highpass')['tau_ms'][0]
+    u = np.zeros((len(fit.inputs), w.y.size))
+    u[0] = math.exp(-1e3 / (tau_ms * FS)) ** np.arange(w.y.size)
+    decay = simulate_output(fit.estimate, [u])[0]
+    decay -= decay[:w.baseline].mean()
+    size = 3000.0 / np.max(np.abs(decay))
+    charged = list(windows)
+    charged[first] = dataclasses.replace(w, y=w.y + size * decay)
+    prediction = fit.predict(charged)
+    assert not plain.carried_in  # these shots start the recording: nothing to carry
+    # Least squares: the charge plus what of the shots' own misfit follows its decay.
+    misfit = w.y - plain.total[first]
+    expected = size + float(decay @ misfit) / float(decay @ decay)
+    assert prediction.carried_in[w.source] == pytest.approx(expected, rel=1e-6)
+    assert abs(expected - size) < 0.1 * size
+    left = charged[first].y - prediction.total[first]
+    assert float(left @ left) <= float(misfit @ misfit)  # the fit can only lower the error
+    added = size * decay
+    assert np.sqrt(np.mean((left - misfit) ** 2)) < 0.1 * np.sqrt(np.mean(added ** 2))
