@@ -688,11 +688,11 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         evidence = effect.evidence(analysis, outcome)
     except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
         evidence = Effect.evidence(effect, None, outcome)
-    if prediction.carried_in:
-        evidence = (f'{evidence} The first shot of {len(prediction.carried_in)} validation '
-                    f'recording(s) starts from a slow state the shots before it left (fitted '
-                    f'here); compensating a recording from its start leaves it in its first '
-                    f'shot.')
+    if prediction.started_after_shots:
+        evidence = (f'{evidence} The first shot of {len(prediction.started_after_shots)} '
+                    f'validation recording(s) starts from a slow state the shots before it '
+                    f'left (fitted here); compensating a recording from its start leaves it '
+                    f'in its first shot.')
     units = {k: effect.parameters.get(k, '') for k in parameters}
     left = ctx.leftover(residual)
     doubt, rival = effect.implausible(fit), effect.rival(analysis)

@@ -148,9 +148,9 @@ class Prediction:
         induced: Acceleration-driven part per window (simulated from rest), Pa.
         disturbance: Disturbance estimate per window (zeros without disturbances), Pa.
         disturbance_parameters: Coefficients estimated on these windows' own residual.
-        carried_in: The state fitted per recording for its first window (a zero shift's
-            level in m/s² of peak ``|a_z|``, or the high-pass's output offset in Pa): left
-            by shots before it, unknown to a compensation from rest.
+        carried_in: Zero-shift level (m/s² of peak ``|a_z|``) fitted per recording for its
+            first window: left by shots before it, unknown to a compensation from rest.
+        charge_pa: Likewise, the high-pass's charge (its decay's size in Pa).
 
     """
 
@@ -158,6 +158,12 @@ class Prediction:
     disturbance: list[np.ndarray]
     disturbance_parameters: int
     carried_in: Mapping[int, float] = field(default_factory=dict)
+    charge_pa: Mapping[int, float] = field(default_factory=dict)
+
+    @property
+    def started_after_shots(self) -> set[int]:
+        """Return the recordings whose first window starts from a fitted slow state."""
+        return set(self.carried_in) | set(self.charge_pa)
 
     @property
     def total(self) -> list[np.ndarray]:
@@ -237,10 +243,10 @@ class ExtendedFit:
         """
         carry = _carried_in(self.estimate, windows, self.inputs, self.fs)
         induced = simulate_output(self.estimate, _channels(windows, self.inputs, self.fs, carry))
-        carry.update(_highpass_carried_in(self.estimate, windows, self.inputs, self.fs,
-                                          induced))
+        charge = _highpass_charge(self.estimate, windows, self.inputs, self.fs, induced)
         if self.disturbance is None:
-            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry)
+            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry,
+                              charge)
         sources = 1 + max(w.source for w in windows)
         cols = [self.disturbance.columns(w, fs=self.fs, sources=sources) for w in windows]
         phi = np.concatenate(cols, axis=1).T
@@ -248,7 +254,7 @@ class ExtendedFit:
         used = np.flatnonzero(np.any(phi != 0, axis=0))
         coef = np.zeros(phi.shape[1])
         coef[used] = _lstsq(phi[:, used], target)[0]
-        return Prediction(induced, [c.T @ coef for c in cols], int(used.size), carry)
+        return Prediction(induced, [c.T @ coef for c in cols], int(used.size), carry, charge)
 
 
 def _channels(windows: Sequence[Window], names: Sequence[str], fs: float,
@@ -266,7 +272,7 @@ def _channels(windows: Sequence[Window], names: Sequence[str], fs: float,
     for index in sorted(range(len(windows)), key=lambda i: (windows[i].source, windows[i].start)):
         w = windows[index]
         level = (carry_in or {}).get(w.source, 0.0)
-        state, stop = last.get(w.source, ({f'{n}|peak': level for n in names}, w.start))
+        state, stop = last.get(w.source, ({f'{names[r]}|peak': level for r in peaks}, w.start))
         state = carried_state(state, names, w.start - stop, fs=fs) if peaks else {}
         u = input_channels(names, w.acceleration, state, fs=fs)
         if peaks and w.baseline > 0:
@@ -274,6 +280,15 @@ def _channels(windows: Sequence[Window], names: Sequence[str], fs: float,
         last[w.source] = (state, w.start + w.y.size)
         out[index] = u
     return out
+
+
+def _first_windows(windows: Sequence[Window]) -> dict[int, int]:
+    """Return the index of each recording's earliest window."""
+    first: dict[int, int] = {}
+    for index, w in enumerate(windows):
+        if w.source not in first or w.start < windows[first[w.source]].start:
+            first[w.source] = index
+    return first
 
 
 def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
@@ -288,12 +303,9 @@ def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[s
     """
     if not any(parse_channel(name).kind == 'peak' for name in names):
         return {}
-    first: dict[int, Window] = {}
-    for w in windows:
-        if w.source not in first or w.start < first[w.source].start:
-            first[w.source] = w
     out = {}
-    for source, w in first.items():
+    for source, index in _first_windows(windows).items():
+        w = windows[index]
         top = float(np.max(np.abs(w.acceleration[2]))) if w.y.size else 0.0
         if not top > 0:
             continue
@@ -309,8 +321,8 @@ def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[s
     return out
 
 
-def _highpass_carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
-                         fs: float, induced: list[np.ndarray]) -> dict[int, float]:
+def _highpass_charge(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
+                     fs: float, induced: list[np.ndarray]) -> dict[int, float]:
     """
     Add to ``induced`` the decay of each recording's high-pass charge; return its size, Pa.
 
@@ -323,12 +335,8 @@ def _highpass_carried_in(estimate: Estimate, windows: Sequence[Window], names: S
     tau_ms = dict(channel.modifiers).get('highpass_ms')
     if tau_ms is None:
         return {}
-    first: dict[int, int] = {}
-    for index, w in enumerate(windows):
-        if w.source not in first or w.start < windows[first[w.source]].start:
-            first[w.source] = index
     out = {}
-    for source, index in first.items():
+    for source, index in _first_windows(windows).items():
         w = windows[index]
         u = np.zeros((len(names), w.y.size))
         u[0] = math.exp(-1e3 / (tau_ms * fs)) ** np.arange(w.y.size)

@@ -324,11 +324,11 @@ def test_a_high_pass_charge_left_before_a_recording_is_fitted_in_its_first_windo
     charged = list(windows)
     charged[first] = dataclasses.replace(w, y=w.y + size * decay)
     prediction = fit.predict(charged)
-    assert not plain.carried_in  # these shots start the recording: nothing to carry
+    assert not plain.charge_pa  # these shots start the recording: nothing to carry
     # Least squares: the charge plus what of the shots' own misfit follows its decay.
     misfit = w.y - plain.total[first]
     expected = size + float(decay @ misfit) / float(decay @ decay)
-    assert prediction.carried_in[w.source] == pytest.approx(expected, rel=1e-6)
+    assert prediction.charge_pa[w.source] == pytest.approx(expected, rel=1e-6)
     assert abs(expected - size) < 0.1 * size
     left = charged[first].y - prediction.total[first]
     assert float(left @ left) <= float(misfit @ misfit)  # the fit can only lower the error
