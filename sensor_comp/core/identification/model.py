@@ -49,10 +49,12 @@ TYPICAL_MPA_PER_G = (1e-6, 4e-4)
 #: The range any such sensor can show, in MPa/g. Above: the sensitivity is the inertia of
 #: the diaphragm and crystal stack over the diaphragm area, ρ·t·g; a 5 mm quartz stack
 #: (2650 kg/m³) gives 130 Pa/g = 1.3e-4 MPa/g, so 1e-3 MPa/g would take a stack eight times
-#: heavier than any sensor has; twice that for ringing. Below: a decade under the best
-#: acceleration-compensated sensors (their datasheets bound it at 1e-5 bar/g = 1e-6 MPa/g).
-#: A pressure in kPa or MPa where Pa is expected moves a sensitivity 10^3 or 10^6 down.
-PLAUSIBLE_MPA_PER_G = (1e-7, 2e-3)
+#: heavier than any sensor has; twice that for ringing. Below: two decades under the best
+#: acceleration-compensated sensors (their datasheets bound it at 1e-5 bar/g = 1e-6 MPa/g):
+#: a compensating mass can cancel nearly all of the static response, leaving the two
+#: modes' ringing. A pressure in MPa or bar where Pa is expected moves a sensitivity
+#: 10^6 or 10^5 down, below it for any sensor.
+PLAUSIBLE_MPA_PER_G = (1e-8, 2e-3)
 
 #: Unit mistakes that scale an identified sensitivity, as (mistake, factor to the truth).
 _UNIT_MISTAKES = (

@@ -343,6 +343,8 @@ def test_sensitivity_ranges():
     assert low < TYPICAL_MPA_PER_G[0] < 1.4e-4 < TYPICAL_MPA_PER_G[1] < high
     assert sensitivity_problem(1.4e-4) is None and sensitivity_problem(-2e-6) is None
     assert sensitivity_problem(1.4e-7)[0] is False  # kPa taken for Pa: still plausible
+    # A compensating mass that cancels nearly all of the static response: a warning only.
+    assert sensitivity_problem(4.9e-8)[0] is False
     for value in (1.4e-10, 1.4e-1, 0.0, math.nan):
         assert sensitivity_problem(value)[0] is True
     assert 'no single unit mistake' in sensitivity_problem(1e-18)[1]
