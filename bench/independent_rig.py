@@ -221,6 +221,9 @@ class Case:
         induced_pressure: The sensor's linear response to the axial acceleration, Pa.
         effect_pressure: The effect's contribution to the pressure (for an accelerometer
             effect: the pressure error it causes through the sensor model), Pa.
+        accel_noise_pressure: What the axial accelerometer noise gives through the sensor's
+            static gain and mechanics (discretised at the sample rate), Pa: a perfect model
+            fed the measured acceleration predicts it, the pressure holds none of it.
 
     """
 
@@ -229,6 +232,7 @@ class Case:
     clean_pressure: np.ndarray
     induced_pressure: np.ndarray
     effect_pressure: np.ndarray
+    accel_noise_pressure: np.ndarray
 
     def halves(self) -> tuple[int, tuple[Recording, Recording]]:
         """
@@ -687,7 +691,10 @@ def simulate(spec: RigSpec) -> Case:
             acceleration[2] += built.accel(x)
     rng = np.random.default_rng([spec.seed, 22])
     pressure = clean + sigma * rng.standard_normal(grid.n)
-    measured = acceleration + spec.accel_noise * rng.standard_normal(acceleration.shape)
+    accel_noise = spec.accel_noise * rng.standard_normal(acceleration.shape)
+    measured = acceleration + accel_noise
+    through = spec.sensitivity * signal.lfilter(*_mode(spec.fn_hz, spec.zeta, 1 / spec.fs),
+                                                accel_noise[2])
     recording = Recording(fs=spec.fs, t0_ns=spec.t0_ns, pressure=pressure,
                           acceleration=measured, metadata={
                               'charge_sensitivity_pC_per_MPa':
@@ -697,7 +704,7 @@ def simulate(spec: RigSpec) -> Case:
              'noise_sigma_pa': sigma, 'accel_noise_sigma': spec.accel_noise,
              'windows': [list(w) for w in windows], 'rate_band': rate_band(spec.fs),
              'rig': _rig_summary(spec)}
-    return Case(recording, truth, clean, base.sampled, effect_pressure)
+    return Case(recording, truth, clean, base.sampled, effect_pressure, through)
 
 
 def _rig_summary(spec: RigSpec) -> dict:

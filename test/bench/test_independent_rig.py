@@ -4,8 +4,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import signal
 
-from bench.independent_rig import (CATALOGUE, CLEAN, draw_spec, OUT_OF_CATALOGUE, Pulse,
+from bench.independent_rig import (_mode, CATALOGUE, CLEAN, draw_spec, OUT_OF_CATALOGUE, Pulse,
                                    ratio, Shot, simulate, write_csv)
 from sensor_comp.io.csv_import import read_csv
 from sensor_comp.streams import G0
@@ -84,3 +85,19 @@ def test_halves_cut_between_the_shots_and_keep_every_sample():
     assert calibration.n_samples + validation.n_samples == case.recording.n_samples
     np.testing.assert_array_equal(np.concatenate([calibration.pressure, validation.pressure]),
                                   case.recording.pressure)
+
+
+def test_the_accelerometer_noise_through_the_sensor_is_what_a_perfect_model_adds():
+    quiet = simulate(_slow_rig(accel_noise=0.0))
+    assert not np.any(quiet.accel_noise_pressure)
+    spec = _slow_rig(accel_noise=50.0)
+    case = simulate(spec)
+    # White noise σ through the unit-DC mode at the sample rate: σ·√Σh², times S.
+    impulse = np.zeros(4096)
+    impulse[0] = 1.0
+    h = signal.lfilter(*_mode(spec.fn_hz, spec.zeta, 1 / spec.fs), impulse)
+    expected = spec.sensitivity * 50.0 * np.sqrt(np.sum(h * h))
+    assert np.std(case.accel_noise_pressure) == pytest.approx(expected, rel=0.05)
+    # The measured axial acceleration holds the noise the pressure path was given.
+    assert np.std(case.recording.acceleration[2] - quiet.recording.acceleration[2]) == \
+        pytest.approx(50.0, rel=0.05)
