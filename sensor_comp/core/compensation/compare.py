@@ -1,8 +1,10 @@
 """
 Measured against simulated induced pressure per shot, as MATLAB's ``compare`` reports it.
 
-Models are simulated from rest over each baseline-removed shot window; fit %, peak error
-and peak residual per shot. Definitions: ``doc/compare.md``.
+Models are simulated from rest over each baseline-removed shot window (a zero shift's
+leaky peak carried from window to window of the recording, as the compensation filter
+carries it on the stream); fit %, peak error and peak residual per shot. Definitions:
+``doc/compare.md``.
 """
 
 from __future__ import annotations
@@ -19,12 +21,14 @@ from ..estimators.metrics import fit_percent
 from ..estimators.polynomials import max_root_radius
 from ..estimators.simulate import simulate_output
 from ..shots.detection import segments, Shot, ShotError
+from ..shots.windows import shot_channels
 from ...streams import Recording
 
 __all__ = ['Comparison', 'ShotComparison', 'compare', 'format_table']
 
 _WINDOWS = ('shot windows from the pre-trigger to the post-trigger, baselines removed, each '
-            'simulated from rest; overall fit over all windows together')
+            'simulated from rest (a zero shift\'s leaky peak carried over from the window '
+            'before, as on the stream); overall fit over all windows together')
 
 
 def _signed_peak(x: np.ndarray) -> float:
@@ -156,7 +160,7 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     for position, (model, label) in enumerate(zip(models, labels)):
         inputs = uses[position]
         if inputs not in inputs_cache:
-            inputs_cache[inputs] = [u for u, _ in segments(recording, shots, inputs=inputs)]
+            inputs_cache[inputs] = shot_channels(recording, shots, inputs)
         simulated = simulate_output(model, inputs_cache[inputs])
         if inputs not in uses[position + 1:]:
             del inputs_cache[inputs]

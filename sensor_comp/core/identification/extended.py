@@ -54,10 +54,10 @@ from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
-from ..shots.inputs import carried_state, input_channels, mode_pair, parse_channel
+from ..shots.inputs import mode_pair, parse_channel
 from .lag_free import LagFree
 from .model import Model
-from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window
+from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
 
 __all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit',
            'ExtendedFit', 'Prediction', 'Window', 'fit_extended', 'ringing_khz',
@@ -242,7 +242,8 @@ class ExtendedFit:
         fit); :attr:`Prediction.disturbance_parameters` counts them.
         """
         carry = _carried_in(self.estimate, windows, self.inputs, self.fs)
-        induced = simulate_output(self.estimate, _channels(windows, self.inputs, self.fs, carry))
+        channels = window_channels(windows, self.inputs, fs=self.fs, carry_in=carry)
+        induced = simulate_output(self.estimate, channels)
         charge = _highpass_charge(self.estimate, windows, self.inputs, self.fs, induced)
         if self.disturbance is None:
             return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry,
@@ -255,31 +256,6 @@ class ExtendedFit:
         coef = np.zeros(phi.shape[1])
         coef[used] = _lstsq(phi[:, used], target)[0]
         return Prediction(induced, [c.T @ coef for c in cols], int(used.size), carry, charge)
-
-
-def _channels(windows: Sequence[Window], names: Sequence[str], fs: float,
-              carry_in: Mapping[int, float] | None = None) -> list[np.ndarray]:
-    """
-    Return each window's input rows, as the compensation filter computes them on the stream.
-
-    A leaky peak carries over from the window before in the same recording (the first one
-    starts from ``carry_in[source]``, default rest) and, like the pressure, has its
-    pre-trigger mean removed.
-    """
-    peaks = [row for row, name in enumerate(names) if parse_channel(name).kind == 'peak']
-    out: list[np.ndarray] = [np.empty(0)] * len(windows)
-    last: dict[int, tuple[dict, int]] = {}
-    for index in sorted(range(len(windows)), key=lambda i: (windows[i].source, windows[i].start)):
-        w = windows[index]
-        level = (carry_in or {}).get(w.source, 0.0)
-        state, stop = last.get(w.source, ({f'{names[r]}|peak': level for r in peaks}, w.start))
-        state = carried_state(state, names, w.start - stop, fs=fs) if peaks else {}
-        u = input_channels(names, w.acceleration, state, fs=fs)
-        if peaks and w.baseline > 0:
-            u[peaks] -= u[peaks, :w.baseline].mean(axis=1, keepdims=True)
-        last[w.source] = (state, w.start + w.y.size)
-        out[index] = u
-    return out
 
 
 def _first_windows(windows: Sequence[Window]) -> dict[int, int]:
@@ -311,7 +287,7 @@ def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[s
             continue
 
         def sse(level, w=w):
-            u = _channels([w], names, fs, {w.source: level})[0]
+            u = window_channels([w], names, fs=fs, carry_in={w.source: level})[0]
             r = w.y - simulate_output(estimate, [u])[0]
             return float(r @ r)
         found = optimize.minimize_scalar(sse, bounds=(0.0, CARRY_IN_LIMIT * top),
@@ -549,7 +525,7 @@ class _Fitter:
         if names not in self._channels:
             if len(self._channels) >= CHANNEL_CACHE:
                 self._channels.pop(next(iter(self._channels)))
-            self._channels[names] = _channels(self.windows, names, self.fs)
+            self._channels[names] = window_channels(self.windows, names, fs=self.fs)
         return self._channels[names]
 
     def lag(self, values: Mapping[str, float], a: np.ndarray | None) -> LagFree | None:

@@ -20,7 +20,7 @@ from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
 from .extended import (BASE_DELAY, BASE_ORDERS, fit_extended, robust_uncertainty,
                        SENSOR_ZETA, SLOWEST_POLE_S)
-from ..shots.windows import EARLY_S, shot_windows
+from ..shots.windows import EARLY_S, shot_channels, shot_windows
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                           fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
                           Selection, simulate_output)
@@ -603,7 +603,7 @@ def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: 
     explanation += _check_excitation(draft, calib)
     fit['selection'] = explanation
     calib_inputs = ([u for u, _ in data.measured] if extension is None else
-                    [u for s in calib for u, _ in segments(s.recording, s.shots, inputs=inputs)])
+                    [u for s in calib for u in shot_channels(s.recording, s.shots, inputs)])
     calib_fit = float(fit_percent([y for _, y in data.measured],
                                   simulate_output(draft, calib_inputs)))
     del calib_inputs

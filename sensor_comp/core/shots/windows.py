@@ -7,15 +7,16 @@ after the pulses. Below the effects and the model, so both can use it without a 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 import math
 
 import numpy as np
 
 from .detection import segments
+from .inputs import carried_state, input_channels, parse_channel
 
-__all__ = ['EARLY_S', 'Window', 'ringing_khz', 'shot_windows']
+__all__ = ['EARLY_S', 'Window', 'ringing_khz', 'shot_channels', 'shot_windows', 'window_channels']
 
 #: Part of a window after the pulse that the grid start sees, s.
 EARLY_S = 3e-3
@@ -88,3 +89,48 @@ def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
     f = np.fft.rfftfreq(n, 1 / fs)
     low = int(np.searchsorted(f, 2 / EARLY_S))
     return float(f[low + int(np.argmax(power[low:]))] / 1e3)
+
+
+def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: float,
+                    carry_in: Mapping[int, float] | None = None) -> list[np.ndarray]:
+    """
+    Return each window's input rows, as the compensation filter computes them on the stream.
+
+    A leaky peak (a zero shift's) carries over from the window before in the same recording,
+    decayed over the gap, and the first one starts from ``carry_in[source]`` (m/s², default
+    rest); like the pressure, its rows have their pre-trigger mean removed. Every other
+    channel starts from rest in each window.
+    """
+    peaks = [row for row, name in enumerate(names) if parse_channel(name).kind == 'peak']
+    out: list[np.ndarray] = [np.empty(0)] * len(windows)
+    last: dict[int, tuple[dict, int]] = {}
+    for index in sorted(range(len(windows)), key=lambda i: (windows[i].source, windows[i].start)):
+        w = windows[index]
+        level = (carry_in or {}).get(w.source, 0.0)
+        state, stop = last.get(w.source, ({f'{names[r]}|peak': level for r in peaks}, w.start))
+        state = carried_state(state, names, w.start - stop, fs=fs) if peaks else {}
+        u = input_channels(names, w.acceleration, state, fs=fs)
+        if peaks and w.baseline > 0:
+            u[peaks] -= u[peaks, :w.baseline].mean(axis=1, keepdims=True)
+        last[w.source] = (state, w.start + w.y.size)
+        out[index] = u
+    return out
+
+
+@dataclass(frozen=True)
+class _Source:
+    recording: object
+    shots: tuple
+
+
+def shot_channels(recording, shots: Sequence, names: Sequence[str]) -> list[np.ndarray]:
+    """
+    Return the input rows of each shot window of one recording, as on the stream.
+
+    As :func:`~sensor_comp.core.shots.detection.segments`, but a leaky peak carries over
+    from window to window (:func:`window_channels`, from rest at the first).
+    """
+    if not any(parse_channel(name).kind == 'peak' for name in names):
+        return [u for u, _ in segments(recording, shots, inputs=names)]
+    return window_channels(shot_windows([_Source(recording, tuple(shots))]), names,
+                           fs=recording.fs)
