@@ -531,7 +531,7 @@ def _base_fits(windows: Sequence[Window], effects: tuple[str, ...], fs: float,
                             slowest_pole_s=SLOWEST_POLE_S)
         bound = SLOWEST_POLE_S
     except (IdentError, EffectError) as exc:  # as free as the given model, then
-        notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:g} ms '
+        notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:.3g} ms '
                      f'({exc}); fitted without that bound')
         free, bound = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk), None
     if nf < 2:

@@ -67,10 +67,12 @@ __all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SENSOR_ZETA', 'SLOWEST_POLE_S', 'Distur
 #: 2nd-order sensor, exactly.
 BASE_ORDERS, BASE_DELAY = (2, 3), 0
 #: Slowest time constant the sensor's own poles may take in the diagnosis's fits (and a
-#: lag-free fit), s: a sensor mode is fast (kHz); a slower pole imitates a tail (an
-#: amplifier high-pass, a zero shift), which the base must not absorb while the extensions
-#: for it may not.
-SLOWEST_POLE_S = 1e-3
+#: lag-free fit), s: a sensor mode is fast, 1 kHz at the least (a pair's natural frequency
+#: is its pole's modulus); a slower pole imitates a tail (an amplifier high-pass, a zero
+#: shift) or the hum and drift within a window, which the base must not absorb while the
+#: extensions for them may not. (At 1 ms, a 60 Hz hum beside the shots drew a base's mode
+#: to 216 Hz, where no extension's refit could leave it.)
+SLOWEST_POLE_S = 1 / (2 * math.pi * 1e3)
 #: Most damping of the sensor's mode in the lag-free fits: a piezoelectric sensor rings
 #: (ζ of a few %); a pair damped further can trade its damping for a delay or a lag.
 SENSOR_ZETA = 0.2
