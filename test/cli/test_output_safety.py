@@ -188,11 +188,18 @@ def big(tmp_path_factory):
     return bag
 
 
+def _default_sigint() -> None:
+    # A suite started in the background without job control ignores SIGINT, and its children
+    # inherit that (Python then installs no KeyboardInterrupt handler): the test is about
+    # what the command does with a SIGINT it receives.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(*argv) -> subprocess.Popen:
     """Start ``sensor-comp --quiet ARGV`` as a process with its stderr piped."""
     return subprocess.Popen([sys.executable, '-m', 'sensor_comp.cli.main', '--quiet', *argv],
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=_default_sigint)
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
