@@ -13,9 +13,10 @@ import pytest
 from scipy import signal
 
 from sensor_comp.core.compensation.compare import compare, format_table
-from sensor_comp.core.compensation.filter import CompensationError
+from sensor_comp.core.compensation.filter import CompensationError, compensate_recording
+from sensor_comp.core.estimators.simulate import simulate_output
 from sensor_comp.core.identification.denoise import EmdDenoiser
-from sensor_comp.core.shots.detection import detect_shots, ShotError
+from sensor_comp.core.shots.detection import detect_shots, segments, ShotError
 from sensor_comp.streams import G0, Recording
 
 FS = 100e3
@@ -163,9 +164,6 @@ def test_a_zero_shift_is_compared_as_the_stream_compensates_it():
     # A zero shift's leaky peak (τ = 80 ms) outlives the 100 ms between shots: compare must
     # carry it from window to window as compensation does on the stream, or it credits the
     # model with less than compensation removes.
-    from sensor_comp.core.compensation.filter import compensate_recording
-    from sensor_comp.core.estimators.simulate import simulate_output
-    from sensor_comp.core.shots.detection import segments
     clean, _ = make(0.0)
     zero_shift = SimpleNamespace(fs=FS, inputs=('a_z', 'peak_a_z(tau_ms=80)'),
                                  b=np.vstack([B, 0.3 * B]), a=A, nk=1, name='zero shift')
