@@ -13,8 +13,8 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView, FittedModel,
-                   ModelSpec, modifier_value, Outcome, parameters_text, Physical,
+from .base import (BASE_CONTEXT, delta_std, EDGE_FACTOR, Effect, EffectError, FitView,
+                   FittedModel, ModelSpec, modifier_value, Outcome, parameters_text, Physical,
                    ResidualView, row_of, Search, segment_of, sentence, stored_std)
 from ..estimators.least_squares import delayed_numerator
 from ..shots.inputs import mode_pair
@@ -28,9 +28,34 @@ MIN_KHZ = 1.0
 MAX_ZETA = 0.2
 #: Relative band around the sensor's own mode not searched.
 MAIN_BAND = 0.2
+#: Most base poles a second mode is read beside: the sensor's mode and one real pole.
+MAX_BASE_POLES = 3
 #: A second mode whose gain lies within this many standard deviations of zero is not
 #: resolved: the two extra numerator coefficients, not the mode, did the fitting.
 GAIN_Z = 2.0
+
+
+def _reading(model: FittedModel, a: np.ndarray, b: np.ndarray
+             ) -> tuple[float, float, float, bool]:
+    """
+    Return ``(freq_khz, zeta, gain, swapped)`` of the second mode of ``b/a`` with the search.
+
+    The second mode is the searched one unless it carries more static gain than the main
+    mode beside it (``swapped``: the base poles then hold the second mode).
+    """
+    row = row_of(model, 'a')
+    freq, zeta = modifier_value(model, 'mode')
+    pair = mode_pair(freq, zeta, model.fs)
+    full = np.convolve(a, pair)
+    found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
+    searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
+    main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
+               default=None)
+    if main is None:
+        raise EffectError('the fitted model has no main mode beside the second one')
+    if abs(searched[2]) > abs(main[2]):
+        return main[0] / 1e3, main[1], main[2] / searched[2], True
+    return searched[0] / 1e3, searched[1], searched[2] / main[2], False
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
@@ -86,23 +111,7 @@ class SecondResonance(Effect):
         the effect was known settles on the stronger ringing), so the two swap roles and
         the base mode is reported, its values and deviations read from the denominator.
         """
-        row = row_of(model, 'a')
-        freq, zeta = modifier_value(model, 'mode')
-        pair = mode_pair(freq, zeta, model.fs)
-
-        def reading(a, b):
-            full = np.convolve(a, pair)
-            found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
-            searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
-            main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
-                       default=None)
-            if main is None:
-                raise EffectError('the fitted model has no main mode beside the second one')
-            if abs(searched[2]) > abs(main[2]):
-                return main[0] / 1e3, main[1], main[2] / searched[2], True
-            return searched[0] / 1e3, searched[1], searched[2] / main[2], False
-
-        values = reading(model.a, model.b)
+        values = _reading(model, model.a, model.b)
         out = {}
         for index, name in enumerate(('freq_khz', 'zeta', 'gain')):
             # A searched value's deviation is the fit's (stored); the others come from the
@@ -110,13 +119,38 @@ class SecondResonance(Effect):
             searched = index < 2 and not values[3]
             out[name] = (values[index], stored_std(model, self.id, name)
                          if covariance is None or searched else
-                         delta_std(lambda a, b, i=index: reading(a, b)[i], model.a, model.b,
-                                   covariance))
+                         delta_std(lambda a, b, i=index: _reading(model, a, b)[i], model.a,
+                                   model.b, covariance))
         return out
 
     def implausible(self, fit: FitView) -> str | None:
-        """Return why the fit is no second mode: the generic checks or an unresolved gain."""
-        why = super().implausible(fit)
+        """
+        Return why the fit is no second mode: the generic checks or an unresolved gain.
+
+        A base of more than :data:`MAX_BASE_POLES` poles holds a second mode or shares the
+        sensor's between two pairs; the searched mode then fits something else (a 12.7 kHz
+        mount mode held by four base poles, the sensor's 44 kHz mode read as a 31 kHz
+        second one). When the searched mode holds the sensor's own (the
+        roles swapped, see :meth:`physical`), its values are the sensor mode's, free to damp
+        to the base's bound like any base mode: the checks of the searched ranges then apply
+        to the mode reported, read from the base poles.
+        """
+        model = fit.model()
+        try:
+            freq, zeta, _, swapped = _reading(model, model.a, model.b)
+        except EffectError as exc:
+            return str(exc)
+        if fit.spec.nf > MAX_BASE_POLES:
+            return (f'a base of {fit.spec.nf} poles holds a mode besides the sensor\'s: the '
+                    f'searched one is a third (a second mode is read beside one)')
+        if not swapped:
+            why = super().implausible(fit)
+        elif not MIN_KHZ * EDGE_FACTOR < freq < self._top_khz(fit) / EDGE_FACTOR:
+            why = f'freq_khz = {freq:.4g} lies outside the range searched for a second mode'
+        elif not zeta < MAX_ZETA / EDGE_FACTOR:
+            why = f'zeta = {zeta:.3g} is no resonance (searched up to {MAX_ZETA:g})'
+        else:
+            why = None
         if why is not None:
             return why
         gain, std = fit.parameters(self.id).get('gain', (None, None))
@@ -125,6 +159,11 @@ class SecondResonance(Effect):
             return (f'its gain ({gain:.3g} ± {std:.2g}) is not told apart from zero: the '
                     f'extra numerator coefficients, not the mode, follow the residual')
         return None
+
+    @staticmethod
+    def _top_khz(fit: FitView) -> float:
+        """Return the top of the searched frequency range, kHz."""
+        return next(s.high for s in fit.spec.searches if s.key == FREQ)
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Name the residual's spectral peak and what the second mode removes."""
