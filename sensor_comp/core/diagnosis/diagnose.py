@@ -7,16 +7,18 @@ effect is fitted on the CALIBRATION shots
 and scored on the VALIDATION shots, which it has never seen:
 
 - **base**: a given model's effects on a sensor base of at most one mode, sampled exactly
-  (``nf ≤ 2``, numerator on lags ``0..nf``), refitted on the calibration shots: the orders
-  and delay a free structure search chose are not used, because extra poles or a delay of
-  many samples stand in for the effects the diagnosis is to name; no pole of any fit may
-  be slower than :data:`SLOWEST_POLE_S` (a slow real pole with a zero at 1 imitates an
-  amplifier high-pass or a zero shift exactly); and when the base resolves the sensor's
-  mode, every numerator through the mechanics lags at DC exactly as the mechanics do
-  (:mod:`~sensor_comp.core.identification.lag_free`: a free numerator leads or lags by
-  more, and so takes in a base-strain term or a channel delay, which then are never named)
-  and that mode stays lightly damped (:data:`SENSOR_ZETA`: poles damped further trade their
-  damping for a lag).
+  (``nf ≤ 2``, numerator on lags ``0..nf``), refitted on the calibration shots
+  (:mod:`~sensor_comp.core.identification.held_base`): the orders and delay a free
+  structure search chose are not used, because extra poles or a delay of many samples
+  stand in for the effects the diagnosis is to name; no pole of any fit may be slower than
+  :data:`~sensor_comp.core.identification.extended.SLOWEST_POLE_S` (a slow real pole with
+  a zero at 1 imitates an amplifier high-pass or a zero shift exactly); and when the base
+  resolves the sensor's mode, every numerator through the mechanics lags at DC exactly as
+  the mechanics do (:mod:`~sensor_comp.core.identification.lag_free`: a free numerator
+  leads or lags by more, and so takes in a base-strain term or a channel delay, which then
+  are never named) and that mode stays lightly damped
+  (:data:`~sensor_comp.core.identification.extended.SENSOR_ZETA`: poles damped further
+  trade their damping for a lag).
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).
 - **noise**: the base residual before the triggers (a straight line per window and the
@@ -86,13 +88,12 @@ import math
 import numpy as np
 from scipy import stats
 
-from ..effects import Effect, EffectError, EFFECTS, get_effect, Outcome, Physical
-from ..effects.base import BASE_CONTEXT
+from ..effects import Effect, EFFECTS, get_effect, Outcome, Physical
 from ..effects.mains_hum import line_columns
-from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, fit_extended,
-                                       Prediction, SENSOR_ZETA, shot_windows, SLOWEST_POLE_S,
-                                       Window)
-from ..estimators import estimate_delay, fit_percent, IdentError
+from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, Prediction,
+                                       shot_windows, Window)
+from ..identification.held_base import base_fits, fit_on_base, MODE_ZETA
+from ..estimators import estimate_delay, fit_percent
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
 from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseModel,
@@ -136,9 +137,6 @@ FORM_SHARE, FORM_CAP = 0.05, 0.4
 #: named (a second effect: of what the first leaves): a catalogue effect that follows a
 #: small part of something else is no answer, however significant.
 NAME_SHARE = 0.5
-#: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
-#: a searched second mode keeps away from.
-MODE_ZETA = 0.2
 #: A disturbance that removes before the triggers less than this share of the energy it
 #: predicts there, by :data:`BEFORE_Z` standard deviations, is no pickup present before the
 #: shocks.
@@ -487,7 +485,7 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
     cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
         [s for s in valid if s.shots])
     with progress('base model', 1) as bar:
-        free, held = _base_fits(cw, base_effects, fs, orders, notes)
+        free, held = base_fits(cw, effects=base_effects, fs=fs, orders=orders, notes=notes)
         bar.advance()
     free_prediction = free.predict(vw)
     free_residual = [w.y - p for w, p in zip(vw, free_prediction.total)]
@@ -511,44 +509,6 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
             bar.advance()
     return _Context(fs, cw, vw, orders, base_effects, base, prediction, residual, noise,
                     bounds, analyses, alpha, free, free_residual)
-
-
-def _base_fits(windows: Sequence[Window], effects: tuple[str, ...], fs: float,
-               orders: tuple[int, int, int], notes: list[str]
-               ) -> tuple[ExtendedFit, ExtendedFit | None]:
-    """
-    Return the base fit with free numerators and with lag-free ones (None: not fitted).
-
-    The free base gives the verdict when no effect is named (its numerator may shape the
-    accelerometer noise, which an exact sensor numerator passes on, so it is the fairer
-    judge of clean data); the lag-free one (:mod:`~sensor_comp.core.identification.lag_free`,
-    with two poles: one pole is no sensor mode) is what every candidate is fitted and
-    scored against, so that a lead or delay is an effect's.
-    """
-    nf, nb, nk = orders
-    try:
-        free = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            slowest_pole_s=SLOWEST_POLE_S)
-        bound = SLOWEST_POLE_S
-    except (IdentError, EffectError) as exc:  # as free as the given model, then
-        notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:.3g} ms '
-                     f'({exc}); fitted without that bound')
-        free, bound = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk), None
-    if nf < 2:
-        notes.append('base: numerators free (one pole is no sensor mode, so a channel delay '
-                     'or base strain cannot be told from the sensor\'s own lag)')
-        return free, None
-    try:
-        held = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            starts=free.denominators, slowest_pole_s=bound, lag_free=True,
-                            max_zeta=SENSOR_ZETA)
-    except (IdentError, EffectError) as exc:
-        notes.append(f'base: numerators free (no lag-free fit: {exc})')
-        return free, None
-    notes.append('base: candidates fitted and scored with lag-free numerators (a lead or '
-                 'delay is an effect\'s, not the sensor path\'s); the verdict without an '
-                 'effect is the free-numerator base\'s')
-    return free, held
 
 
 def _quiet(residual: Sequence[np.ndarray], windows: Sequence[Window],
@@ -632,17 +592,12 @@ def _fit_candidate(calibration: Sequence[Window], effects: tuple[str, ...], fs: 
                    orders: tuple[int, int, int], starts, lag_free: bool,
                    context: dict) -> ExtendedFit | str:
     """Return one candidate's extended fit, or why it failed in one line (a job)."""
-    nf, nb, nk = orders
-    token = BASE_CONTEXT.set(context)
     try:
-        return fit_extended(calibration, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            starts=starts, slowest_pole_s=SLOWEST_POLE_S, lag_free=lag_free,
-                            max_zeta=SENSOR_ZETA if lag_free else None)
+        return fit_on_base(calibration, effects=effects, fs=fs, orders=orders, starts=starts,
+                           lag_free=lag_free, context=context)
     except Exception as exc:  # noqa: B902 - one candidate must not stop the others
         why = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
         return f'{type(exc).__name__}{": " + why if why else ""}'
-    finally:
-        BASE_CONTEXT.reset(token)
 
 
 def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.ndarray],

@@ -358,14 +358,15 @@ def test_a_named_effect_that_leaves_more_than_noise_is_partly_explained():
 
 def test_a_candidate_whose_fit_fails_is_a_note_and_the_others_go_on(monkeypatch):
     from sensor_comp.core.diagnosis import diagnose as module
-    real = module.fit_extended
+    from sensor_comp.core.identification import held_base
+    real = held_base.fit_extended
 
     def failing(windows, *, effects, **options):
         if 'second_resonance' in effects:
             raise np.linalg.LinAlgError('SVD did not converge')
         return real(windows, effects=effects, **options)
 
-    monkeypatch.setattr(module, 'fit_extended', failing)
+    monkeypatch.setattr(held_base, 'fit_extended', failing)
     monkeypatch.setattr(module, 'pool_size', lambda *args: 1)  # a helper has no patch
     effects, fs, noise, accel_noise, _, _ = CASES['nonlinear_sensitivity']
     (_, calib), (_, valid) = pair(effects, fs, noise, accel_noise)

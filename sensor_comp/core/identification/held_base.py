@@ -1,0 +1,105 @@
+"""
+The base an effect is named against: one sensor mode, its numerators held lag-free.
+
+The diagnosis fits every candidate effect on this base (``doc/effects.md``, lag-free
+numerators), and ``identify --effect`` fits the effect the same way, so that the model a
+user adds an effect to is the one the diagnosis credited. A free-numerator base comes
+first (the verdict without an effect is its; its poles start the held one); no pole may be
+slower than :data:`~.extended.SLOWEST_POLE_S`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import math
+
+import numpy as np
+
+from ..effects import EffectError
+from ..effects.base import BASE_CONTEXT
+from ..estimators import IdentError
+from .extended import ExtendedFit, fit_extended, SENSOR_ZETA, SLOWEST_POLE_S
+from ..shots.windows import Window
+
+__all__ = ['base_fits', 'fit_on_base', 'MODE_ZETA', 'modes_khz']
+
+#: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
+#: a searched second mode keeps away from.
+MODE_ZETA = 0.2
+
+
+def base_fits(windows: Sequence[Window], *, effects: tuple[str, ...], fs: float,
+              orders: tuple[int, int, int], notes: list[str]
+              ) -> tuple[ExtendedFit, ExtendedFit | None]:
+    """
+    Return the base fit with free numerators and with lag-free ones (None: not fitted).
+
+    The free base gives the verdict when no effect is named (its numerator may shape the
+    accelerometer noise, which an exact sensor numerator passes on, so it is the fairer
+    judge of clean data); the lag-free one (:mod:`.lag_free`, with two poles: one pole is
+    no sensor mode) is what every candidate is fitted and scored against, so that a lead or
+    delay is an effect's. What was done goes to ``notes``.
+
+    Raises:
+        IdentError: When not even the free base can be fitted.
+        EffectError: When one of ``effects`` cannot be fitted.
+
+    """
+    nf, nb, nk = orders
+    try:
+        free = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            slowest_pole_s=SLOWEST_POLE_S)
+        bound = SLOWEST_POLE_S
+    except (IdentError, EffectError) as exc:  # as free as the given model, then
+        notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:.3g} ms '
+                     f'({exc}); fitted without that bound')
+        free, bound = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk), None
+    if nf < 2:
+        notes.append('base: numerators free (one pole is no sensor mode, so a channel delay '
+                     'or base strain cannot be told from the sensor\'s own lag)')
+        return free, None
+    try:
+        held = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            starts=free.denominators, slowest_pole_s=bound, lag_free=True,
+                            max_zeta=SENSOR_ZETA)
+    except (IdentError, EffectError) as exc:
+        notes.append(f'base: numerators free (no lag-free fit: {exc})')
+        return free, None
+    notes.append('base: candidates fitted and scored with lag-free numerators (a lead or '
+                 'delay is an effect\'s, not the sensor path\'s); the verdict without an '
+                 'effect is the free-numerator base\'s')
+    return free, held
+
+
+def modes_khz(a: np.ndarray, fs: float) -> tuple[float, ...]:
+    """Return the modes (damped less than :data:`MODE_ZETA`) of denominator ``a``, kHz."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        s = np.log(np.roots(a).astype(complex)) * fs
+    pairs = [(abs(p) / (2e3 * math.pi), -p.real / abs(p)) for p in s
+             if p.imag > 0 and np.isfinite(p)]
+    return tuple(f for f, zeta in sorted(pairs, key=lambda m: m[1]) if zeta < MODE_ZETA)
+
+
+def fit_on_base(windows: Sequence[Window], *, effects: tuple[str, ...], fs: float,
+                orders: tuple[int, int, int], starts: Sequence[np.ndarray], lag_free: bool,
+                context: dict) -> ExtendedFit:
+    """
+    Return ``effects`` fitted on the base as the diagnosis fits a candidate.
+
+    ``starts`` are the base's denominators, ``lag_free`` whether its numerators are held,
+    ``context`` what the effects read of the base (``modes_khz``: its modes, which a
+    searched second mode keeps away from).
+
+    Raises:
+        IdentError: When the extension cannot be fitted.
+        EffectError: When an effect cannot be fitted.
+
+    """
+    nf, nb, nk = orders
+    token = BASE_CONTEXT.set(context)
+    try:
+        return fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            starts=starts, slowest_pole_s=SLOWEST_POLE_S, lag_free=lag_free,
+                            max_zeta=SENSOR_ZETA if lag_free else None)
+    finally:
+        BASE_CONTEXT.reset(token)
