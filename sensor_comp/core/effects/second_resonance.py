@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (BASE_CONTEXT, delta_std, EDGE_FACTOR, Effect, EffectError, FitView,
+from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView,
                    FittedModel, ModelSpec, modifier_value, Outcome, parameters_text, Physical,
                    ResidualView, row_of, Search, segment_of, sentence, stored_std)
 from ..estimators.least_squares import delayed_numerator
@@ -125,32 +125,17 @@ class SecondResonance(Effect):
 
     def implausible(self, fit: FitView) -> str | None:
         """
-        Return why the fit is no second mode: the generic checks or an unresolved gain.
+        Return why the fit is no second mode: its base, the generic checks or its gain.
 
         A base of more than :data:`MAX_BASE_POLES` poles holds a second mode or shares the
         sensor's between two pairs; the searched mode then fits something else (a 12.7 kHz
         mount mode held by four base poles, the sensor's 44 kHz mode read as a 31 kHz
-        second one). When the searched mode holds the sensor's own (the
-        roles swapped, see :meth:`physical`), its values are the sensor mode's, free to damp
-        to the base's bound like any base mode: the checks of the searched ranges then apply
-        to the mode reported, read from the base poles.
+        second one).
         """
-        model = fit.model()
-        try:
-            freq, zeta, _, swapped = _reading(model, model.a, model.b)
-        except EffectError as exc:
-            return str(exc)
         if fit.spec.nf > MAX_BASE_POLES:
             return (f'a base of {fit.spec.nf} poles holds a mode besides the sensor\'s: the '
                     f'searched one is a third (a second mode is read beside one)')
-        if not swapped:
-            why = super().implausible(fit)
-        elif not MIN_KHZ * EDGE_FACTOR < freq < self._top_khz(fit) / EDGE_FACTOR:
-            why = f'freq_khz = {freq:.4g} lies outside the range searched for a second mode'
-        elif not zeta < MAX_ZETA / EDGE_FACTOR:
-            why = f'zeta = {zeta:.3g} is no resonance (searched up to {MAX_ZETA:g})'
-        else:
-            why = None
+        why = super().implausible(fit)
         if why is not None:
             return why
         gain, std = fit.parameters(self.id).get('gain', (None, None))
@@ -159,11 +144,6 @@ class SecondResonance(Effect):
             return (f'its gain ({gain:.3g} ± {std:.2g}) is not told apart from zero: the '
                     f'extra numerator coefficients, not the mode, follow the residual')
         return None
-
-    @staticmethod
-    def _top_khz(fit: FitView) -> float:
-        """Return the top of the searched frequency range, kHz."""
-        return next(s.high for s in fit.spec.searches if s.key == FREQ)
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Name the residual's spectral peak and what the second mode removes."""
