@@ -92,14 +92,14 @@ from ..effects import Effect, EFFECTS, get_effect, Outcome, Physical
 from ..effects.mains_hum import line_columns
 from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, Prediction,
                                        shot_windows, Window)
-from ..identification.held_base import base_fits, fit_on_base, MODE_ZETA
+from ..identification.held_base import base_fits, fit_on_base, modes_khz
 from ..estimators import estimate_delay, fit_percent
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
 from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseModel,
                           PRACTICAL_SHARE, segment_bounds)
 from ..progress import ProgressFactory, Silent
-from .residual import analyse, model_resonances, ringing_time_s
+from .residual import analyse, ringing_time_s
 from .rival_forms import rival_remains
 from ...errors import SensorCompError
 from ...sharing import pool_size, share
@@ -558,9 +558,7 @@ def _candidates(ids: Sequence[str], ctx: _Context, progress,
     (:mod:`sensor_comp.sharing`; each fit is the same), the scores are computed here.
     """
     ranked, skipped = [], []
-    modes = sorted((m for m in model_resonances(ctx.base.model()) if m[1] < MODE_ZETA),
-                   key=lambda m: m[1])
-    context = {'modes_khz': tuple(fn / 1e3 for fn, _ in modes)}
+    context = {'modes_khz': modes_khz(ctx.base.estimate.a, ctx.fs)}
     fitted = []
     for effect_id in ids:
         reason = ('already in the base model' if effect_id in ctx.base_effects

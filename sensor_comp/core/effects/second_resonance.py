@@ -13,8 +13,8 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView,
-                   FittedModel, ModelSpec, modifier_value, Outcome, parameters_text, Physical,
+from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView, FittedModel,
+                   ModelSpec, modifier_value, Outcome, parameters_text, Physical,
                    ResidualView, row_of, Search, segment_of, sentence, stored_std)
 from ..estimators.least_squares import delayed_numerator
 from ..shots.inputs import mode_pair
@@ -33,29 +33,6 @@ MAX_BASE_POLES = 3
 #: A second mode whose gain lies within this many standard deviations of zero is not
 #: resolved: the two extra numerator coefficients, not the mode, did the fitting.
 GAIN_Z = 2.0
-
-
-def _reading(model: FittedModel, a: np.ndarray, b: np.ndarray
-             ) -> tuple[float, float, float, bool]:
-    """
-    Return ``(freq_khz, zeta, gain, swapped)`` of the second mode of ``b/a`` with the search.
-
-    The second mode is the searched one unless it carries more static gain than the main
-    mode beside it (``swapped``: the base poles then hold the second mode).
-    """
-    row = row_of(model, 'a')
-    freq, zeta = modifier_value(model, 'mode')
-    pair = mode_pair(freq, zeta, model.fs)
-    full = np.convolve(a, pair)
-    found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
-    searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
-    main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
-               default=None)
-    if main is None:
-        raise EffectError('the fitted model has no main mode beside the second one')
-    if abs(searched[2]) > abs(main[2]):
-        return main[0] / 1e3, main[1], main[2] / searched[2], True
-    return searched[0] / 1e3, searched[1], searched[2] / main[2], False
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
@@ -111,7 +88,23 @@ class SecondResonance(Effect):
         the effect was known settles on the stronger ringing), so the two swap roles and
         the base mode is reported, its values and deviations read from the denominator.
         """
-        values = _reading(model, model.a, model.b)
+        row = row_of(model, 'a')
+        freq, zeta = modifier_value(model, 'mode')
+        pair = mode_pair(freq, zeta, model.fs)
+
+        def reading(a, b):
+            full = np.convolve(a, pair)
+            found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
+            searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
+            main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
+                       default=None)
+            if main is None:
+                raise EffectError('the fitted model has no main mode beside the second one')
+            if abs(searched[2]) > abs(main[2]):
+                return main[0] / 1e3, main[1], main[2] / searched[2], True
+            return searched[0] / 1e3, searched[1], searched[2] / main[2], False
+
+        values = reading(model.a, model.b)
         out = {}
         for index, name in enumerate(('freq_khz', 'zeta', 'gain')):
             # A searched value's deviation is the fit's (stored); the others come from the
@@ -119,8 +112,8 @@ class SecondResonance(Effect):
             searched = index < 2 and not values[3]
             out[name] = (values[index], stored_std(model, self.id, name)
                          if covariance is None or searched else
-                         delta_std(lambda a, b, i=index: _reading(model, a, b)[i], model.a,
-                                   model.b, covariance))
+                         delta_std(lambda a, b, i=index: reading(a, b)[i], model.a, model.b,
+                                   covariance))
         return out
 
     def implausible(self, fit: FitView) -> str | None:

@@ -72,11 +72,16 @@ def base_fits(windows: Sequence[Window], *, effects: tuple[str, ...], fs: float,
 
 
 def modes_khz(a: np.ndarray, fs: float) -> tuple[float, ...]:
-    """Return the modes (damped less than :data:`MODE_ZETA`) of denominator ``a``, kHz."""
-    with np.errstate(divide='ignore', invalid='ignore'):
-        s = np.log(np.roots(a).astype(complex)) * fs
-    pairs = [(abs(p) / (2e3 * math.pi), -p.real / abs(p)) for p in s
-             if p.imag > 0 and np.isfinite(p)]
+    """
+    Return the stable modes of denominator ``a`` damped less than :data:`MODE_ZETA`, kHz.
+
+    Least damped first: the sensor's, as a rule.
+    """
+    pairs = []
+    for z in (np.roots(a) if len(a) > 1 else ()):
+        if z.imag > 1e-12 and abs(z) < 1.0:
+            s = complex(np.log(z)) * fs
+            pairs.append((abs(s) / (2e3 * math.pi), -s.real / abs(s)))
     return tuple(f for f, zeta in sorted(pairs, key=lambda m: m[1]) if zeta < MODE_ZETA)
 
 

@@ -7,8 +7,7 @@ One concept per module: :mod:`.analysis` (the steps), :mod:`.dynamics`, :mod:`.s
 """
 
 from .analysis import analyse, DEFAULT_MAX_LAG_S, MAX_LAG_LIMIT_S, MIN_LAGS
-from .dynamics import (model_resonances, OVERDAMPED_RINGING_S, RINGING_TIME_CONSTANTS,
-                       ringing_time_s)
+from .dynamics import OVERDAMPED_RINGING_S, RINGING_TIME_CONSTANTS, ringing_time_s
 from .localisation import EXCESS_Z
 from .probes import GENERIC_PROBES, PROBES, TIME_CONSTANTS_MS
 from .results import (AmplitudeTrend, Correlation, Probe, ResidualError, ResidualSpectrum,
@@ -43,6 +42,5 @@ __all__ = [
     'analyse',
     'autocorrelation',
     'cross_correlation',
-    'model_resonances',
     'ringing_time_s',
 ]

@@ -18,7 +18,6 @@ __all__ = [
     'Dynamics',
     'InputPath',
     'dynamics',
-    'model_resonances',
     'ringing_time_s',
     'through',
 ]
@@ -73,11 +72,6 @@ def dynamics(model: Model) -> Dynamics:
         if view.time_constants_s:
             slowest = max(slowest, view.time_constants_s[0])
     return Dynamics(path, ringing, slowest, tuple(sorted(resonances)), note)
-
-
-def model_resonances(model: Model) -> tuple[tuple[float, float], ...]:
-    """Return ``(natural frequency in Hz, damping ratio)`` of every stable complex pole pair."""
-    return dynamics(model).resonances
 
 
 def ringing_time_s(model: Model) -> float:
