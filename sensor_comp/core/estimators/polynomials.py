@@ -6,9 +6,11 @@ Roots in ``z`` are those of ``z^n + a1 z^(n-1) + ... + an`` (``numpy.roots``).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ['is_stable', 'max_root_radius', 'reflect_unstable']
+__all__ = ['is_stable', 'max_root_radius', 'reflect_unstable', 'resonances']
 
 
 def max_root_radius(poly: np.ndarray) -> float:
@@ -41,3 +43,13 @@ def reflect_unstable(poly: np.ndarray) -> np.ndarray:
     roots = np.where(radius > 1.0, 1.0 / np.conj(roots), roots)
     roots = np.where(np.abs(roots) >= 1.0, roots * (1.0 - 1e-9), roots)
     return np.real(np.poly(roots))
+
+
+def resonances(poly: np.ndarray, fs: float) -> tuple[tuple[float, float], ...]:
+    """Return ``(natural frequency in Hz, damping ratio)`` of every stable complex root pair."""
+    out = []
+    for z in (np.roots(poly) if len(poly) > 1 else ()):
+        if z.imag > 1e-12 and abs(z) < 1.0:
+            s = complex(np.log(z)) * fs
+            out.append((abs(s) / (2 * math.pi), -s.real / abs(s)))
+    return tuple(out)

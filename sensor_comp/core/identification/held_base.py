@@ -11,13 +11,13 @@ slower than :data:`~.extended.SLOWEST_POLE_S`.
 from __future__ import annotations
 
 from collections.abc import Sequence
-import math
 
 import numpy as np
 
 from ..effects import EffectError
 from ..effects.base import BASE_CONTEXT
 from ..estimators import IdentError
+from ..estimators.polynomials import resonances
 from .extended import ExtendedFit, fit_extended, SENSOR_ZETA, SLOWEST_POLE_S
 from ..shots.windows import Window
 
@@ -77,12 +77,8 @@ def modes_khz(a: np.ndarray, fs: float) -> tuple[float, ...]:
 
     Least damped first: the sensor's, as a rule.
     """
-    pairs = []
-    for z in (np.roots(a) if len(a) > 1 else ()):
-        if z.imag > 1e-12 and abs(z) < 1.0:
-            s = complex(np.log(z)) * fs
-            pairs.append((abs(s) / (2e3 * math.pi), -s.real / abs(s)))
-    return tuple(f for f, zeta in sorted(pairs, key=lambda m: m[1]) if zeta < MODE_ZETA)
+    pairs = sorted(resonances(a, fs), key=lambda m: m[1])
+    return tuple(fn / 1e3 for fn, zeta in pairs if zeta < MODE_ZETA)
 
 
 def fit_on_base(windows: Sequence[Window], *, effects: tuple[str, ...], fs: float,

@@ -9,6 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ...estimators.polynomials import resonances
 from ...estimators.simulate import simulate_output
 from ...identification.model import Model, ModelError
 
@@ -51,12 +52,7 @@ def dynamics(model: Model) -> Dynamics:
     """Return the dynamics of ``model``'s ``a_z`` path (its first input without one)."""
     row = model.inputs.index('a_z') if 'a_z' in model.inputs else 0
     path = InputPath(np.asarray(model.a), np.atleast_2d(model.b)[row:row + 1], int(model.nk))
-    poles = np.roots(model.a) if len(model.a) > 1 else np.empty(0)
-    resonances = []
-    for z in poles:
-        if z.imag > 1e-12 and abs(z) < 1.0:
-            s = complex(np.log(z)) * model.fs
-            resonances.append((abs(s) / (2 * math.pi), -s.real / abs(s)))
+    modes = resonances(np.asarray(model.a), model.fs)
     note = ''
     ringing = OVERDAMPED_RINGING_S
     slowest = 0.0
@@ -71,7 +67,7 @@ def dynamics(model: Model) -> Dynamics:
             slowest = envelope
         if view.time_constants_s:
             slowest = max(slowest, view.time_constants_s[0])
-    return Dynamics(path, ringing, slowest, tuple(sorted(resonances)), note)
+    return Dynamics(path, ringing, slowest, tuple(sorted(modes)), note)
 
 
 def ringing_time_s(model: Model) -> float:
