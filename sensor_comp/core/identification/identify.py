@@ -524,13 +524,16 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                  key=lambda nf: _bic(fits[nf]))
     held = (_lag_free(measured, effects, sources.fs)
             if compare or doubts[chosen] is not None else None)
-    gain = None if held is None else \
-        _measured_bic(fits[chosen], measured) - _measured_bic(held, measured)
-    if held is not None and (doubts[chosen] is not None or gain > 0):
+    if held is not None and doubts[chosen] is not None:
         why = (f'with free numerators, on every base tried, it read as no such effect '
-               f'({doubts[chosen]})' if doubts[chosen] is not None else
-               f'BIC on the measured shots lower by {gain:.1f} than with free numerators '
+               f'({doubts[chosen]})')
+    elif held is not None:  # both read as the effect: the measured shots decide
+        gain = _measured_bic(fits[chosen], measured) - _measured_bic(held, measured)
+        why = (f'BIC on the measured shots lower by {gain:.1f} than with free numerators '
                f'on nf={chosen}')
+        if not gain > 0:
+            held = None
+    if held is not None:
         return held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
                       f'numerators, a lightly damped mode, on the measured pressure): {why}']
     fit, notes = fits[chosen], _base_notes(names, base.na, chosen, fits, failed, doubts)
