@@ -649,6 +649,8 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     units = {k: effect.parameters.get(k, '') for k in parameters}
     left = ctx.leftover(residual)
     doubt, rival = effect.implausible(fit), effect.rival(analysis)
+    if doubt is None:
+        doubt = effect.confounded(fit, ctx.calibration + ctx.validation)
     if rival is not None:
         # The base's misfit sways the probes: the rival must remain in what the fit leaves.
         remains = rival_remains(effect, fit.model(), prediction.total, ctx.validation,

@@ -427,6 +427,16 @@ class Effect:
                         f'{own.statistic:.3g}): another form than this effect\'s')
         return None
 
+    def confounded(self, fit: FitView, windows: Sequence[Window]) -> str | None:
+        """
+        Return why a cause outside the catalogue explains the fit as well, or None.
+
+        Read from the measured shot ``windows`` where the model's input-output map alone
+        cannot tell the effect from such a cause (``doc/effects.md``); the diagnosis then
+        does not count the effect. None by default.
+        """
+        return None
+
     def describe(self) -> str:
         """Return the effect for a catalogue listing (id, title, parameters, signature)."""
         units = ', '.join(f'{name} [{unit}]' for name, unit in self.parameters.items())

@@ -7,6 +7,7 @@ Every input passes a searched mode filter kept ±20 % away from the sensor's own
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 import math
 
@@ -15,9 +16,12 @@ from scipy import signal
 
 from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView, FittedModel,
                    ModelSpec, modifier_value, Outcome, parameters_text, Physical,
-                   ResidualView, row_of, Search, segment_of, sentence, stored_std)
+                   ResidualView, row_of, Search, segment_of, sentence, static_gain,
+                   stored_std)
 from ..estimators.least_squares import delayed_numerator
+from ..estimators.polynomials import resonances
 from ..shots.inputs import mode_pair
+from ..shots.windows import acceleration_ringing, Window
 
 __all__ = ['SecondResonance', 'modes']
 
@@ -33,6 +37,15 @@ MAX_BASE_POLES = 3
 #: A second mode whose gain lies within this many standard deviations of zero is not
 #: resolved: the two extra numerator coefficients, not the mode, did the fitting.
 GAIN_Z = 2.0
+#: Least peak of the acceleration's spectrum after the pulses, over the spectrum beside it,
+#: at a lightly damped zero of the fit that is an accelerometer resonance (about 1 on
+#: noise; 200 to 10⁵ on rigs whose accelerometer channel rang).
+ACCEL_RING = 10.0
+#: ... within this relative distance of the zero, or its damping ratio (a damped ring's
+#: peak is as wide), where the pressure's amplitude per the acceleration's is below this
+#: share of the static gain: the pressure does not follow that ringing (0.08–0.13 on rigs
+#: whose accelerometer rang; an anvil's ringing beside a true second mode: 1.2).
+RING_MATCH, FOLLOWS = 0.01, 0.5
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
@@ -136,6 +149,38 @@ class SecondResonance(Effect):
                 not abs(gain) > GAIN_Z * std:
             return (f'its gain ({gain:.3g} ± {std:.2g}) is not told apart from zero: the '
                     f'extra numerator coefficients, not the mode, follow the residual')
+        return None
+
+    def confounded(self, fit: FitView, windows: Sequence[Window]) -> str | None:
+        """
+        Return why an accelerometer resonance explains the fit as well, or None.
+
+        A mode ``M`` in the accelerometer channel turns the measured acceleration into
+        ``(1 − x + x M) a``: the pressure it predicts through a sensor ``G`` is
+        ``G / (1 − x + x M)``, a mode at ``f/√(1 − x)`` beside an anti-resonance at the
+        accelerometer's ``f``, which is this effect's form with a gain ``−x``. The
+        measured acceleration then rings after the pulses where the fit has its
+        lightly damped zeros, and the pressure does not follow that ringing (an anvil's
+        ringing beside a true second mode is in the pressure too); a mode of the sensor
+        leaves the acceleration quiet there.
+        """
+        model = fit.model()
+        row = row_of(model, 'a')
+        numerator = delayed_numerator(model.b, model.nk)[row]
+        gain = abs(static_gain(model.a, model.b, row))
+        for freq, zeta in resonances(numerator, model.fs, unstable=True):
+            if not (MIN_KHZ * 1e3 < freq < 0.45 * model.fs and abs(zeta) < MAX_ZETA):
+                continue
+            ring = acceleration_ringing(windows, freq, fs=model.fs)
+            if ring.prominence >= ACCEL_RING and \
+                    abs(ring.hz / freq - 1) < max(RING_MATCH, abs(zeta)) and \
+                    ring.follows < FOLLOWS * gain:
+                return (f'the fit cancels {freq / 1e3:.3g} kHz (a zero pair, ζ = {zeta:.2g}) '
+                        f'where the measured acceleration rings after the pulses '
+                        f'({ring.prominence:.0f}× its spectrum beside it) and the pressure '
+                        f'does not follow it ({ring.follows / gain:.2g} of the static gain): '
+                        f'a resonance of the accelerometer or its '
+                        f'mount, outside the catalogue, explains it as well')
         return None
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:

@@ -45,11 +45,17 @@ def reflect_unstable(poly: np.ndarray) -> np.ndarray:
     return np.real(np.poly(roots))
 
 
-def resonances(poly: np.ndarray, fs: float) -> tuple[tuple[float, float], ...]:
-    """Return ``(natural frequency in Hz, damping ratio)`` of every stable complex root pair."""
+def resonances(poly: np.ndarray, fs: float, *,
+               unstable: bool = False) -> tuple[tuple[float, float], ...]:
+    """
+    Return ``(natural frequency in Hz, damping ratio)`` of every stable complex root pair.
+
+    With ``unstable`` also the pairs outside the unit circle (negative damping), as the
+    zeros of a numerator may lie.
+    """
     out = []
     for z in (np.roots(poly) if len(poly) > 1 else ()):
-        if z.imag > 1e-12 and abs(z) < 1.0:
+        if z.imag > 1e-12 and (unstable or abs(z) < 1.0):
             s = complex(np.log(z)) * fs
             out.append((abs(s) / (2 * math.pi), -s.real / abs(s)))
     return tuple(out)

@@ -16,10 +16,14 @@ import numpy as np
 from .detection import segments
 from .inputs import carried_state, input_channels, parse_channel
 
-__all__ = ['EARLY_S', 'Window', 'ringing_khz', 'shot_channels', 'shot_windows', 'window_channels']
+__all__ = ['EARLY_S', 'RING_CYCLES', 'Ringing', 'Window', 'acceleration_ringing',
+           'ringing_khz', 'shot_channels', 'shot_windows', 'window_channels']
 
 #: Part of a window after the pulse that the grid start sees, s.
 EARLY_S = 3e-3
+#: Cycles after a pulse :func:`acceleration_ringing` looks over (a mode with ζ ≥ 0.01 has
+#: rung out by 30).
+RING_CYCLES = 30
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,11 +77,74 @@ def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
     """
     Return the kHz of the strongest ringing after the pulses (None: no pulse end).
 
-    Peak of the pooled spectrum over :data:`EARLY_S` after each pulse (quadratic trend
-    removed, Hann, zero-padded), at two cycles or more in that time.
+    Peak of the pooled spectrum of the pressure over :data:`EARLY_S` after each pulse, at
+    two cycles or more in that time.
     """
-    parts = [w.y[w.end:w.end + round(EARLY_S * fs)] for w in windows
-             if w.end is not None and w.y.size - w.end >= 16]
+    spectrum = _after_pulses([w.y for w in windows], windows, 0, round(EARLY_S * fs), fs)
+    if spectrum is None:
+        return None
+    f, power = spectrum
+    low = int(np.searchsorted(f, 2 / EARLY_S))
+    return float(f[low + int(np.argmax(power[low:]))] / 1e3)
+
+
+@dataclass(frozen=True)
+class Ringing:
+    """
+    The axial acceleration's ringing after the pulses (:func:`acceleration_ringing`).
+
+    Args:
+        hz: Frequency of its spectral peak (nan: none).
+        prominence: The peak's power over the median of the spectrum beside it (about 1 on
+            noise, hundreds where a channel rings; 0 without a peak).
+        follows: The pressure's amplitude at the peak per the acceleration's, Pa/(m/s²):
+            the sensor's gain there when the pressure follows that ringing.
+
+    """
+
+    hz: float
+    prominence: float
+    follows: float
+
+
+def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float) -> Ringing:
+    """
+    Return the axial acceleration's ringing nearest ``freq_hz`` after the pulses.
+
+    The local peak of its pooled spectrum from two to :data:`RING_CYCLES` cycles of
+    ``freq_hz`` after each pulse nearest ``freq_hz`` (within 15 %; a ring beside another
+    keeps its own peak), against the spectrum 0.7–0.85 and 1.15–1.4 times ``freq_hz``, and
+    the pressure's spectrum there.
+    """
+    skip, length = round(2 * fs / freq_hz), round(RING_CYCLES * fs / freq_hz)
+    spectrum = _after_pulses([w.acceleration[2] for w in windows], windows, skip, length, fs)
+    none = Ringing(math.nan, 0.0, math.nan)
+    if spectrum is None:
+        return none
+    f, power = spectrum
+    near = np.flatnonzero((np.abs(f / freq_hz - 1) < 0.15)[1:-1]) + 1
+    side = power[((f > 0.7 * freq_hz) & (f < 0.85 * freq_hz)) |
+                 ((f > 1.15 * freq_hz) & (f < 1.4 * freq_hz))]
+    peaks = near[(power[near] >= power[near - 1]) & (power[near] >= power[near + 1])]
+    if not peaks.size or not side.size or not np.median(side) > 0:
+        return none
+    peak = peaks[int(np.argmin(np.abs(f[peaks] / freq_hz - 1)))]
+    _, pressure = _after_pulses([w.y for w in windows], windows, skip, length, fs)
+    return Ringing(float(f[peak]), float(power[peak] / np.median(side)),
+                   float(math.sqrt(pressure[peak] / power[peak])) if power[peak] > 0 else
+                   math.nan)
+
+
+def _after_pulses(signals: Sequence[np.ndarray], windows: Sequence[Window], skip: int,
+                  length: int, fs: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """
+    Return ``(Hz, power)``: the spectrum of ``signals`` after each window's pulse, pooled.
+
+    From ``skip`` to ``skip + length`` samples after the pulse end, quadratic trend removed,
+    Hann window, zero-padded to four times the longest part; None without such parts.
+    """
+    parts = [x[w.end + skip:w.end + skip + length] for x, w in zip(signals, windows)
+             if w.end is not None and x.size - w.end - skip >= 16]
     if not parts:
         return None
     n = 1 << int(math.ceil(math.log2(4 * max(p.size for p in parts))))
@@ -86,9 +153,7 @@ def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
         t = np.arange(p.size)
         p = p - np.polyval(np.polyfit(t, p, 2), t)
         power = power + np.abs(np.fft.rfft(p * np.hanning(p.size), n)) ** 2
-    f = np.fft.rfftfreq(n, 1 / fs)
-    low = int(np.searchsorted(f, 2 / EARLY_S))
-    return float(f[low + int(np.argmax(power[low:]))] / 1e3)
+    return np.fft.rfftfreq(n, 1 / fs), power
 
 
 def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: float,

@@ -24,6 +24,7 @@ from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
 from sensor_comp.core.shots.inputs import (carried_state, fractional_delay, input_channels,
                                            InputError, mode_pair, needs_rate, parse_channel)
 from sensor_comp.core.identification.model import load, Model
+from sensor_comp.core.shots.windows import acceleration_ringing, Window
 from sensor_comp.streams import G0
 
 FS = 200e3
@@ -309,6 +310,37 @@ def test_a_second_mode_is_not_read_beside_a_base_of_four_poles():
         why = effect.implausible(fit)
         assert (why is None) == plausible, (nf, why)
     assert 'a base of 4 poles holds a mode besides the sensor' in why
+
+
+def test_a_second_mode_is_confounded_where_the_accelerometer_itself_rings():
+    # An accelerometer mode M (fraction x) measures (1 - x + x M) a: the pressure predicted
+    # from it, G / (1 - x + x M), has the second-mode form with its zero pair at M's 24 kHz.
+    sensor, accel, x = mode_pair(40.0, 0.05, FS), mode_pair(24.0, 0.015, FS), 0.2
+    acc = shocks(8000, seed=3)
+    measured = acc.copy()
+    measured[2] = (1 - x) * acc[2] + x * accel.sum() * signal.lfilter([1.0], accel, acc[2])
+    shifted = (1 - x) * accel + x * accel.sum() * np.r_[1.0, 0.0, 0.0]
+    model = _model(['a_z'], sensor.sum() * accel / shifted[0], nk=0,
+                   a=np.convolve(sensor, shifted / shifted[0]))
+    fit = SimpleNamespace(model=lambda: model)
+    effect = get_effect('second_resonance')
+    # Pulses of 1 ms from 2 ms every 10 ms; windows from 2 ms before each pulse's end.
+    ends = [round((onset + 1e-3) * FS) for onset in (0.002, 0.012, 0.022, 0.032)]
+
+    def why(signals, pressure):
+        windows = [Window(signals[:, e - 600:e + 1400], pressure[e - 600:e + 1400], e - 600,
+                          400, 0, end=600) for e in ends]
+        return effect.confounded(fit, windows), windows
+
+    quiet = np.zeros(acc.shape[1])
+    assert 'cancels 24 kHz' in (why(measured, quiet)[0] or '')
+    # The pressure follows the acceleration's ringing (an anvil's, at the static gain of 1):
+    # the same zeros are a mode of the sensor beside it.
+    assert why(measured, measured[2])[0] is None
+    # A quiet accelerometer: a mode of the sensor.
+    found, windows = why(acc, quiet)
+    assert found is None
+    assert acceleration_ringing(windows, 24e3, fs=FS).prominence < 3.0
 
 
 def test_model_file_with_effects_compensates_alike_after_loading(tmp_path):
