@@ -43,8 +43,8 @@ GAIN_Z = 2.0
 ACCEL_RING = 10.0
 #: ... within this relative distance of the zero, or its damping ratio (a damped ring's
 #: peak is as wide), where the pressure's amplitude per the acceleration's is below this
-#: share of the static gain: the pressure does not follow that ringing (0.08–0.13 on rigs
-#: whose accelerometer rang; an anvil's ringing beside a true second mode: 1.2).
+#: share of the static gain: the pressure does not follow that ringing (0.025 on rigs
+#: whose accelerometer rang; an anvil's ringing beside a true second mode: 1.17).
 RING_MATCH, FOLLOWS = 0.01, 0.5
 
 

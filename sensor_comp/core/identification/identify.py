@@ -534,12 +534,18 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
         if not gain > 0:
             held = None
     if held is not None:
-        return held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
-                      f'numerators, a lightly damped mode, on the measured pressure): {why}']
-    fit, notes = fits[chosen], _base_notes(names, base.na, chosen, fits, failed, doubts)
-    if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
-        fit = robust_uncertainty(fit, measured)
-    return fit, notes
+        fit, notes = held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
+                            f'numerators, a lightly damped mode, on the measured pressure): '
+                            f'{why}']
+    else:
+        fit, notes = fits[chosen], _base_notes(names, base.na, chosen, fits, failed, doubts)
+        if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
+            fit = robust_uncertainty(fit, measured)
+    # Another cause with the same map from the measured acceleration compensates alike;
+    # only the name and its parameters are in doubt.
+    return fit, notes + [f'{e.id}: {why}; the compensation is the same either way (the map '
+                         f'from the measured acceleration is)' for e in ordered(effects)
+                         if (why := e.confounded(fit, measured)) is not None]
 
 
 def _base_notes(names: str, asked: int, chosen: int, fits: dict, failed: dict,

@@ -83,7 +83,8 @@ def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
     spectrum = _after_pulses([w.y for w in windows], windows, 0, round(EARLY_S * fs), fs)
     if spectrum is None:
         return None
-    f, power = spectrum
+    f, rows = spectrum
+    power = np.sum(np.abs(rows) ** 2, axis=0)
     low = int(np.searchsorted(f, 2 / EARLY_S))
     return float(f[low + int(np.argmax(power[low:]))] / 1e3)
 
@@ -97,8 +98,9 @@ class Ringing:
         hz: Frequency of its spectral peak (nan: none).
         prominence: The peak's power over the median of the spectrum beside it (about 1 on
             noise, hundreds where a channel rings; 0 without a peak).
-        follows: The pressure's amplitude at the peak per the acceleration's, Pa/(m/s²):
-            the sensor's gain there when the pressure follows that ringing.
+        follows: The pressure's amplitude at the peak per the acceleration's, Pa/(m/s²),
+            from their cross-spectrum: the sensor's gain there when the pressure follows
+            that ringing.
 
     """
 
@@ -121,39 +123,44 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
     none = Ringing(math.nan, 0.0, math.nan)
     if spectrum is None:
         return none
-    f, power = spectrum
+    f, rows = spectrum
+    power = np.sum(np.abs(rows) ** 2, axis=0)
     near = np.flatnonzero((np.abs(f / freq_hz - 1) < 0.15)[1:-1]) + 1
     side = power[((f > 0.7 * freq_hz) & (f < 0.85 * freq_hz)) |
                  ((f > 1.15 * freq_hz) & (f < 1.4 * freq_hz))]
     peaks = near[(power[near] >= power[near - 1]) & (power[near] >= power[near + 1])]
-    if not peaks.size or not side.size or not np.median(side) > 0:
+    if not peaks.size or not side.size or not np.median(side) > 0 or \
+            not np.max(power[peaks]) > 0:
         return none
     peak = peaks[int(np.argmin(np.abs(f[peaks] / freq_hz - 1)))]
+    # The cross-spectrum over the windows: the pressure noise, incoherent with the
+    # acceleration, does not add to it as it adds to the pressure's power.
     _, pressure = _after_pulses([w.y for w in windows], windows, skip, length, fs)
+    cross = np.sum(pressure[:, peak] * np.conj(rows[:, peak]))
     return Ringing(float(f[peak]), float(power[peak] / np.median(side)),
-                   float(math.sqrt(pressure[peak] / power[peak])) if power[peak] > 0 else
-                   math.nan)
+                   float(abs(cross) / power[peak]) if power[peak] > 0 else math.nan)
 
 
 def _after_pulses(signals: Sequence[np.ndarray], windows: Sequence[Window], skip: int,
                   length: int, fs: float) -> tuple[np.ndarray, np.ndarray] | None:
     """
-    Return ``(Hz, power)``: the spectrum of ``signals`` after each window's pulse, pooled.
+    Return ``(Hz, spectra)``: the spectrum of each of ``signals`` after its window's pulse.
 
     From ``skip`` to ``skip + length`` samples after the pulse end, quadratic trend removed,
-    Hann window, zero-padded to four times the longest part; None without such parts.
+    Hann window, zero-padded to four times the longest part (one row per window with a
+    pulse end and 16 samples there); None without such parts.
     """
     parts = [x[w.end + skip:w.end + skip + length] for x, w in zip(signals, windows)
              if w.end is not None and x.size - w.end - skip >= 16]
     if not parts:
         return None
     n = 1 << int(math.ceil(math.log2(4 * max(p.size for p in parts))))
-    power = 0.0
+    rows = []
     for p in parts:
         t = np.arange(p.size)
         p = p - np.polyval(np.polyfit(t, p, 2), t)
-        power = power + np.abs(np.fft.rfft(p * np.hanning(p.size), n)) ** 2
-    return np.fft.rfftfreq(n, 1 / fs), power
+        rows.append(np.fft.rfft(p * np.hanning(p.size), n))
+    return np.fft.rfftfreq(n, 1 / fs), np.array(rows)
 
 
 def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: float,

@@ -196,6 +196,17 @@ def test_an_effect_is_fitted_as_the_diagnosis_named_it_on_the_measured_pressure(
                for note in result.notes), result.notes
 
 
+def test_a_second_mode_fit_says_when_an_accelerometer_resonance_explains_it_as_well():
+    # A 26.4 kHz mode in the accelerometer channel only (seed-4 case 97 of the benchmark):
+    # the second-mode fit is the same map from the measured acceleration, so it compensates
+    # alike, but its name is in doubt and the note says why.
+    calib, valid, _ = rig(1784411294, 'accel_resonance', 1.5, (100e3, 300e3))
+    result = identify([calib], validation=[valid], effects=['second_resonance'])
+    notes = [n for n in result.notes if n.startswith('second_resonance: the fit cancels')]
+    assert len(notes) == 1 and 'accelerometer' in notes[0], result.notes
+    assert 'the compensation is the same either way' in notes[0]
+
+
 def test_an_effect_fit_that_cannot_start_is_one_effect_error(monkeypatch):
     _, _, source, _ = table2(200e3, 6)
 
