@@ -179,8 +179,8 @@ class SecondResonance(Effect):
                         f'where the measured acceleration rings after the pulses '
                         f'({ring.prominence:.0f}× its spectrum beside it) and the pressure '
                         f'does not follow it ({ring.follows / gain:.2g} of the static gain): '
-                        f'a resonance of the accelerometer or its '
-                        f'mount, outside the catalogue, explains it as well')
+                        f'a resonance of the accelerometer or its mount, outside the '
+                        f'catalogue, explains it as well')
         return None
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:

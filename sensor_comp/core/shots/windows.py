@@ -129,8 +129,7 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
     side = power[((f > 0.7 * freq_hz) & (f < 0.85 * freq_hz)) |
                  ((f > 1.15 * freq_hz) & (f < 1.4 * freq_hz))]
     peaks = near[(power[near] >= power[near - 1]) & (power[near] >= power[near + 1])]
-    if not peaks.size or not side.size or not np.median(side) > 0 or \
-            not np.max(power[peaks]) > 0:
+    if not peaks.size or not side.size or not np.median(side) > 0:
         return none
     peak = peaks[int(np.argmin(np.abs(f[peaks] / freq_hz - 1)))]
     # The cross-spectrum over the windows: the pressure noise, incoherent with the
