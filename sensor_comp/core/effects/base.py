@@ -12,23 +12,23 @@ from contextvars import ContextVar
 from dataclasses import dataclass, replace
 import math
 import re
-from typing import ClassVar, Protocol, runtime_checkable, TYPE_CHECKING
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
 from .probe import ProbeSpec
 from ..shots.inputs import AXES, mode_pair, parse_channel
+from ..shots.windows import Ringing, Window
 from ...errors import SensorCompError
 
-if TYPE_CHECKING:
-    from ..shots.windows import Window
 
-__all__ = ['BASE_CONTEXT', 'EDGE_FACTOR', 'Effect', 'EffectError', 'FitView', 'FittedModel',
-           'ModelSpec', 'Outcome', 'PeakView', 'Physical', 'ProbeView', 'ResidualView',
-           'RIVAL_MARGIN', 'RIVAL_SHARE', 'Search', 'SegmentView', 'SpectrumView', 'TrendView',
-           'centroid', 'dc_delay_s', 'delta_std', 'effect_entry', 'entry_of', 'excess_delay_s',
-           'mechanics_delay_s', 'modifier_value', 'parameters_text', 'probe_of', 'registry',
-           'row_of', 'segment_of', 'sentence', 'static_gain', 'stored_std', 'tail_share']
+__all__ = ['ACCEL_RING', 'BASE_CONTEXT', 'EDGE_FACTOR', 'FOLLOWS', 'Effect', 'EffectError',
+           'FitView', 'FittedModel', 'ModelSpec', 'Outcome', 'PeakView', 'Physical',
+           'ProbeView', 'ResidualView', 'RIVAL_MARGIN', 'RIVAL_SHARE', 'Search', 'SegmentView',
+           'SpectrumView', 'TrendView', 'centroid', 'dc_delay_s', 'delta_std', 'effect_entry',
+           'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
+           'parameters_text', 'probe_of', 'registry', 'row_of', 'segment_of', 'sentence',
+           'static_gain', 'stored_std', 'tail_share', 'unfollowed']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -46,6 +46,11 @@ AMPLITUDE_Z = 2.0
 #: pulse (``a|a|`` against ``a³``: 2.4 % of their energy), which a model misfit of a
 #: percent must not cross.
 RIVAL_MARGIN, RIVAL_SHARE = 25.0, 0.02
+#: An accelerometer's own ringing (:func:`unfollowed`): the least peak of the acceleration's
+#: spectrum after the pulses over the spectrum beside it (about 1 on noise; 200 to 10⁵ on
+#: rigs whose accelerometer channel rang) and the largest share of the static gain at which
+#: the pressure follows it (0.025 there; an anvil's ringing: 1.0–1.2).
+ACCEL_RING, FOLLOWS = 10.0, 0.5
 #: Physical parameters: name -> (value, standard deviation or None).
 Physical = dict[str, tuple[float, float | None]]
 
@@ -441,6 +446,17 @@ class Effect:
         """Return the effect for a catalogue listing (id, title, parameters, signature)."""
         units = ', '.join(f'{name} [{unit}]' for name, unit in self.parameters.items())
         return f'{self.id}: {self.title} ({units})\n    {self.signature}'
+
+
+def unfollowed(ring: Ringing, gain: float) -> bool:
+    """
+    Return whether the acceleration's ``ring`` is an accelerometer's the pressure ignores.
+
+    Its peak at least :data:`ACCEL_RING` times the spectrum beside it, and the pressure's
+    amplitude there below :data:`FOLLOWS` of the static ``gain`` (Pa per m/s²) times the
+    acceleration's: the pressure does not follow it, as it follows an anvil's ringing.
+    """
+    return ring.prominence >= ACCEL_RING and ring.follows < FOLLOWS * abs(gain)
 
 
 def parameters_text(effect: Effect, parameters: Physical) -> str:

@@ -17,7 +17,7 @@ from scipy import signal
 from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView, FittedModel,
                    ModelSpec, modifier_value, Outcome, parameters_text, Physical,
                    ResidualView, row_of, Search, segment_of, sentence, static_gain,
-                   stored_std)
+                   stored_std, unfollowed)
 from ..estimators.least_squares import delayed_numerator
 from ..estimators.polynomials import resonances
 from ..shots.inputs import mode_pair
@@ -37,15 +37,10 @@ MAX_BASE_POLES = 3
 #: A second mode whose gain lies within this many standard deviations of zero is not
 #: resolved: the two extra numerator coefficients, not the mode, did the fitting.
 GAIN_Z = 2.0
-#: Least peak of the acceleration's spectrum after the pulses, over the spectrum beside it,
-#: at a lightly damped zero of the fit that is an accelerometer resonance (about 1 on
-#: noise; 200 to 10⁵ on rigs whose accelerometer channel rang).
-ACCEL_RING = 10.0
-#: ... within this relative distance of the zero, or its damping ratio (a damped ring's
-#: peak is as wide), where the pressure's amplitude per the acceleration's is below this
-#: share of the static gain: the pressure does not follow that ringing (0.025 on rigs
-#: whose accelerometer rang; an anvil's ringing beside a true second mode: 1.17).
-RING_MATCH, FOLLOWS = 0.01, 0.5
+#: An accelerometer's ringing (:func:`~.base.unfollowed`) at a lightly damped zero of the
+#: fit lies within this relative distance of it, or its damping ratio (a damped ring's
+#: peak is as wide; fits of an accelerometer mode put the zero within 0.1 %).
+RING_MATCH = 0.01
 
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
@@ -172,9 +167,7 @@ class SecondResonance(Effect):
             if not (MIN_KHZ * 1e3 < freq < 0.45 * model.fs and abs(zeta) < MAX_ZETA):
                 continue
             ring = acceleration_ringing(windows, freq, fs=model.fs)
-            if ring.prominence >= ACCEL_RING and \
-                    abs(ring.hz / freq - 1) < max(RING_MATCH, abs(zeta)) and \
-                    ring.follows < FOLLOWS * gain:
+            if unfollowed(ring, gain) and abs(ring.hz / freq - 1) < max(RING_MATCH, abs(zeta)):
                 return (f'the fit cancels {freq / 1e3:.3g} kHz (a zero pair, ζ = {zeta:.2g}) '
                         f'where the measured acceleration rings after the pulses '
                         f'({ring.prominence:.0f}× its spectrum beside it) and the pressure '

@@ -7,6 +7,7 @@ Base-strain sensitivity: pressure read from the housing strain, which follows th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 import math
 
@@ -15,8 +16,9 @@ from scipy import signal
 
 from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
                    parameters_text, Physical, probe_of, ResidualView, row_of, sentence,
-                   static_gain, stored_std)
+                   static_gain, stored_std, unfollowed)
 from .probe import ProbeSpec
+from ..shots.windows import ringings, Window
 from ...streams import G0, G_PER_MS
 
 __all__ = ['JERK_PROBE', 'StrainSensitivity', 'jerk']
@@ -109,6 +111,26 @@ class StrainSensitivity(Effect):
         if not abs(lead_ms) <= MAX_LEAD_MS:
             return (f'the strain term equals the axial response {abs(lead_ms):.3g} ms ahead or '
                     f'behind: no strain of a sensor mount, the paths imitate something else')
+        return None
+
+    def confounded(self, fit: FitView, windows: Sequence[Window]) -> str | None:
+        """
+        Return why an accelerometer resonance explains the fit as well, or None.
+
+        A mode ``M`` at ``ω`` in the accelerometer channel measures ``(1 − x + x M) a``;
+        below ``ω`` the pressure predicted from it, ``G / (1 − x + x M)``, is to first order
+        ``G (1 + 2ζx s/ω)``: a leading derivative term. The acceleration then rings after
+        the pulses where the pressure does not follow it (an anvil's ringing it follows).
+        """
+        model = fit.model()
+        gain = static_gain(model.a, model.b, row_of(model, 'a'))
+        for ring in ringings(windows, fs=model.fs):
+            if unfollowed(ring, gain):
+                return (f'the measured acceleration rings at {ring.hz / 1e3:.3g} kHz after the '
+                        f'pulses ({ring.prominence:.0f}× its spectrum beside it) and the '
+                        f'pressure does not follow it ({ring.follows / abs(gain):.2g} of the '
+                        f'static gain): a resonance of the accelerometer or its mount, '
+                        f'outside the catalogue, reads as a derivative term below it')
         return None
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:

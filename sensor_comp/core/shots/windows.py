@@ -17,7 +17,7 @@ from .detection import segments
 from .inputs import carried_state, input_channels, parse_channel
 
 __all__ = ['EARLY_S', 'RING_CYCLES', 'Ringing', 'Window', 'acceleration_ringing',
-           'ringing_khz', 'shot_channels', 'shot_windows', 'window_channels']
+           'ringing_khz', 'ringings', 'shot_channels', 'shot_windows', 'window_channels']
 
 #: Part of a window after the pulse that the grid start sees, s.
 EARLY_S = 3e-3
@@ -126,8 +126,7 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
     f, rows = spectrum
     power = np.sum(np.abs(rows) ** 2, axis=0)
     near = np.flatnonzero((np.abs(f / freq_hz - 1) < 0.15)[1:-1]) + 1
-    side = power[((f > 0.7 * freq_hz) & (f < 0.85 * freq_hz)) |
-                 ((f > 1.15 * freq_hz) & (f < 1.4 * freq_hz))]
+    side = power[_beside(f, freq_hz)]
     peaks = near[(power[near] >= power[near - 1]) & (power[near] >= power[near + 1])]
     if not peaks.size or not side.size or not np.median(side) > 0:
         return none
@@ -138,6 +137,40 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
     cross = np.sum(pressure[:, peak] * np.conj(rows[:, peak]))
     return Ringing(float(f[peak]), float(power[peak] / np.median(side)),
                    float(abs(cross) / power[peak]) if power[peak] > 0 else math.nan)
+
+
+def ringings(windows: Sequence[Window], *, fs: float, count: int = 5) -> list[Ringing]:
+    """
+    Return the axial acceleration's ``count`` strongest ringings after the pulses.
+
+    The local peaks of its pooled spectrum over :data:`EARLY_S` after each pulse (at two
+    cycles or more in that time, below 0.45 ``fs``) highest above the spectrum beside them,
+    each measured by :func:`acceleration_ringing`; most prominent first.
+    """
+    spectrum = _after_pulses([w.acceleration[2] for w in windows], windows, 0,
+                             round(EARLY_S * fs), fs)
+    if spectrum is None:
+        return []
+    f, rows = spectrum
+    power = np.sum(np.abs(rows) ** 2, axis=0)
+    inner = np.flatnonzero((f >= 2 / EARLY_S) & (f < 0.45 * fs))
+    inner = inner[(inner > 0) & (inner < power.size - 1)]
+    peaks = inner[(power[inner] > power[inner - 1]) & (power[inner] >= power[inner + 1])]
+    # Against the spectrum beside each peak (its geometric mean there, from cumulative
+    # sums): the pulses' own spectrum falls steeply, so the highest peaks by power are its
+    # low-frequency lobes, not a ringing.
+    log = np.concatenate([[0.0], np.cumsum(np.log(np.maximum(power, 1e-300)))])
+    below = [np.searchsorted(f, k * f[peaks]) for k in (0.7, 0.85)]
+    above = [np.minimum(np.searchsorted(f, k * f[peaks]), f.size) for k in (1.15, 1.4)]
+    width = np.maximum(below[1] - below[0] + above[1] - above[0], 1)
+    beside = (log[below[1]] - log[below[0]] + log[above[1]] - log[above[0]]) / width
+    strongest = peaks[np.argsort(np.log(power[peaks]) - beside)[::-1][:count]]
+    return [acceleration_ringing(windows, float(f[k]), fs=fs) for k in strongest]
+
+
+def _beside(f: np.ndarray, hz: float) -> np.ndarray:
+    """Return the bins beside ``hz`` a peak is measured against: 0.7–0.85 and 1.15–1.4 times."""
+    return ((f > 0.7 * hz) & (f < 0.85 * hz)) | ((f > 1.15 * hz) & (f < 1.4 * hz))
 
 
 def _after_pulses(signals: Sequence[np.ndarray], windows: Sequence[Window], skip: int,
