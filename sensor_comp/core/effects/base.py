@@ -49,7 +49,7 @@ RIVAL_MARGIN, RIVAL_SHARE = 25.0, 0.02
 #: An accelerometer's own ringing (:func:`unfollowed`): the least peak of the acceleration's
 #: spectrum after the pulses over the spectrum beside it (about 1 on noise; 200 to 10⁵ on
 #: rigs whose accelerometer channel rang) and the largest share of the static gain at which
-#: the pressure follows it (0.025 there; an anvil's ringing: 1.0–1.2).
+#: the pressure follows it (0.025 there; an anvil's ringing: 1.0–1.4).
 ACCEL_RING, FOLLOWS = 10.0, 0.5
 #: Physical parameters: name -> (value, standard deviation or None).
 Physical = dict[str, tuple[float, float | None]]
