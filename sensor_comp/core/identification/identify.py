@@ -543,9 +543,9 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
             fit = robust_uncertainty(fit, measured)
     # Another cause with the same map from the measured acceleration compensates alike;
     # only the name and its parameters are in doubt.
-    return fit, notes + [f'{e.id}: {why}; the compensation is the same either way (the map '
+    return fit, notes + [f'{e.id}: {other}; the compensation is the same either way (the map '
                          f'from the measured acceleration is)' for e in ordered(effects)
-                         if (why := e.confounded(fit, measured)) is not None]
+                         if (other := e.confounded(fit, measured)) is not None]
 
 
 def _base_notes(names: str, asked: int, chosen: int, fits: dict, failed: dict,

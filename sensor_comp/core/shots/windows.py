@@ -16,7 +16,7 @@ import numpy as np
 from .detection import segments
 from .inputs import carried_state, input_channels, parse_channel
 
-__all__ = ['EARLY_S', 'RING_CYCLES', 'Ringing', 'Window', 'acceleration_ringing',
+__all__ = ['BESIDE', 'EARLY_S', 'RING_CYCLES', 'Ringing', 'Window', 'acceleration_ringing',
            'ringing_khz', 'ringings', 'shot_channels', 'shot_windows', 'window_channels']
 
 #: Part of a window after the pulse that the grid start sees, s.
@@ -24,6 +24,8 @@ EARLY_S = 3e-3
 #: Cycles after a pulse :func:`acceleration_ringing` looks over (a mode with ζ ≥ 0.01 has
 #: rung out by 30).
 RING_CYCLES = 30
+#: The bands beside a spectral peak at ``f`` it is measured against, in units of ``f``.
+BESIDE = ((0.7, 0.85), (1.15, 1.4))
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,8 +117,8 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
 
     The local peak of its pooled spectrum from two to :data:`RING_CYCLES` cycles of
     ``freq_hz`` after each pulse nearest ``freq_hz`` (within 15 %; a ring beside another
-    keeps its own peak), against the spectrum 0.7–0.85 and 1.15–1.4 times ``freq_hz``, and
-    the pressure's spectrum there.
+    keeps its own peak), against the spectrum :data:`BESIDE` it, and the pressure's
+    spectrum there.
     """
     skip, length = round(2 * fs / freq_hz), round(RING_CYCLES * fs / freq_hz)
     spectrum = _after_pulses([w.acceleration[2] for w in windows], windows, skip, length, fs)
@@ -125,9 +127,8 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
         return none
     f, rows = spectrum
     power = np.sum(np.abs(rows) ** 2, axis=0)
-    near = np.flatnonzero((np.abs(f / freq_hz - 1) < 0.15)[1:-1]) + 1
+    peaks = _local_peaks(power, np.abs(f / freq_hz - 1) < 0.15)
     side = power[_beside(f, freq_hz)]
-    peaks = near[(power[near] >= power[near - 1]) & (power[near] >= power[near + 1])]
     if not peaks.size or not side.size or not np.median(side) > 0:
         return none
     peak = peaks[int(np.argmin(np.abs(f[peaks] / freq_hz - 1)))]
@@ -153,24 +154,28 @@ def ringings(windows: Sequence[Window], *, fs: float, count: int = 5) -> list[Ri
         return []
     f, rows = spectrum
     power = np.sum(np.abs(rows) ** 2, axis=0)
-    inner = np.flatnonzero((f >= 2 / EARLY_S) & (f < 0.45 * fs))
-    inner = inner[(inner > 0) & (inner < power.size - 1)]
-    peaks = inner[(power[inner] > power[inner - 1]) & (power[inner] >= power[inner + 1])]
+    peaks = _local_peaks(power, (f >= 2 / EARLY_S) & (f < 0.45 * fs))
     # Against the spectrum beside each peak (its geometric mean there, from cumulative
     # sums): the pulses' own spectrum falls steeply, so the highest peaks by power are its
     # low-frequency lobes, not a ringing.
     log = np.concatenate([[0.0], np.cumsum(np.log(np.maximum(power, 1e-300)))])
-    below = [np.searchsorted(f, k * f[peaks]) for k in (0.7, 0.85)]
-    above = [np.minimum(np.searchsorted(f, k * f[peaks]), f.size) for k in (1.15, 1.4)]
-    width = np.maximum(below[1] - below[0] + above[1] - above[0], 1)
-    beside = (log[below[1]] - log[below[0]] + log[above[1]] - log[above[0]]) / width
+    (lo, hi), (up, top) = [[np.searchsorted(f, k * f[peaks]) for k in band] for band in BESIDE]
+    width = np.maximum(hi - lo + top - up, 1)
+    beside = (log[hi] - log[lo] + log[top] - log[up]) / width
     strongest = peaks[np.argsort(np.log(power[peaks]) - beside)[::-1][:count]]
     return [acceleration_ringing(windows, float(f[k]), fs=fs) for k in strongest]
 
 
 def _beside(f: np.ndarray, hz: float) -> np.ndarray:
-    """Return the bins beside ``hz`` a peak is measured against: 0.7–0.85 and 1.15–1.4 times."""
-    return ((f > 0.7 * hz) & (f < 0.85 * hz)) | ((f > 1.15 * hz) & (f < 1.4 * hz))
+    """Return the bins of :data:`BESIDE` ``hz``, against which a peak there is measured."""
+    (lo, hi), (up, top) = BESIDE
+    return ((f > lo * hz) & (f < hi * hz)) | ((f > up * hz) & (f < top * hz))
+
+
+def _local_peaks(power: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """Return the bins of ``where`` (a mask) above the bin below and not below the next."""
+    bins = np.flatnonzero(where[1:-1]) + 1
+    return bins[(power[bins] > power[bins - 1]) & (power[bins] >= power[bins + 1])]
 
 
 def _after_pulses(signals: Sequence[np.ndarray], windows: Sequence[Window], skip: int,
