@@ -233,16 +233,24 @@ def carried_state(state: Mapping[str, object], names: Sequence[str], samples: in
     """
     Return what of a stream's ``state`` outlasts ``samples`` samples of rest.
 
-    A leaky peak decays over the gap (a zero shift can outlast the time between shots);
+    A leaky peak decays over the gap (a zero shift can outlast the time between shots), and
+    so does a high-pass's charge (an amplifier's discharge, tens of ms, outlasts it too: a
+    fit that restarted it from rest in each window read its time constant 5-20 % long);
     every other stage restarts from rest, as the acceleration is at its baseline between
     shot windows.
     """
     out: dict[str, object] = {}
+    if samples < 0:
+        return out
     for name in names:
         channel = parse_channel(name)
         key = f'{name}|peak'
-        if channel.kind == 'peak' and isinstance(state.get(key), float) and samples >= 0:
+        if channel.kind == 'peak' and isinstance(state.get(key), float):
             out[key] = state[key] * math.exp(-1e3 * samples / (channel.tau_ms * fs))
+        for index, (modifier, value) in enumerate(channel.modifiers):
+            key = f'{name}|{index}'
+            if modifier == 'highpass_ms' and key in state:
+                out[key] = state[key] * math.exp(-1e3 * samples / (value * fs))
     return out
 
 

@@ -205,25 +205,32 @@ def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: floa
     """
     Return each window's input rows, as the compensation filter computes them on the stream.
 
-    A leaky peak (a zero shift's) carries over from the window before in the same recording,
-    decayed over the gap, and the first one starts from ``carry_in[source]`` (m/s², default
-    rest); like the pressure, its rows have their pre-trigger mean removed. Every other
-    channel starts from rest in each window.
+    A slow state carries over from the window before in the same recording, decayed over the
+    gap (:func:`~.inputs.carried_state`): a leaky peak's (a zero shift's), whose first one
+    starts from ``carry_in[source]`` (m/s², default rest), and a high-pass's charge (from
+    rest at the first; the prediction fits that one). Like the pressure, those rows have
+    their pre-trigger mean removed. Every other channel starts from rest in each window.
     """
-    peaks = [row for row, name in enumerate(names) if parse_channel(name).kind == 'peak']
+    slow = [row for row, name in enumerate(names) if _slow(parse_channel(name))]
+    peaks = [row for row in slow if parse_channel(names[row]).kind == 'peak']
     out: list[np.ndarray] = [np.empty(0)] * len(windows)
     last: dict[int, tuple[dict, int]] = {}
     for index in sorted(range(len(windows)), key=lambda i: (windows[i].source, windows[i].start)):
         w = windows[index]
         level = (carry_in or {}).get(w.source, 0.0)
         state, stop = last.get(w.source, ({f'{names[r]}|peak': level for r in peaks}, w.start))
-        state = carried_state(state, names, w.start - stop, fs=fs) if peaks else {}
+        state = carried_state(state, names, w.start - stop, fs=fs) if slow else {}
         u = input_channels(names, w.acceleration, state, fs=fs)
-        if peaks and w.baseline > 0:
-            u[peaks] -= u[peaks, :w.baseline].mean(axis=1, keepdims=True)
+        if slow and w.baseline > 0:
+            u[slow] -= u[slow, :w.baseline].mean(axis=1, keepdims=True)
         last[w.source] = (state, w.start + w.y.size)
         out[index] = u
     return out
+
+
+def _slow(channel) -> bool:
+    """Return whether a channel's state outlasts the gap between shots (a peak, a high-pass)."""
+    return channel.kind == 'peak' or any(m == 'highpass_ms' for m, _ in channel.modifiers)
 
 
 @dataclass(frozen=True)
@@ -236,10 +243,11 @@ def shot_channels(recording, shots: Sequence, names: Sequence[str]) -> list[np.n
     """
     Return the input rows of each shot window of one recording, as on the stream.
 
-    As :func:`~sensor_comp.core.shots.detection.segments`, but a leaky peak carries over
-    from window to window (:func:`window_channels`, from rest at the first).
+    As :func:`~sensor_comp.core.shots.detection.segments`, but a slow state (a leaky peak,
+    a high-pass) carries over from window to window (:func:`window_channels`, from rest at
+    the first).
     """
-    if not any(parse_channel(name).kind == 'peak' for name in names):
+    if not any(_slow(parse_channel(name)) for name in names):
         return [u for u, _ in segments(recording, shots, inputs=names)]
     return window_channels(shot_windows([_Source(recording, tuple(shots))]), names,
                            fs=recording.fs)

@@ -165,20 +165,24 @@ def test_highpass_leaky_peak_and_mode_follow_their_closed_forms():
     assert np.all(peak[:10] == 0)
 
 
-def test_a_leaky_peak_carried_over_a_gap_equals_the_stream():
+def test_a_slow_state_carried_over_a_gap_equals_the_stream():
     # Two windows cut from one stream: the second computed from the first's carried state
-    # equals the stream's own leaky peak; the delay's FIR state restarts from rest.
+    # equals the stream's own leaky peak and high-pass; the delay's FIR state restarts.
     acc = shocks(3000)
-    acc[:, 1200:1800] = 0.0  # the gap between the windows is at rest
-    names = ['peak_a_z(tau_ms=20.0)', 'a_z@delay_us=20.0']
+    acc[:, 1150:1800] = 0.0  # the gap between the windows (and the first's end) at rest
+    names = ['peak_a_z(tau_ms=20.0)', 'a_z@delay_us=20.0', 'a_z@highpass_ms=30.0']
     whole = input_channels(names, acc, {}, fs=FS)
     state: dict = {}
     input_channels(names, acc[:, :1200], state, fs=FS)
     carried = carried_state(state, names, 600, fs=FS)
-    assert set(carried) == {'peak_a_z(tau_ms=20.0)|peak'}
+    assert set(carried) == {'peak_a_z(tau_ms=20.0)|peak', 'a_z@highpass_ms=30.0|0'}
     second = input_channels(names, acc[:, 1800:], carried, fs=FS)
     assert np.allclose(second[0], whole[0, 1800:], rtol=1e-12, atol=0)
     assert whole[0, 1800] > 0.5 * np.max(np.abs(acc[2, :1200]))  # 20 ms outlast the gap
+    # The high-pass's undershoot after the first shots, decayed over the gap, is there.
+    scale = np.max(np.abs(whole[2]))
+    np.testing.assert_allclose(second[2], whole[2, 1800:], rtol=0, atol=1e-12 * scale)
+    assert abs(whole[2, 1800]) > 1e-3 * scale
     assert carried_state(state, names, -1, fs=FS) == {}
 
 

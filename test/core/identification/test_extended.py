@@ -334,3 +334,15 @@ def test_a_high_pass_charge_left_before_a_recording_is_fitted_in_its_first_windo
     assert float(left @ left) <= float(misfit @ misfit)  # the fit can only lower the error
     added = size * decay
     assert np.sqrt(np.mean((left - misfit) ** 2)) < 0.1 * np.sqrt(np.mean(added ** 2))
+
+
+def test_a_high_pass_charge_outlasting_the_gap_between_shots_is_carried_over():
+    # Shots every 12 ms under a 30 ms discharge: each window starts in the undershoot the
+    # shots before left. Restarting the high-pass from rest in every window read 39 ± 2.4 ms.
+    sim = simulate(RigConfig(shots=TABLE2[:6], fs=200e3, seed=3, pressure_noise=0.002,
+                             pre_trigger_s=0.002, post_shot_s=0.004, spacing_s=0.012,
+                             effects=['amplifier_highpass:tau_ms=30']))
+    windows = shot_windows([ShotSource.detect(sim.recording)])
+    fit = fit_extended(windows, effects=('amplifier_highpass',), fs=200e3, nf=2, nb=3, nk=0)
+    tau, std = fit.parameters('amplifier_highpass')['tau_ms']
+    assert abs(tau - 30.0) <= 3 * std and std < 0.03 * 30.0
