@@ -236,7 +236,8 @@ class ExtendedFit:
         Return the prediction over ``windows`` (e.g. validation shots).
 
         The acceleration-driven part is simulated from rest in each window, but for a zero
-        shift's leaky peak, which carries over between the windows of a recording: the
+        shift's leaky peak and a high-pass's charge, which carry over between the windows
+        of a recording (:func:`~sensor_comp.core.shots.windows.window_channels`): the
         slow state a recording's first window starts from (left by shots before it: that
         leaky peak's level, or a high-pass's charge) is fitted. A disturbance's
         phase belongs to its recording, so its coefficients are estimated again by least

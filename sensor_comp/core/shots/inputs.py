@@ -235,7 +235,7 @@ def carried_state(state: Mapping[str, object], names: Sequence[str], samples: in
 
     A leaky peak decays over the gap (a zero shift can outlast the time between shots), and
     so does a high-pass's charge (an amplifier's discharge, tens of ms, outlasts it too: a
-    fit that restarted it from rest in each window read its time constant 5-20 % long);
+    fit that restarted it from rest in each window read its time constant up to 22 % long);
     every other stage restarts from rest, as the acceleration is at its baseline between
     shot windows.
     """
