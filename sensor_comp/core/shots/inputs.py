@@ -61,6 +61,11 @@ class Channel:
         """Return whether the channel needs the sample rate."""
         return self.kind in ('da', 'peak') or bool(self.modifiers)
 
+    @property
+    def carries_over(self) -> bool:
+        """Return whether a state of it outlasts the gap between shots (:func:`carried_state`)."""
+        return self.kind == 'peak' or any(m == 'highpass_ms' for m, _ in self.modifiers)
+
 
 def _known() -> str:
     bases = [f'{p}_{a}' for p in ('a', 'da') for a in AXES]

@@ -211,7 +211,7 @@ def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: floa
     rest at the first; the prediction fits that one). Like the pressure, those rows have
     their pre-trigger mean removed. Every other channel starts from rest in each window.
     """
-    slow = [row for row, name in enumerate(names) if _slow(parse_channel(name))]
+    slow = [row for row, name in enumerate(names) if parse_channel(name).carries_over]
     peaks = [row for row in slow if parse_channel(names[row]).kind == 'peak']
     out: list[np.ndarray] = [np.empty(0)] * len(windows)
     last: dict[int, tuple[dict, int]] = {}
@@ -228,11 +228,6 @@ def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: floa
     return out
 
 
-def _slow(channel) -> bool:
-    """Return whether a channel's state outlasts the gap between shots (a peak, a high-pass)."""
-    return channel.kind == 'peak' or any(m == 'highpass_ms' for m, _ in channel.modifiers)
-
-
 @dataclass(frozen=True)
 class _Source:
     recording: object
@@ -247,7 +242,7 @@ def shot_channels(recording, shots: Sequence, names: Sequence[str]) -> list[np.n
     a high-pass) carries over from window to window (:func:`window_channels`, from rest at
     the first).
     """
-    if not any(_slow(parse_channel(name)) for name in names):
+    if not any(parse_channel(name).carries_over for name in names):
         return [u for u, _ in segments(recording, shots, inputs=names)]
     return window_channels(shot_windows([_Source(recording, tuple(shots))]), names,
                            fs=recording.fs)
