@@ -20,8 +20,10 @@ its defaults:
 The noise ceiling is the worst peak residual a perfect model would leave on B's shots, in %
 of the shot's measured peak, windows and baselines as the comparison takes them: the white
 pressure noise (the generator's clean pressure subtracted) minus what the accelerometer's
-own noise gives through the true sensor (a model fed the measured acceleration predicts
-it; no model can tell it from the acceleration). The pressure noise alone, the ceiling of
+own noise gives through the true model: the sensor and, for an effect driven by the
+acceleration, the effect's path too (a base strain's derivative, a second mode, the
+lateral axes, the a|a| and peak terms). A model fed the measured acceleration predicts it;
+no model can tell it from the acceleration. The pressure noise alone, the ceiling of
 earlier rounds, is kept in each row (``pressure_ceiling_percent``): where the sensor's
 resonance rings on the accelerometer noise, at high pressure-to-noise ratios, it lies
 below what any model can reach.
@@ -162,8 +164,8 @@ def _ceiling(case, cut: int, validation, *, accelerometer: bool = True) -> float
     Return the worst peak residual (%) a perfect model leaves on the validation shots.
 
     With ``accelerometer`` the model is fed the measured acceleration, so that its
-    residual also holds the accelerometer noise through the true sensor; without, the
-    pressure noise alone.
+    residual also holds the accelerometer noise through the true model (the sensor and the
+    effect's acceleration path); without, the pressure noise alone.
     """
     worst = 0.0
     for source in validation:

@@ -223,9 +223,10 @@ class Case:
         induced_pressure: The sensor's linear response to the axial acceleration, Pa.
         effect_pressure: The effect's contribution to the pressure (for an accelerometer
             effect: the pressure error it causes through the sensor model), Pa.
-        accel_noise_pressure: What the axial accelerometer noise gives through the sensor's
-            static gain and mechanics (discretised at the sample rate), Pa: a perfect model
-            fed the measured acceleration predicts it, the pressure holds none of it.
+        accel_noise_pressure: What the accelerometer noise gives through the true model
+            (the sensor and the effect's acceleration path, discretised at the sample
+            rate), Pa: a perfect model fed the measured acceleration predicts it, the
+            pressure holds none of it.
 
     """
 
@@ -695,8 +696,7 @@ def simulate(spec: RigSpec) -> Case:
     pressure = clean + sigma * rng.standard_normal(grid.n)
     accel_noise = spec.accel_noise * rng.standard_normal(acceleration.shape)
     measured = acceleration + accel_noise
-    through = spec.sensitivity * signal.lfilter(*_mode(spec.fn_hz, spec.zeta, 1 / spec.fs),
-                                                accel_noise[2])
+    through = _noise_through(spec, parameters, acceleration, accel_noise)
     recording = Recording(fs=spec.fs, t0_ns=spec.t0_ns, pressure=pressure,
                           acceleration=measured, metadata={
                               'charge_sensitivity_pC_per_MPa':
@@ -707,6 +707,42 @@ def simulate(spec: RigSpec) -> Case:
              'windows': [list(w) for w in windows], 'rate_band': rate_band(spec.fs),
              'rig': _rig_summary(spec)}
     return Case(recording, truth, clean, base.sampled, effect_pressure, through)
+
+
+def _noise_through(spec: RigSpec, parameters: dict, acceleration: np.ndarray,
+                   noise: np.ndarray) -> np.ndarray:
+    """
+    Return what the true model predicts from the accelerometer noise alone, Pa.
+
+    The sensor's path and, for an effect driven by the acceleration, the effect's own
+    path (discretised at the sample rate): a perfect model fed the measured acceleration
+    ``acceleration + noise`` predicts both, the pressure holds neither. Pressure-side
+    effects (high-pass, delay, hum) only reshape the sensor's term a little; a drive outside
+    the catalogue has no perfect catalogue model.
+    """
+    mech = _mode(spec.fn_hz, spec.zeta, 1 / spec.fs)
+    s, nz, effect = spec.sensitivity, noise[2], spec.effect
+    drive = nz
+    if effect == 'nonlinear_sensitivity':
+        measured = acceleration[2] + nz
+        drive = drive + parameters['beta_per_g'] * (
+            measured * np.abs(measured) - acceleration[2] * np.abs(acceleration[2])) / G0
+    elif effect == 'transverse_sensitivity':
+        angle = math.radians(parameters['angle_deg'])
+        drive = drive + parameters['ratio'] * (math.cos(angle) * noise[0] +
+                                               math.sin(angle) * noise[1])
+    out = s * signal.lfilter(*mech, drive)
+    if effect == 'second_resonance':
+        second = _mode(parameters['freq_khz'] * 1e3, parameters['zeta'], 1 / spec.fs)
+        out += parameters['gain'] * s * signal.lfilter(*second, nz)
+    elif effect == 'strain_sensitivity':
+        out += parameters['pa_per_g_per_ms'] * np.gradient(nz) * spec.fs / (G0 * 1e3)
+    elif effect == 'zero_shift':
+        tau = parameters['tau_ms'] * 1e-3
+        shift = _leaky_peak(acceleration[2] + nz, tau, spec.fs) - \
+            _leaky_peak(acceleration[2], tau, spec.fs)
+        out += parameters['pa_per_g'] * signal.lfilter(*mech, shift / G0)
+    return out
 
 
 def _rig_summary(spec: RigSpec) -> dict:

@@ -21,6 +21,31 @@ def _slow_rig(**changes):
     return replace(spec, shots=shots, fn_hz=60e3, **changes)
 
 
+@pytest.mark.parametrize('effect, shape', [
+    ('strain_sensitivity', {'sign': -1.0}),
+    ('second_resonance', {'freq_khz': 20.0, 'zeta': 0.03, 'sign': 1.0})])
+def test_the_ceiling_holds_the_accelerometer_noise_through_the_effect_too(effect, shape):
+    # A perfect model, fed the measured acceleration, computed here from the recording
+    # and the truth: what it leaves beside the pressure noise is its error on the clean
+    # signal (discretisation), far below the accelerometer noise it passes on.
+    spec = replace(_slow_rig(accel_noise=20.0), effect=effect, R=5.0, shape=shape)
+    case = simulate(spec)
+    p, fs, s = case.truth['parameters'], spec.fs, spec.sensitivity
+    m = case.recording.acceleration[2]
+    perfect = s * signal.lfilter(*_mode(spec.fn_hz, spec.zeta, 1 / fs), m)
+    if effect == 'strain_sensitivity':
+        perfect += p['pa_per_g_per_ms'] * np.gradient(m) * fs / (G0 * 1e3)
+    else:
+        second = _mode(1e3 * p['freq_khz'], p['zeta'], 1 / fs)
+        perfect += p['gain'] * s * signal.lfilter(*second, m)
+    noise = case.recording.pressure - case.clean_pressure
+    left = case.recording.pressure - perfect - (noise - case.accel_noise_pressure)
+    effect_only = case.accel_noise_pressure - simulate(replace(spec, effect=CLEAN)) \
+        .accel_noise_pressure
+    assert np.std(effect_only) > 0.2 * np.std(case.accel_noise_pressure)
+    assert np.std(left) < 0.02 * np.std(case.accel_noise_pressure)
+
+
 @pytest.mark.parametrize('effect', ['nonlinear_sensitivity', 'amplifier_highpass',
                                     'channel_delay', 'transverse_sensitivity',
                                     'accel_resonance'])
