@@ -91,10 +91,12 @@ class SecondResonance(Effect):
         Return the second mode's frequency (kHz), damping and relative static gain.
 
         The second mode is the one with the smaller static gain share: when the searched
-        mode carries more than the other (``|gain| > 1``), the fit put the sensor's own
-        mode in the search and the mount mode in the base poles (a base fitted before
-        the effect was known settles on the stronger ringing), so the two swap roles and
-        the base mode is reported, its values and deviations read from the denominator.
+        mode carries more than the other, the fit put the sensor's own mode in the search
+        and the mount mode in the base poles (a base fitted before the effect was known
+        settles on the stronger ringing), so the two swap roles and the base mode is
+        reported, its values and deviations read from the denominator. The gain is per
+        the sensor's static sensitivity: the path's static gain less the second mode's,
+        the path's direct term (what acts within a sample) going to the faster mode.
         """
         row = row_of(model, 'a')
         freq, zeta = modifier_value(model, 'mode')
@@ -102,15 +104,20 @@ class SecondResonance(Effect):
 
         def reading(a, b):
             full = np.convolve(a, pair)
-            found = modes(full, delayed_numerator(b, model.nk)[row] * pair.sum(), model.fs)
+            numerator = delayed_numerator(b, model.nk)[row] * pair.sum()
+            found = modes(full, numerator, model.fs)
             searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
             main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
                        default=None)
             if main is None:
                 raise EffectError('the fitted model has no main mode beside the second one')
-            if abs(searched[2]) > abs(main[2]):
-                return main[0] / 1e3, main[1], main[2] / searched[2], True
-            return searched[0] / 1e3, searched[1], searched[2] / main[2], False
+            swapped = abs(searched[2]) > abs(main[2])
+            second, first = (main, searched) if swapped else (searched, main)
+            total = float(numerator.sum() / full.sum())
+            share = second[2] + (total - sum(m[2] for m in found)
+                                 if second[0] > first[0] else 0.0)
+            sensor = total - share
+            return second[0] / 1e3, second[1], share / sensor if sensor else math.nan, swapped
 
         values = reading(model.a, model.b)
         out = {}

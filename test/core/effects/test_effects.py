@@ -297,6 +297,24 @@ def test_second_mode_is_the_one_with_the_smaller_static_share(searched):
     assert (reading['freq_khz'][1] is None) == (searched == 'mount')
 
 
+@pytest.mark.parametrize('mount_khz', [6.0, 30.0])
+def test_the_second_gain_is_per_the_sensors_static_gain_the_direct_term_to_the_faster_mode(
+        mount_khz):
+    # A fit's numerator one order above its poles adds a term acting within a sample (the
+    # discretised response of the fastest mode), whose static gain no mode's residue holds:
+    # against the main mode's residue alone a 0.5 gain read 0.56 on independent rigs.
+    sensor, mount, direct = (20.0, 0.05, 1.0), (mount_khz, 0.03, -0.4), 0.25
+    a, pair = mode_pair(*sensor[:2], FS), mode_pair(*mount[:2], FS)
+    full = np.convolve(a, pair)
+    numerator = (sensor[2] * a.sum() * pair + mount[2] * pair.sum() * a) / pair.sum()
+    numerator = np.r_[numerator, 0.0, 0.0] + direct * full / pair.sum()
+    model = _model([f'a_z@mode={mount[0]!r},{mount[1]!r}'], numerator, a=a, nk=0)
+    reading = get_effect('second_resonance').physical(model)
+    faster = mount_khz > sensor[0]
+    expected = (mount[2] + direct) / sensor[2] if faster else mount[2] / (sensor[2] + direct)
+    assert reading['gain'][0] == pytest.approx(expected, rel=1e-6)
+
+
 def test_a_second_mode_is_not_read_beside_a_base_of_four_poles():
     # Four base poles held a 12.7 kHz mount mode and shared the sensor's 44 kHz mode with
     # the search, which then read as a plausible 31 kHz second mode (gain 0.5 ± 0.08).
