@@ -85,8 +85,7 @@ def ringing_khz(windows: Sequence[Window], fs: float) -> float | None:
     spectrum = _after_pulses([w.y for w in windows], windows, 0, round(EARLY_S * fs), fs)
     if spectrum is None:
         return None
-    f, rows = spectrum
-    power = np.sum(np.abs(rows) ** 2, axis=0)
+    f, _, power = spectrum
     low = int(np.searchsorted(f, 2 / EARLY_S))
     return float(f[low + int(np.argmax(power[low:]))] / 1e3)
 
@@ -125,8 +124,7 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
     none = Ringing(math.nan, 0.0, math.nan)
     if spectrum is None:
         return none
-    f, rows = spectrum
-    power = np.sum(np.abs(rows) ** 2, axis=0)
+    f, rows, power = spectrum
     peaks = _local_peaks(power, np.abs(f / freq_hz - 1) < 0.15)
     side = power[_beside(f, freq_hz)]
     if not peaks.size or not side.size or not np.median(side) > 0:
@@ -134,7 +132,7 @@ def acceleration_ringing(windows: Sequence[Window], freq_hz: float, *, fs: float
     peak = peaks[int(np.argmin(np.abs(f[peaks] / freq_hz - 1)))]
     # The cross-spectrum over the windows: the pressure noise, incoherent with the
     # acceleration, does not add to it as it adds to the pressure's power.
-    _, pressure = _after_pulses([w.y for w in windows], windows, skip, length, fs)
+    _, pressure, _ = _after_pulses([w.y for w in windows], windows, skip, length, fs)
     cross = np.sum(pressure[:, peak] * np.conj(rows[:, peak]))
     return Ringing(float(f[peak]), float(power[peak] / np.median(side)),
                    float(abs(cross) / power[peak]) if power[peak] > 0 else math.nan)
@@ -152,8 +150,7 @@ def ringings(windows: Sequence[Window], *, fs: float, count: int = 5) -> list[Ri
                              round(EARLY_S * fs), fs)
     if spectrum is None:
         return []
-    f, rows = spectrum
-    power = np.sum(np.abs(rows) ** 2, axis=0)
+    f, _, power = spectrum
     peaks = _local_peaks(power, (f >= 2 / EARLY_S) & (f < 0.45 * fs))
     # Against the spectrum beside each peak (its geometric mean there, from cumulative
     # sums): the pulses' own spectrum falls steeply, so the highest peaks by power are its
@@ -179,13 +176,14 @@ def _local_peaks(power: np.ndarray, where: np.ndarray) -> np.ndarray:
 
 
 def _after_pulses(signals: Sequence[np.ndarray], windows: Sequence[Window], skip: int,
-                  length: int, fs: float) -> tuple[np.ndarray, np.ndarray] | None:
+                  length: int, fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """
-    Return ``(Hz, spectra)``: the spectrum of each of ``signals`` after its window's pulse.
+    Return ``(Hz, spectra, pooled power)`` of each of ``signals`` after its window's pulse.
 
     From ``skip`` to ``skip + length`` samples after the pulse end, quadratic trend removed,
     Hann window, zero-padded to four times the longest part (one row per window with a
-    pulse end and 16 samples there); None without such parts.
+    pulse end and 16 samples there), and their power summed over the rows; None without
+    such parts.
     """
     parts = [x[w.end + skip:w.end + skip + length] for x, w in zip(signals, windows)
              if w.end is not None and x.size - w.end - skip >= 16]
@@ -197,7 +195,8 @@ def _after_pulses(signals: Sequence[np.ndarray], windows: Sequence[Window], skip
         t = np.arange(p.size)
         p = p - np.polyval(np.polyfit(t, p, 2), t)
         rows.append(np.fft.rfft(p * np.hanning(p.size), n))
-    return np.fft.rfftfreq(n, 1 / fs), np.array(rows)
+    rows = np.array(rows)
+    return np.fft.rfftfreq(n, 1 / fs), rows, np.sum(np.abs(rows) ** 2, axis=0)
 
 
 def window_channels(windows: Sequence[Window], names: Sequence[str], *, fs: float,
