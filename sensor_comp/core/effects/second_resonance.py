@@ -113,10 +113,9 @@ class SecondResonance(Effect):
                 raise EffectError('the fitted model has no main mode beside the second one')
             swapped = abs(searched[2]) > abs(main[2])
             second, first = (main, searched) if swapped else (searched, main)
-            total = float(numerator.sum() / full.sum())
-            share = second[2] + (total - sum(m[2] for m in found)
-                                 if second[0] > first[0] else 0.0)
-            sensor = total - share
+            direct = float(np.sum(signal.residuez(numerator, full)[2]))
+            share = second[2] + (direct if second[0] > first[0] else 0.0)
+            sensor = float(numerator.sum() / full.sum()) - share
             return second[0] / 1e3, second[1], share / sensor if sensor else math.nan, swapped
 
         values = reading(model.a, model.b)
