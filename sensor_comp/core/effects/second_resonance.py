@@ -45,7 +45,13 @@ RING_MATCH = 0.01
 
 def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
     """Return the complex modes of ``num/a`` as ``(fn_hz, zeta, DC gain share)``, largest first."""
-    r, p, _ = signal.residuez(num, a)
+    return _partial_fractions(a, num, fs)[0]
+
+
+def _partial_fractions(a: np.ndarray, num: np.ndarray, fs: float
+                       ) -> tuple[list[tuple[float, float, float]], float]:
+    """Return :func:`modes` and the DC gain of the direct term (what acts within a sample)."""
+    r, p, k = signal.residuez(num, a)
     out = []
     for residue, pole in zip(r, p):
         if pole.imag <= 1e-12:
@@ -53,7 +59,7 @@ def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float,
         s = complex(np.log(pole)) * fs
         out.append((abs(s) / (2 * math.pi), -s.real / abs(s),
                     float(2 * (residue / (1 - pole)).real)))
-    return sorted(out, key=lambda m: -abs(m[2]))
+    return sorted(out, key=lambda m: -abs(m[2])), float(np.sum(k))
 
 
 class SecondResonance(Effect):
@@ -105,7 +111,7 @@ class SecondResonance(Effect):
         def reading(a, b):
             full = np.convolve(a, pair)
             numerator = delayed_numerator(b, model.nk)[row] * pair.sum()
-            found = modes(full, numerator, model.fs)
+            found, direct = _partial_fractions(full, numerator, model.fs)
             searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
             main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
                        default=None)
@@ -113,7 +119,6 @@ class SecondResonance(Effect):
                 raise EffectError('the fitted model has no main mode beside the second one')
             swapped = abs(searched[2]) > abs(main[2])
             second, first = (main, searched) if swapped else (searched, main)
-            direct = float(np.sum(signal.residuez(numerator, full)[2]))
             share = second[2] + (direct if second[0] > first[0] else 0.0)
             sensor = float(numerator.sum() / full.sum()) - share
             return second[0] / 1e3, second[1], share / sensor if sensor else math.nan, swapped
