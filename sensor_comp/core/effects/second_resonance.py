@@ -23,7 +23,7 @@ from ..estimators.polynomials import resonances
 from ..shots.inputs import mode_pair
 from ..shots.windows import acceleration_ringing, Window
 
-__all__ = ['SecondResonance', 'modes']
+__all__ = ['partial_fractions', 'SecondResonance']
 
 FREQ, ZETA = 'second_resonance.freq_khz', 'second_resonance.zeta'
 #: Lowest mode frequency searched, kHz: below, a "mode" would imitate slow tails.
@@ -43,14 +43,14 @@ GAIN_Z = 2.0
 RING_MATCH = 0.01
 
 
-def modes(a: np.ndarray, num: np.ndarray, fs: float) -> list[tuple[float, float, float]]:
-    """Return the complex modes of ``num/a`` as ``(fn_hz, zeta, DC gain share)``, largest first."""
-    return _partial_fractions(a, num, fs)[0]
+def partial_fractions(a: np.ndarray, num: np.ndarray, fs: float
+                      ) -> tuple[list[tuple[float, float, float]], float]:
+    """
+    Return the complex modes of ``num/a`` and the static gain of its direct term.
 
-
-def _partial_fractions(a: np.ndarray, num: np.ndarray, fs: float
-                       ) -> tuple[list[tuple[float, float, float]], float]:
-    """Return :func:`modes` and the DC gain of the direct term (what acts within a sample)."""
+    The modes as ``(fn_hz, zeta, DC gain share)``, largest first; the direct term is what
+    acts within a sample (a numerator of the denominator's order or more).
+    """
     r, p, k = signal.residuez(num, a)
     out = []
     for residue, pole in zip(r, p):
@@ -111,7 +111,7 @@ class SecondResonance(Effect):
         def reading(a, b):
             full = np.convolve(a, pair)
             numerator = delayed_numerator(b, model.nk)[row] * pair.sum()
-            found, direct = _partial_fractions(full, numerator, model.fs)
+            found, direct = partial_fractions(full, numerator, model.fs)
             searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
             main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
                        default=None)
