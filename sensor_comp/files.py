@@ -12,6 +12,7 @@ import errno
 import json
 import os
 from pathlib import Path
+import signal
 import tempfile
 from typing import IO, Iterable, Iterator
 
@@ -223,14 +224,38 @@ def open_temporary(path: str | os.PathLike, *, text: bool = False) -> tuple[IO, 
     :func:`publish`. OSError if the folder does not take the file.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial',
-                               dir=path.parent or '.')
+    # An interrupt arriving while mkstemp returns would leave the file with no name to
+    # remove it by: SIGINT/SIGTERM wait until the file is ours (the unblock runs the handler).
+    held = _hold_signals()
     try:
+        fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial',
+                                   dir=path.parent or '.')
+    except BaseException:
+        _release_signals(held)
+        raise
+    try:
+        _release_signals(held)
         return (os.fdopen(fd, 'w', encoding='utf-8') if text else os.fdopen(fd, 'wb')), Path(tmp)
     except BaseException:
         os.close(fd)
         os.unlink(tmp)
         raise
+
+
+_INTERRUPTS = {signal.SIGINT, signal.SIGTERM}
+
+
+def _hold_signals() -> set | None:
+    """Block SIGINT and SIGTERM in this thread; return the mask to restore (None: no mask)."""
+    if not hasattr(signal, 'pthread_sigmask'):
+        return None
+    return signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+
+
+def _release_signals(held: set | None) -> None:
+    """Restore the mask; a signal that came meanwhile is handled (raises) here."""
+    if held is not None:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:

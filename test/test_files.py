@@ -2,6 +2,8 @@
 
 import os
 from pathlib import Path
+import signal
+import tempfile
 
 import pytest
 
@@ -146,6 +148,21 @@ def test_temporary_files_are_unique_and_removed_on_interruption(tmp_path):
             f.write('new')
             raise KeyboardInterrupt
     assert path.read_text() == 'old' and [p.name for p in tmp_path.iterdir()] == ['out.json']
+
+
+def test_an_interrupt_as_the_temporary_file_is_created_removes_it(tmp_path, monkeypatch):
+    # The CLI's interruption test signalled as soon as the file appeared and, on a loaded
+    # machine, found it left: the signal came while mkstemp was returning its name.
+    made = tempfile.mkstemp
+
+    def interrupted(*args, **kwargs):
+        out = made(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGINT)
+        return out
+    monkeypatch.setattr(tempfile, 'mkstemp', interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        open_temporary(tmp_path / 'out.mcap')
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_figure_is_saved_atomically_in_the_format_of_its_suffix(tmp_path):
