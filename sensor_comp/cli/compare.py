@@ -8,7 +8,7 @@ import os
 
 from .options import add_threshold
 from .sources import add_force, check_plots, load_model, usable_source
-from ..core.compensation.compare import compare, format_table
+from ..core.compensation.compare import compare, format_table, INITIAL
 from ..errors import SensorCompError
 from ..files import save_figure
 
@@ -34,6 +34,11 @@ def register(subparsers) -> None:
                         help='write the residual (measured − model) per shot')
     parser.add_argument('--window', nargs=2, type=float, action='append',
                         metavar=('START', 'STOP'), help='manual shot window in seconds')
+    parser.add_argument('--initial', choices=INITIAL, default='estimate',
+                        help='the slow state (zero shift, high-pass charge) the first shot '
+                             'starts from: estimate it from that shot where it lowers the '
+                             'error beyond chance, as MATLAB compare does (default), or '
+                             'rest, as compensate starts a recording')
     add_threshold(parser)
     add_force(parser)
     parser.set_defaults(func=run)
@@ -54,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     labels = _labels(model_paths)
     source, warnings = usable_source(recording_path, dict(zip(model_paths, models)),
                                      windows=args.window, threshold_g=args.threshold)
-    comparisons = compare(models, source.recording, list(source.shots), labels=labels)
+    comparisons = compare(models, source.recording, list(source.shots), labels=labels,
+                          initial=args.initial)
     if plots:
         from ..core.report.plots import comparison_figure, comparison_residual_figure
         figures = {'plot': comparison_figure, 'residual_plot': comparison_residual_figure}

@@ -126,5 +126,9 @@ def run(args: argparse.Namespace) -> int:
     print(f'validation: fit {result.validation_fit_percent:.2f} % over {shots} held-out '
           f'shots, worst peak residual '
           f'{result.model.fit["validation_peak_residual_percent"]:.1f} %')
+    rest = result.model.fit.get('validation_peak_residual_percent_from_rest')
+    if rest is not None:
+        print(f'validation: a slow state carried into a recording\'s first shot was fitted; '
+              f'from rest (as compensate starts a recording) the worst is {rest:.1f} %')
     print(f'wrote {args.output}')
     return 0

@@ -68,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
             print(f'  WARNING: unstable: a pole lies at |z| = {radius:.6f}; compare and '
                   f'compensation refuse this model (identify never writes one)')
         for key in ('validation_fit_percent', 'validation_peak_residual_percent',
-                    'calibration_fit_percent', 'selection'):
+                    'validation_peak_residual_percent_from_rest', 'calibration_fit_percent',
+                    'selection'):
             if key in model.fit:
                 value = model.fit[key]
                 print(f'  {key}: {value:.3f}' if isinstance(value, float)

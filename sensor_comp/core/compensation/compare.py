@@ -1,9 +1,11 @@
 """
 Measured against simulated induced pressure per shot, as MATLAB's ``compare`` reports it.
 
-Models are simulated from rest over each baseline-removed shot window (a zero shift's
-leaky peak carried from window to window of the recording, as the compensation filter
-carries it on the stream); fit %, peak error and peak residual per shot. Definitions:
+Models are simulated over each baseline-removed shot window from rest, but for a zero
+shift's leaky peak and a high-pass's charge, carried from window to window of the recording
+as the compensation filter carries them on the stream; the state the first window starts
+from is estimated (:mod:`.initial_state`, as MATLAB's ``compare`` estimates initial
+conditions) or taken as rest. Fit %, peak error and peak residual per shot. Definitions:
 ``doc/compare.md``.
 """
 
@@ -17,18 +19,24 @@ import numpy as np
 
 from .filter import (CompensationError, LinearModel, peak_residual_percent, UnstableModelError,
                      window_disturbances)
+from .initial_state import simulate_from_state
 from ..estimators.metrics import fit_percent
 from ..estimators.polynomials import max_root_radius
 from ..estimators.simulate import simulate_output
 from ..shots.detection import segments, Shot, ShotError
-from ..shots.windows import shot_channels
+from ..shots.inputs import parse_channel
+from ..shots.windows import recording_windows, shot_channels, window_channels
 from ...streams import Recording
 
-__all__ = ['Comparison', 'ShotComparison', 'compare', 'format_table']
+__all__ = ['INITIAL', 'Comparison', 'ShotComparison', 'compare', 'format_table']
+
+#: How the first window of a recording starts: its slow state estimated, or from rest.
+INITIAL = ('estimate', 'rest')
 
 _WINDOWS = ('shot windows from the pre-trigger to the post-trigger, baselines removed, each '
-            'simulated from rest (a zero shift\'s leaky peak carried over from the window '
-            'before, as on the stream); overall fit over all windows together')
+            'simulated from rest but for a zero shift\'s leaky peak and a high-pass\'s '
+            'charge, carried over from the window before as on the stream (the first '
+            'window\'s: see initial_state); overall fit over all windows together')
 
 
 def _signed_peak(x: np.ndarray) -> float:
@@ -89,6 +97,11 @@ class Comparison:
         peak_residual_percent: Worst peak residual of the shots.
         shots: Per-shot numbers and traces.
         denoised: Whether the measured pressure was denoised first.
+        initial_state: The slow state the first window starts from where one was estimated:
+            ``zero_shift_level_m_s2`` (a leaky peak's level) and/or ``highpass_charge_pa``.
+        rest_peak_residual_percent: With an estimated state, the worst peak residual with
+            the first window from rest instead (what compensating the recording from its
+            start leaves); None otherwise.
 
     """
 
@@ -97,11 +110,15 @@ class Comparison:
     peak_residual_percent: float
     shots: tuple[ShotComparison, ...]
     denoised: bool = False
+    initial_state: dict = field(default_factory=dict)
+    rest_peak_residual_percent: float | None = None
 
     def to_dict(self) -> dict:
         """Return the numbers as JSON-ready values (for ``--json``)."""
         return {'label': self.label, 'fit_percent': self.fit_percent,
                 'peak_residual_percent': self.peak_residual_percent,
+                'initial_state': dict(self.initial_state),
+                'rest_peak_residual_percent': self.rest_peak_residual_percent,
                 'denoised': self.denoised, 'windows': _WINDOWS,
                 'n_samples': int(sum(s.t.size for s in self.shots)),
                 'shots': [s.to_dict() for s in self.shots]}
@@ -117,17 +134,29 @@ def _label(model: LinearModel, position: int) -> str:
 
 def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence[Shot], *,
             labels: Sequence[str] | None = None,
-            denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Comparison]:
+            denoise: Callable[[np.ndarray], np.ndarray] | None = None,
+            initial: str = 'estimate') -> list[Comparison]:
     """
     Compare several models (or one) with the measured pressure of the same shots.
 
-    ``models`` have ``b``, ``a``, ``nk``, ``inputs`` and ``fs``; ``labels`` default to each
-    model's ``label``/``name``/``structure``; ``denoise`` (e.g. an ``EmdDenoiser``) is applied
-    once to each measured window first.
+    Args:
+        models: Each with ``b``, ``a``, ``nk``, ``inputs`` and ``fs``.
+        recording: The recording the shots are in.
+        shots: The shots compared on.
+        labels: Names in tables; default each model's ``label``/``name``/``structure``.
+        denoise: Applied once to each measured window first (e.g. an ``EmdDenoiser``).
+        initial: ``'estimate'``: a slow state (zero shift, high-pass charge) the first
+            window starts from is fitted on it where it lowers the error beyond chance
+            (:mod:`.initial_state`); ``'rest'``: the first window starts from rest, as
+            compensating the recording from its start does.
+
+    Returns:
+        One :class:`Comparison` per model.
 
     Raises:
         ShotError: With no shot, a window with missing samples, or mismatched labels.
-        CompensationError: When a model's sample rate differs from the recording's.
+        CompensationError: When a model's sample rate differs from the recording's, or on
+            an unknown ``initial``.
         UnstableModelError: When a model is unstable.
 
     """
@@ -136,21 +165,18 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     models = list(models)
     if not shots:
         raise ShotError('no shots to compare on')
+    if initial not in INITIAL:
+        raise CompensationError(f'initial {initial!r}: use one of {", ".join(INITIAL)}')
     if labels is not None and len(labels) != len(models):
         raise ShotError(f'{len(labels)} labels given for {len(models)} models')
     labels = list(labels) if labels is not None else [_label(m, i)
                                                       for i, m in enumerate(models)]
     for model, label in zip(models, labels):
-        if not math.isclose(model.fs, recording.fs, rel_tol=1e-9):
-            raise CompensationError(f'{label}: identified at {model.fs:g} Hz, recording '
-                                    f'sampled at {recording.fs:g} Hz; a model belongs to one '
-                                    f'rate: compare it with recordings at {model.fs:g} Hz')
-        radius = max_root_radius(np.asarray(model.a, dtype=np.float64))
-        if not radius < 1.0:
-            raise UnstableModelError(f'{label}: the model is unstable (a pole at |z| = '
-                                     f'{radius:.6f}): its simulation diverges; identify it '
-                                     f'again (identify never writes an unstable model)')
-    measured = [y for _, y in segments(recording, shots, inputs=(), denoise=denoise)]
+        _check(model, label, recording.fs)
+    states = [initial == 'estimate' and _carries(m) for m in models]
+    windows = recording_windows(recording, shots, denoise=denoise) if any(states) else None
+    measured = ([w.y for w in windows] if windows is not None else
+                [y for _, y in segments(recording, shots, inputs=(), denoise=denoise)])
     # Windows as long as the validation data, made as late and freed as early as they can be:
     # the inputs after the last model that reads them, the residuals once the disturbances
     # are fitted, the times per row.
@@ -158,38 +184,92 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     inputs_cache: dict[tuple[str, ...], list[np.ndarray]] = {}
     out = []
     for position, (model, label) in enumerate(zip(models, labels)):
-        inputs = uses[position]
-        if inputs not in inputs_cache:
-            inputs_cache[inputs] = shot_channels(recording, shots, inputs)
-        simulated = simulate_output(model, inputs_cache[inputs])
-        if inputs not in uses[position + 1:]:
-            del inputs_cache[inputs]
+        inputs, state, rest = uses[position], {}, None
+        if states[position]:
+            simulated, fitted = simulate_from_state(model, windows, names=inputs,
+                                                    fs=recording.fs,
+                                                    noise_variance=_pretrigger(windows))
+            state = _state(fitted)
+            if state:
+                rest = simulate_output(model, window_channels(windows, inputs,
+                                                              fs=recording.fs))
+        else:
+            if inputs not in inputs_cache:
+                inputs_cache[inputs] = shot_channels(recording, shots, inputs)
+            simulated = simulate_output(model, inputs_cache[inputs])
+            if inputs not in uses[position + 1:]:
+                del inputs_cache[inputs]
         disturbances = window_disturbances(
             model, [s.start for s in shots], [s.baseline_stop - s.start for s in shots],
             [y - yhat for y, yhat in zip(measured, simulated)])
         for yhat, d in zip(simulated, disturbances):
             yhat += d
+        rows = _rows(shots, measured, simulated, recording.fs)
+        from_rest = None if rest is None else max(
+            peak_residual_percent(y, y - r - d)
+            for y, r, d in zip(measured, rest, disturbances))
         del disturbances
-        rows = []
-        for shot, y, yhat in zip(shots, measured, simulated):
-            peak, model_peak = _signed_peak(y) / 1e6, _signed_peak(yhat) / 1e6
-            try:
-                residual = peak_residual_percent(y, y - yhat)
-            except CompensationError as err:
-                raise ShotError(f'shot {shot.index}: {err}') from None
-            rows.append(ShotComparison(
-                index=shot.index, start_s=shot.start_s, stop_s=shot.stop_s,
-                fit_percent=float(fit_percent(y, yhat)), peak_mpa=peak,
-                model_peak_mpa=model_peak,
-                peak_error_mpa=model_peak - peak,
-                peak_error_percent=100.0 * (model_peak - peak) / abs(peak),
-                peak_residual_percent=residual, t=np.arange(shot.start, shot.stop) / recording.fs,
-                measured=y, simulated=yhat))
         out.append(Comparison(label=label,
                               fit_percent=float(fit_percent(measured, simulated)),
                               peak_residual_percent=max(r.peak_residual_percent for r in rows),
-                              shots=tuple(rows), denoised=denoise is not None))
+                              shots=tuple(rows), denoised=denoise is not None,
+                              initial_state=state, rest_peak_residual_percent=from_rest))
     return out
+
+
+def _check(model: LinearModel, label: str, fs: float) -> None:
+    """Raise unless ``model`` is stable and of the recording's rate ``fs``."""
+    if not math.isclose(model.fs, fs, rel_tol=1e-9):
+        raise CompensationError(f'{label}: identified at {model.fs:g} Hz, recording '
+                                f'sampled at {fs:g} Hz; a model belongs to one '
+                                f'rate: compare it with recordings at {model.fs:g} Hz')
+    radius = max_root_radius(np.asarray(model.a, dtype=np.float64))
+    if not radius < 1.0:
+        raise UnstableModelError(f'{label}: the model is unstable (a pole at |z| = '
+                                 f'{radius:.6f}): its simulation diverges; identify it '
+                                 f'again (identify never writes an unstable model)')
+
+
+def _carries(model: LinearModel) -> bool:
+    """Return whether a model's inputs hold a slow state from shot to shot."""
+    return any(parse_channel(name).carries_over for name in model.inputs)
+
+
+def _pretrigger(windows) -> float:
+    """Return the measured pressure's variance over the pre-triggers (baselines removed)."""
+    quiet = [w.y[:w.baseline] for w in windows if w.baseline > 1]
+    count = sum(q.size for q in quiet)
+    return float(sum(q @ q for q in quiet) / count) if count else 0.0
+
+
+def _state(fitted) -> dict:
+    """Return a recording's fitted initial state by name (there is one recording here)."""
+    out = {}
+    for name, values in (('zero_shift_level_m_s2', fitted.carried_in),
+                         ('highpass_charge_pa', fitted.charge_pa)):
+        out.update({name: float(v) for v in values.values()})
+    return out
+
+
+def _rows(shots: Sequence[Shot], measured: Sequence[np.ndarray],
+          simulated: Sequence[np.ndarray], fs: float) -> list[ShotComparison]:
+    """Return the per-shot numbers of one model."""
+    rows = []
+    for shot, y, yhat in zip(shots, measured, simulated):
+        peak, model_peak = _signed_peak(y) / 1e6, _signed_peak(yhat) / 1e6
+        try:
+            residual = peak_residual_percent(y, y - yhat)
+        except CompensationError as err:
+            raise ShotError(f'shot {shot.index}: {err}') from None
+        rows.append(ShotComparison(
+            index=shot.index, start_s=shot.start_s, stop_s=shot.stop_s,
+            fit_percent=float(fit_percent(y, yhat)), peak_mpa=peak,
+            model_peak_mpa=model_peak,
+            peak_error_mpa=model_peak - peak,
+            peak_error_percent=100.0 * (model_peak - peak) / abs(peak),
+            peak_residual_percent=residual, t=np.arange(shot.start, shot.stop) / fs,
+            measured=y, simulated=yhat))
+    return rows
 
 
 def format_table(comparisons: Sequence[Comparison]) -> str:
@@ -212,6 +292,12 @@ def format_table(comparisons: Sequence[Comparison]) -> str:
     lines.append(f'{"all":>4} {"(worst resid.)":>17}' +
                  ''.join(f' | {c.fit_percent:>7.2f} {"":>10} {c.peak_residual_percent:>8.2f}'
                          for c in comparisons))
+    for c in comparisons:
+        if c.initial_state:
+            state = ', '.join(f'{k} = {v:.4g}' for k, v in c.initial_state.items())
+            lines.append(f'{c.label}: the first window starts from a fitted slow state '
+                         f'({state}); from rest, as compensate starts the recording, the '
+                         f'worst residual is {c.rest_peak_residual_percent:.2f} %')
     if any(c.denoised for c in comparisons):
         lines.append('measured pressure denoised (EMD) before comparing')
     return '\n'.join(lines) + '\n'

@@ -47,14 +47,15 @@ import re
 import numpy as np
 from scipy import optimize
 
+from ..compensation.initial_state import simulate_from_state
 from ..effects import EffectError, get_effect, ordered
 from ..effects.base import effect_entry, Effect, mechanics_delay_s, ModelSpec, Physical, Search
-from ..estimators import Estimate, fit_oe, IdentError, simulate_output
+from ..estimators import Estimate, fit_oe, IdentError
 from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
-from ..shots.inputs import mode_pair, parse_channel
+from ..shots.inputs import mode_pair
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
@@ -106,11 +107,6 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
-#: Highest zero-shift level a recording's first window is searched to start from, times
-#: that window's peak acceleration (an earlier, harder shot).
-CARRY_IN_LIMIT = 4.0
-#: Least drop of a first window's squared error, in noise variances, for a carried-in level.
-CARRY_IN_GAIN = 9.0
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -239,15 +235,17 @@ class ExtendedFit:
         shift's leaky peak and a high-pass's charge, which carry over between the windows
         of a recording (:func:`~sensor_comp.core.shots.windows.window_channels`): the
         slow state a recording's first window starts from (left by shots before it: that
-        leaky peak's level, or a high-pass's charge) is fitted. A disturbance's
+        leaky peak's level, or a high-pass's charge) is fitted
+        (:func:`~sensor_comp.core.compensation.initial_state.simulate_from_state`). A
+        disturbance's
         phase belongs to its recording, so its coefficients are estimated again by least
         squares on these windows' residual (per recording, the frequency kept from the
         fit); :attr:`Prediction.disturbance_parameters` counts them.
         """
-        carry = _carried_in(self.estimate, windows, self.inputs, self.fs)
-        channels = window_channels(windows, self.inputs, fs=self.fs, carry_in=carry)
-        induced = simulate_output(self.estimate, channels)
-        charge = _highpass_charge(self.estimate, windows, self.inputs, self.fs, induced)
+        induced, state = simulate_from_state(self.estimate, windows, names=self.inputs,
+                                             fs=self.fs,
+                                             noise_variance=self.estimate.noise_variance)
+        carry, charge = state.carried_in, state.charge_pa
         if self.disturbance is None:
             return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry,
                               charge)
@@ -259,76 +257,6 @@ class ExtendedFit:
         coef = np.zeros(phi.shape[1])
         coef[used] = _lstsq(phi[:, used], target)[0]
         return Prediction(induced, [c.T @ coef for c in cols], int(used.size), carry, charge)
-
-
-def _first_windows(windows: Sequence[Window]) -> dict[int, int]:
-    """Return the index of each recording's earliest window."""
-    first: dict[int, int] = {}
-    for index, w in enumerate(windows):
-        if w.source not in first or w.start < windows[first[w.source]].start:
-            first[w.source] = index
-    return first
-
-
-def _carried_in(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
-                fs: float) -> dict[int, float]:
-    """
-    Return per recording the leaky-peak level (m/s²) its first window starts from.
-
-    Shots before a recording's first window leave a zero shift that is not in it; the level
-    minimising that window's output error is taken where it lowers the error by more than
-    :data:`CARRY_IN_GAIN` times the estimate's noise variance (a chance improvement of one
-    parameter stays far below).
-    """
-    if not any(parse_channel(name).kind == 'peak' for name in names):
-        return {}
-    out = {}
-    for source, index in _first_windows(windows).items():
-        w = windows[index]
-        top = float(np.max(np.abs(w.acceleration[2]))) if w.y.size else 0.0
-        if not top > 0:
-            continue
-
-        def sse(level, w=w):
-            u = window_channels([w], names, fs=fs, carry_in={w.source: level})[0]
-            r = w.y - simulate_output(estimate, [u])[0]
-            return float(r @ r)
-        found = optimize.minimize_scalar(sse, bounds=(0.0, CARRY_IN_LIMIT * top),
-                                         method='bounded', options={'xatol': 1e-3 * top})
-        if found.success and sse(0.0) - found.fun > CARRY_IN_GAIN * estimate.noise_variance:
-            out[source] = float(found.x)
-    return out
-
-
-def _highpass_charge(estimate: Estimate, windows: Sequence[Window], names: Sequence[str],
-                     fs: float, induced: list[np.ndarray]) -> dict[int, float]:
-    """
-    Add to ``induced`` the decay of each recording's high-pass charge; return its size, Pa.
-
-    The ``a_z`` path's high-pass state at a recording's first window is unknown; its decay
-    through the model is one regressor, fitted by least squares where it lowers that
-    window's error by more than :data:`CARRY_IN_GAIN` noise variances (as a zero shift's
-    carried level, :func:`_carried_in`).
-    """
-    channel = parse_channel(names[0])
-    tau_ms = dict(channel.modifiers).get('highpass_ms')
-    if tau_ms is None:
-        return {}
-    out = {}
-    for source, index in _first_windows(windows).items():
-        w = windows[index]
-        u = np.zeros((len(names), w.y.size))
-        u[0] = math.exp(-1e3 / (tau_ms * fs)) ** np.arange(w.y.size)
-        r = simulate_output(estimate, [u])[0]
-        if w.baseline > 0:
-            r -= r[:w.baseline].mean()
-        e = w.y - induced[index]
-        energy = float(r @ r)
-        if energy > 0 and float(r @ e) ** 2 / energy > CARRY_IN_GAIN * estimate.noise_variance:
-            size = float(r @ e) / energy
-            induced[index] = induced[index] + size * r
-            out[source] = size
-    return out
 
 
 def _columns(window: Window, effects: Sequence[Effect], choices: Sequence[Mapping],

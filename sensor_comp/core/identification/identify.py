@@ -648,6 +648,11 @@ def _finish(sources: Sources, data: _Data, base: _Base, extension, explanation: 
     valid_fit = float(fit_percent([shot.measured for c in comparisons for shot in c.shots],
                                   [shot.simulated for c in comparisons for shot in c.shots]))
     worst = max(c.peak_residual_percent for c in comparisons)
+    rest = [c.rest_peak_residual_percent for c in comparisons
+            if c.rest_peak_residual_percent is not None]
+    if rest:  # a slow state carried into a validation recording's first shot was fitted
+        fit['validation_peak_residual_percent_from_rest'] = max(
+            rest + [c.peak_residual_percent for c in comparisons])
     if extension is not None and extension.disturbance is not None:
         # The comparisons simulate the acceleration-driven part only; with the disturbance
         # re-estimated on the validation windows (its phase belongs to each recording):

@@ -17,7 +17,8 @@ from .detection import segments
 from .inputs import carried_state, input_channels, parse_channel
 
 __all__ = ['BESIDE', 'EARLY_S', 'RING_CYCLES', 'Ringing', 'Window', 'acceleration_ringing',
-           'ringing_khz', 'ringings', 'shot_channels', 'shot_windows', 'window_channels']
+           'recording_windows', 'ringing_khz', 'ringings', 'shot_channels', 'shot_windows',
+           'window_channels']
 
 #: Part of a window after the pulse that the grid start sees, s.
 EARLY_S = 3e-3
@@ -243,5 +244,11 @@ def shot_channels(recording, shots: Sequence, names: Sequence[str]) -> list[np.n
     """
     if not any(parse_channel(name).carries_over for name in names):
         return [u for u, _ in segments(recording, shots, inputs=names)]
-    return window_channels(shot_windows([_Source(recording, tuple(shots))]), names,
-                           fs=recording.fs)
+    return window_channels(recording_windows(recording, shots), names, fs=recording.fs)
+
+
+def recording_windows(recording, shots: Sequence, *,
+                      denoise: Callable[[np.ndarray], np.ndarray] | None = None
+                      ) -> list[Window]:
+    """Return the windows of ``shots`` of one recording (:func:`shot_windows`)."""
+    return shot_windows([_Source(recording, tuple(shots))], denoise=denoise)

@@ -17,7 +17,7 @@ import pytest
 from sensor_comp.bundled import bundled_bag
 from sensor_comp.core.compensation.filter import CompensationFilter, compensate_recording
 from sensor_comp.core.effects import EffectError
-from sensor_comp.core.identification import extended
+from sensor_comp.core.compensation import initial_state
 from sensor_comp.core.identification.extended import fit_extended, shot_windows
 from sensor_comp.core.estimators import fit_percent, simulate_output
 from sensor_comp.core.identification.identify import identify, ShotSource
@@ -299,7 +299,7 @@ def test_a_zero_shift_outlasting_the_gap_between_shots_is_carried_as_on_the_stre
                             for w, p in zip(windows[:2], prediction.total[:2])]
     prediction, ratios = first_two()
     assert set(prediction.carried_in) == {0} and max(ratios) < 1.25, ratios
-    monkeypatch.setattr(extended, 'CARRY_IN_GAIN', math.inf)
+    monkeypatch.setattr(initial_state, 'CARRY_IN_GAIN', math.inf)
     prediction, ratios = first_two()
     assert not prediction.carried_in and min(ratios) > 1.5, ratios
 
