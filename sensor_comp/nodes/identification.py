@@ -620,7 +620,8 @@ def _statistics(model: Model) -> dict:
               'damping_ratio': view.damping_ratio,
               'sensitivity_MPa_per_g': view.sensitivity_MPa_per_g}
     for key in ('validation_fit_percent', 'calibration_fit_percent',
-                'validation_peak_residual_percent', 'calibration_shots', 'validation_shots'):
+                'validation_peak_residual_percent', 'validation_peak_residual_percent_from_rest',
+                'calibration_shots', 'validation_shots'):
         if key in fit:
             values[key] = fit[key]
     return {k: ('' if v is None else v) for k, v in values.items()}

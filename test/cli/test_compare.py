@@ -58,6 +58,10 @@ def test_json_has_the_fit_residual_and_one_entry_per_shot(validation, model_file
     first = report['shots'][0]
     assert first['peak_mpa'] == pytest.approx(sensor.sensitivity_mpa_per_g * 2185.0, rel=0.1)
     assert len(report['models']) == 1
+    # A base model holds no slow state: nothing to estimate, and --initial rest is the same.
+    assert report['initial_state'] == {} and report['rest_peak_residual_percent'] is None
+    rest = compare_json(capsys, model_files['oe'], validation.path, '--initial', 'rest')
+    assert rest['fit_percent'] == report['fit_percent']
     assert report['models'][0]['path'] == model_files['oe']
     assert report['models'][0]['fit_percent'] == report['fit_percent']
     assert report['recording'] == validation.path
