@@ -13,6 +13,7 @@ import numpy as np
 
 from .blocks import BlockSequence
 from .core.compensation.filter import CompensationFilter
+from .core.compensation.initial_state import rest_start_note
 from .core.compensation.streaming import BlockCompensator, fit_recording_disturbances
 from .errors import SensorCompError
 from .files import check_output
@@ -35,8 +36,8 @@ def compensate_bag(model, input_path: str, output_path: str, *,
     Two passes (disturbances fitted on the whole bag, then compensation in time order); the
     output is checked first (``force`` replaces a file of another kind, never the input) and
     written atomically. ``namespace`` is found from ``stream_info`` when None. Returns the
-    sample accounting plus ``copied_messages``, ``first_unpaired`` and
-    ``disturbance_warnings``.
+    sample accounting plus ``copied_messages``, ``first_unpaired``,
+    ``disturbance_warnings`` and ``notes`` (what starting from rest leaves).
 
     Raises:
         SensorCompError: On a bag cut short or without both described raw streams of one
@@ -99,9 +100,11 @@ def compensate_bag(model, input_path: str, output_path: str, *,
             pairing.finish()
             if not compensator.counters.output_samples:
                 raise SensorCompError(pairing.describe_failure(input_path, raw.fs))
+    note = rest_start_note(model.inputs)
     return {**compensator.counters.to_dict(), 'copied_messages': copied,
             'first_unpaired': pairing.first_unpaired(),
-            'disturbance_warnings': disturbances.warnings if disturbances else []}
+            'disturbance_warnings': disturbances.warnings if disturbances else [],
+            'notes': [note] if note else []}
 
 
 def _raw_blocks(bag: BagReader, topics: dict):

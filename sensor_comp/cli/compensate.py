@@ -63,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
                   f'each run of them')
         for text in counts['disturbance_warnings']:
             print(f'warning: {text}')
+        for text in counts['notes']:
+            print(f'note: {text}')
         if counts['gaps']:
             print(f'warning: {len(counts["gaps"])} stamp gaps; the filter restarted from rest '
                   f'after each')

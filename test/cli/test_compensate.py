@@ -150,6 +150,7 @@ def test_json_accounts_for_every_sample(result):
     assert counts['unpaired_acceleration_samples'] == counts['mismatched_blocks'] == 0
     assert counts['gaps'] == [] and counts['model_changes'] == 0
     assert counts['copied_messages'] == len(messages(result['input']))
+    assert counts['notes'] == []  # a base model holds no slow state to start from rest
 
 
 def test_a_stamp_gap_is_reported_and_kept(tmp_path, validation, model_files):

@@ -24,7 +24,7 @@ from ..shots.inputs import parse_channel
 from ..shots.windows import Window, window_channels
 
 __all__ = ['CARRY_IN_GAIN', 'CARRY_IN_LIMIT', 'InitialState', 'first_windows',
-           'simulate_from_state']
+           'rest_start_note', 'simulate_from_state']
 
 #: Highest zero-shift level a recording's first window is searched to start from, times
 #: that window's peak acceleration (an earlier, harder shot).
@@ -51,6 +51,27 @@ class InitialState:
     def recordings(self) -> set[int]:
         """Return the recordings whose first window starts from a fitted state."""
         return set(self.carried_in) | set(self.charge_pa)
+
+
+def rest_start_note(names: Sequence[str]) -> str | None:
+    """
+    Return what compensating a recording from rest leaves, for a model over ``names``.
+
+    None when no input channel holds a slow state (a zero shift's leaky peak, a
+    high-pass's charge) from shot to shot.
+    """
+    kinds = []
+    for name in names:
+        channel = parse_channel(name)
+        if channel.kind == 'peak':
+            kinds.append('zero shift (leaky peak)')
+        if any(key == 'highpass_ms' for key, _ in channel.modifiers):
+            kinds.append('high-pass charge')
+    if not kinds:
+        return None
+    return (f'the model\'s {" and ".join(sorted(set(kinds)))} starts from rest at the '
+            f'recording\'s start: what shots fired before it left stays in its first shot '
+            f'(compare estimates it and reports it as initial_state)')
 
 
 def first_windows(windows: Sequence[Window]) -> dict[int, int]:
