@@ -177,6 +177,7 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
     windows = recording_windows(recording, shots, denoise=denoise) if any(states) else None
     measured = ([w.y for w in windows] if windows is not None else
                 [y for _, y in segments(recording, shots, inputs=(), denoise=denoise)])
+    noise = _pretrigger(windows) if windows is not None else 0.0
     # Windows as long as the validation data, made as late and freed as early as they can be:
     # the inputs after the last model that reads them, the residuals once the disturbances
     # are fitted, the times per row.
@@ -187,8 +188,7 @@ def compare(models: Sequence[LinearModel], recording: Recording, shots: Sequence
         inputs, state, rest = uses[position], {}, None
         if states[position]:
             simulated, fitted = simulate_from_state(model, windows, names=inputs,
-                                                    fs=recording.fs,
-                                                    noise_variance=_pretrigger(windows))
+                                                    fs=recording.fs, noise_variance=noise)
             state = _state(fitted)
             if state:
                 rest = simulate_output(model, window_channels(windows, inputs,

@@ -47,11 +47,6 @@ class InitialState:
     carried_in: Mapping[int, float] = field(default_factory=dict)
     charge_pa: Mapping[int, float] = field(default_factory=dict)
 
-    @property
-    def recordings(self) -> set[int]:
-        """Return the recordings whose first window starts from a fitted state."""
-        return set(self.carried_in) | set(self.charge_pa)
-
 
 def rest_start_note(names: Sequence[str]) -> str | None:
     """
