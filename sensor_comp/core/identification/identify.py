@@ -53,6 +53,10 @@ EXCITATION_BAND = 0.1
 MIN_EXCITATION = 1.0
 #: Below this input signal-to-noise ratio the damping bias (over 10 %) is warned about.
 WEAK_EXCITATION = 10.0
+#: Least BIC drop on the measured shots for which a fit to the measured pressure replaces
+#: the one to the EMD-denoised pressure ("positive evidence" on Kass and Raftery's scale;
+#: below it the two fit alike and the denoised one, the paper's method, stays).
+MEASURED_BIC_GAIN = 2.0
 
 _FITTERS = {
     'arx': lambda segs, na, nb, nk: fit_arx(segs, na=na, nb=nb, nk=nk),
@@ -560,9 +564,10 @@ def _undenoised(fit, doubt: str | None, measured: Sequence[Window], effects: Seq
     variance, and it can take signal the model explains: a lightly damped sensor mode rings
     for a few cycles at each pulse onset, too briefly for the IMF energy rule, and a fit
     without that ringing comes out overdamped (a 42 kHz mode read as 28 kHz, ζ 0.72). The
-    same structure fitted to the measured pressure competes by BIC on the measured shots
-    (where the effect reads as itself, if it did in the denoised fit); called where the
-    fit the diagnosis makes did not win. Returns ``(fit, notes)``.
+    same structure fitted to the measured pressure replaces it when its BIC on the measured
+    shots is lower by more than :data:`MEASURED_BIC_GAIN` (and the effect reads as itself,
+    if it did in the denoised fit); called where the fit the diagnosis makes did not win.
+    Returns ``(fit, notes)``.
     """
     try:
         raw = fit_extended(measured, effects=effects, fs=fs, nf=fit.estimate.na,
@@ -572,7 +577,7 @@ def _undenoised(fit, doubt: str | None, measured: Sequence[Window], effects: Seq
     if doubt is None and any(e.implausible(raw) is not None for e in ordered(effects)):
         return fit, []
     gain = _measured_bic(fit, measured) - _measured_bic(raw, measured)
-    if not gain > 0:
+    if not gain > MEASURED_BIC_GAIN:
         return fit, []
     return raw, [f'fitted to the measured pressure, not the EMD-denoised one: BIC on the '
                  f'measured shots lower by {gain:.1f} (the denoising took signal the model '
