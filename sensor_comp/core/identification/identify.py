@@ -544,10 +544,12 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
     else:
         notes = _base_notes(names, base.na, chosen, fits, failed, doubts)
         fit = fits[chosen]
-        if data.denoiser is not None:  # the uncertainty is the measured data's, not the EMD's
+        if data.denoiser is not None:
             fit, denoising = _undenoised(fit, doubts[chosen], measured, effects, sources.fs,
                                          base)
-            fit, notes = robust_uncertainty(fit, measured), notes + denoising
+            if not denoising:  # the uncertainty is the measured data's, not the EMD's
+                fit = robust_uncertainty(fit, measured)
+            notes += denoising
     # Another cause with the same map from the measured acceleration compensates alike;
     # only the name and its parameters are in doubt.
     return fit, notes + [f'{e.id}: {other}; the compensation is the same either way (the map '
