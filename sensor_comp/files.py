@@ -12,7 +12,7 @@ import errno
 import json
 import os
 from pathlib import Path
-import signal
+import secrets
 import tempfile
 from typing import IO, Iterable, Iterator
 
@@ -224,38 +224,26 @@ def open_temporary(path: str | os.PathLike, *, text: bool = False) -> tuple[IO, 
     :func:`publish`. OSError if the folder does not take the file.
     """
     path = Path(path)
-    # An interrupt arriving while mkstemp returns would leave the file with no name to
-    # remove it by: SIGINT/SIGTERM wait until the file is ours (the unblock runs the handler).
-    held = _hold_signals()
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial',
-                                   dir=path.parent or '.')
-    except BaseException:
-        _release_signals(held)
-        raise
-    try:
-        _release_signals(held)
-        return (os.fdopen(fd, 'w', encoding='utf-8') if text else os.fdopen(fd, 'wb')), Path(tmp)
-    except BaseException:
-        os.close(fd)
-        os.unlink(tmp)
-        raise
-
-
-_INTERRUPTS = {signal.SIGINT, signal.SIGTERM}
-
-
-def _hold_signals() -> set | None:
-    """Block SIGINT and SIGTERM in this thread; return the mask to restore (None: no mask)."""
-    if not hasattr(signal, 'pthread_sigmask'):
-        return None
-    return signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
-
-
-def _release_signals(held: set | None) -> None:
-    """Restore the mask; a signal that came meanwhile is handled (raises) here."""
-    if held is not None:
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    folder = path.parent or Path('.')
+    flags = os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, 'O_CLOEXEC', 0)
+    for _ in range(100):
+        # The name is known before the file exists, so an interrupt that comes as the file
+        # is made (mkstemp only returns its name after) can still remove it.
+        tmp = folder / f'.{path.name}.{secrets.token_hex(4)}.partial'
+        try:
+            fd = os.open(tmp, flags, 0o600)
+        except FileExistsError:
+            continue
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        try:
+            return (os.fdopen(fd, 'w', encoding='utf-8') if text else os.fdopen(fd, 'wb')), tmp
+        except BaseException:
+            os.close(fd)
+            tmp.unlink(missing_ok=True)
+            raise
+    raise FileExistsError(f'no free temporary name beside {path}')
 
 
 def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:

@@ -2,8 +2,6 @@
 
 import os
 from pathlib import Path
-import signal
-import tempfile
 
 import pytest
 
@@ -152,16 +150,17 @@ def test_temporary_files_are_unique_and_removed_on_interruption(tmp_path):
 
 def test_an_interrupt_as_the_temporary_file_is_created_removes_it(tmp_path, monkeypatch):
     # The CLI's interruption test signalled as soon as the file appeared and, on a loaded
-    # machine, found it left: the signal came while mkstemp was returning its name.
-    made = tempfile.mkstemp
+    # machine, found it left: the interrupt came as the file was made, before its name
+    # reached the cleanup (mkstemp returns the name only after it has made the file).
+    made = os.open
 
     def interrupted(*args, **kwargs):
-        out = made(*args, **kwargs)
-        os.kill(os.getpid(), signal.SIGINT)
-        return out
-    monkeypatch.setattr(tempfile, 'mkstemp', interrupted)
+        made(*args, **kwargs)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(os, 'open', interrupted)
     with pytest.raises(KeyboardInterrupt):
         open_temporary(tmp_path / 'out.mcap')
+    monkeypatch.undo()
     assert list(tmp_path.iterdir()) == []
 
 
