@@ -237,10 +237,9 @@ class ExtendedFit:
         slow state a recording's first window starts from (left by shots before it: that
         leaky peak's level, or a high-pass's charge) is fitted
         (:func:`~sensor_comp.core.compensation.initial_state.simulate_from_state`). A
-        disturbance's
-        phase belongs to its recording, so its coefficients are estimated again by least
-        squares on these windows' residual (per recording, the frequency kept from the
-        fit); :attr:`Prediction.disturbance_parameters` counts them.
+        disturbance's phase belongs to its recording, so its coefficients are estimated
+        again by least squares on these windows' residual (per recording, the frequency
+        kept from the fit); :attr:`Prediction.disturbance_parameters` counts them.
         """
         induced, state = simulate_from_state(self.estimate, windows, names=self.inputs,
                                              fs=self.fs,
