@@ -214,7 +214,8 @@ def _with_effect(row: dict, key: str, calibration, validation, effect: str) -> N
                 'cpu_s': time.process_time() - cpu,
                 'peak_residual_percent': result.model.fit['validation_peak_residual_percent'],
                 'validation_fit_percent': result.validation_fit_percent,
-                'parameters': (entry or {}).get('parameters'), 'std': (entry or {}).get('std')}
+                'parameters': (entry or {}).get('parameters'), 'std': (entry or {}).get('std'),
+                'notes': list(result.notes)}
     if effect == row['effect']:
         row[key]['check'] = _parameter_check(entry, row['truth']['parameters'])
 

@@ -47,6 +47,11 @@ class InitialState:
     carried_in: Mapping[int, float] = field(default_factory=dict)
     charge_pa: Mapping[int, float] = field(default_factory=dict)
 
+    @property
+    def started_after_shots(self) -> set[int]:
+        """Return the recordings whose first window starts from a fitted slow state."""
+        return set(self.carried_in) | set(self.charge_pa)
+
 
 def rest_start_note(names: Sequence[str]) -> str | None:
     """

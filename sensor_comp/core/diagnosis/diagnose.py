@@ -641,8 +641,9 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         evidence = effect.evidence(analysis, outcome)
     except (AttributeError, KeyError, TypeError, ValueError):  # an analysis without a part
         evidence = Effect.evidence(effect, None, outcome)
-    if prediction.started_after_shots:
-        evidence = (f'{evidence} The first shot of {len(prediction.started_after_shots)} '
+    if prediction.initial.started_after_shots:
+        evidence = (f'{evidence} The first shot of '
+                    f'{len(prediction.initial.started_after_shots)} '
                     f'validation recording(s) starts from a slow state the shots before it '
                     f'left (fitted here); compensating a recording from its start leaves it '
                     f'in its first shot.')

@@ -236,6 +236,16 @@ class OutputErrorProblem:
         The normal equations come from the lagged products (:mod:`.lagged`), never the matrix.
         Raises IdentError when they are not finite.
         """
+        return self.profile_solution(f, transform=transform)[1]
+
+    def profile_solution(self, f: np.ndarray, *, transform: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return ``(θ, y − Φθ)``: :meth:`profile_residual` with the parameters it solved.
+
+        ``θ`` holds ``F``'s coefficients (without the leading 1), then the numerators row by
+        row (mapped back through ``transform``), then the extra coefficients.
+        """
         q = self.n_inputs * self.nb
         p = q + self.n_extra
         gram, moment = np.zeros((p, p)), np.zeros(p)
@@ -261,7 +271,7 @@ class OutputErrorProblem:
             out[self.offsets[s]:self.offsets[s + 1]] = self._output(s, x, b, d)
         if not np.all(np.isfinite(out)):
             raise IdentError('the profile residual is not finite')
-        return np.subtract(self.y, out, out=out)
+        return np.concatenate([f[1:], theta]), np.subtract(self.y, out, out=out)
 
     def _products(self, s: int, x: np.ndarray, target: np.ndarray,
                   z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

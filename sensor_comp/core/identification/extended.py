@@ -47,7 +47,7 @@ import re
 import numpy as np
 from scipy import optimize
 
-from ..compensation.initial_state import simulate_from_state
+from ..compensation.initial_state import InitialState, simulate_from_state
 from ..effects import EffectError, get_effect, ordered
 from ..effects.base import effect_entry, Effect, mechanics_delay_s, ModelSpec, Physical, Search
 from ..estimators import Estimate, fit_oe, IdentError
@@ -55,14 +55,15 @@ from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import max_root_radius
-from ..shots.inputs import mode_pair
+from ..shots.inputs import input_channels, mode_pair, parse_channel
+from .input_noise import MIN_CHECK_GAIN, NoiseLevels, noise_levels, refine_mode
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
 
 __all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit',
-           'ExtendedFit', 'Prediction', 'Window', 'fit_extended', 'ringing_khz',
-           'robust_uncertainty', 'shot_windows']
+           'ExtendedFit', 'Prediction', 'Window', 'corrected_for_input_noise', 'fit_extended',
+           'ringing_khz', 'robust_uncertainty', 'shot_windows']
 
 #: The diagnosis's base structure ``(nf, nb)`` and delay (and a lag-free fit's): a sampled
 #: 2nd-order sensor, exactly.
@@ -107,6 +108,8 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
+#: Sample at which the unit impulse of :meth:`_Fitter.noise_ratio` is applied.
+IMPULSE_AT = 64
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -146,22 +149,16 @@ class Prediction:
         induced: Acceleration-driven part per window (simulated from rest), Pa.
         disturbance: Disturbance estimate per window (zeros without disturbances), Pa.
         disturbance_parameters: Coefficients estimated on these windows' own residual.
-        carried_in: Zero-shift level (m/s² of peak ``|a_z|``) fitted per recording for its
-            first window: left by shots before it, unknown to a compensation from rest.
-        charge_pa: Likewise, the high-pass's charge (its decay's size in Pa).
+        initial: The slow state fitted per recording for its first window (a zero shift's
+            level, a high-pass's charge): left by shots before it, unknown to a
+            compensation from rest.
 
     """
 
     induced: list[np.ndarray]
     disturbance: list[np.ndarray]
     disturbance_parameters: int
-    carried_in: Mapping[int, float] = field(default_factory=dict)
-    charge_pa: Mapping[int, float] = field(default_factory=dict)
-
-    @property
-    def started_after_shots(self) -> set[int]:
-        """Return the recordings whose first window starts from a fitted slow state."""
-        return set(self.carried_in) | set(self.charge_pa)
+    initial: InitialState = field(default_factory=InitialState)
 
     @property
     def total(self) -> list[np.ndarray]:
@@ -244,10 +241,8 @@ class ExtendedFit:
         induced, state = simulate_from_state(self.estimate, windows, names=self.inputs,
                                              fs=self.fs,
                                              noise_variance=self.estimate.noise_variance)
-        carry, charge = state.carried_in, state.charge_pa
         if self.disturbance is None:
-            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, carry,
-                              charge)
+            return Prediction(induced, [np.zeros(w.y.size) for w in windows], 0, state)
         sources = 1 + max(w.source for w in windows)
         cols = [self.disturbance.columns(w, fs=self.fs, sources=sources) for w in windows]
         phi = np.concatenate(cols, axis=1).T
@@ -255,7 +250,7 @@ class ExtendedFit:
         used = np.flatnonzero(np.any(phi != 0, axis=0))
         coef = np.zeros(phi.shape[1])
         coef[used] = _lstsq(phi[:, used], target)[0]
-        return Prediction(induced, [c.T @ coef for c in cols], int(used.size), carry, charge)
+        return Prediction(induced, [c.T @ coef for c in cols], int(used.size), state)
 
 
 def _columns(window: Window, effects: Sequence[Effect], choices: Sequence[Mapping],
@@ -620,16 +615,58 @@ class _Fitter:
         if not self.spec.lag_free:
             return _joint(self.problem(values), a, feasible=self.feasible, method=method)
         result = self._profile_descent(values, a, MAX_ITERATIONS)
-        a = np.concatenate([[1.0], result.theta])
-        lag = self.lag(values, a)
-        estimate, coef, cov = _joint(self.problem(values, a=a), a, feasible=self.feasible,
-                                     method=method, max_iter=0)
-        return (replace(estimate, b=lag.numerators(estimate.b), nk=self.spec.nk,
-                        iterations=result.evaluations, converged=result.converged,
-                        covariance=lag.covariance(estimate.covariance, self.spec.nf),
+        estimate, coef, cov = self.at(values, np.concatenate([[1.0], result.theta]),
+                                      method=method)
+        return (replace(estimate, iterations=result.evaluations, converged=result.converged,
                         method=f'{method}; lag-free numerators: profile Levenberg-Marquardt '
                                f'over the denominator ({result.evaluations} evaluations)'),
                 coef, cov)
+
+    def at(self, values: Mapping[str, float], a: np.ndarray, *, method: str):
+        """Return the estimate at the fixed denominator ``a`` (numerators in the spec's form)."""
+        lag = self.lag(values, a)
+        estimate, coef, cov = _joint(self.problem(values, a=a), a, feasible=self.feasible,
+                                     method=method, max_iter=0)
+        if lag is None:
+            return estimate, coef, cov
+        return (replace(estimate, b=lag.numerators(estimate.b), nk=self.spec.nk,
+                        covariance=lag.covariance(estimate.covariance, self.spec.nf)),
+                coef, cov)
+
+    def noise_ratio(self, values: Mapping[str, float],
+                    levels: NoiseLevels) -> Callable[[np.ndarray], float]:
+        """
+        Return the loss over the noise it should hold, at a denominator (numerators solved).
+
+        The noise: the pressure's white noise plus each axis's white acceleration noise
+        through the model's linear channels (the response to a unit impulse on the axis;
+        |a|-products and leaky peaks pass little of it and are left out).
+        """
+        names = self.spec.channels(values)
+        linear = np.array([parse_channel(n).kind in ('a', 'da') for n in names])
+        n = max(w.y.size for w in self.windows)
+        axes = [k for k in range(3) if levels.axes[k] > 0]
+        pulses = []
+        for k in axes:
+            acceleration = np.zeros((3, n))
+            acceleration[k, IMPULSE_AT] = 1.0
+            pulses.append(input_channels(names, acceleration, {}, fs=self.fs) * linear[:, None])
+        total = sum(w.y.size for w in self.windows)
+        responses = _problem(pulses, [np.zeros(n)] * len(pulses), None, self.spec)
+
+        def ratio(a: np.ndarray) -> float:
+            lag = self.lag(values, a)
+            try:
+                theta, e = self.problem(values).profile_solution(
+                    a, transform=None if lag is None else lag.transform)
+            except IdentError:
+                return math.inf
+            step = responses.simulate(theta[:responses.n_parameters])
+            through = sum(levels.axes[k] * float(np.sum(
+                step[responses.offsets[i]:responses.offsets[i + 1]] ** 2))
+                for i, k in enumerate(axes))
+            return float(e @ e) / (total * (levels.pressure + through))
+        return ratio
 
     def _profile_descent(self, values: Mapping[str, float], a: np.ndarray, max_iter: int, *,
                          steps_only: bool = False):
@@ -995,6 +1032,58 @@ def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
     return ExtendedFit(tuple(e.id for e in chosen), spec, tuple(inputs), estimate, values,
                        value_std, disturbance, tuple(entries), fs, tuple(notes),
                        denominators)
+
+
+def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
+                              check: Sequence[Window] = ()) -> tuple[ExtendedFit, str | None]:
+    """
+    Return ``fit`` with its sensor mode corrected for the accelerometer's noise, and a note.
+
+    The least damped pair moves to the least ratio of the loss on ``windows`` (the measured
+    ones) to the noise the model should leave (:func:`.input_noise.refine_mode`); the
+    numerators, disturbance coefficients and uncertainties are then solved at it, the
+    searched values kept. With ``check`` (held-out windows), the ratio there must fall by
+    :data:`~.input_noise.MIN_CHECK_GAIN` too: a narrow mode can fit the calibration noise.
+    Returns ``(fit, None)`` unchanged when the windows have no pre-trigger to measure the
+    noise on or the ratio does not fall enough.
+    """
+    windows, check = list(windows), list(check)
+    levels = noise_levels(windows)
+    if levels is None or fit.spec.nf < 2:
+        return fit, None
+    disturbances = () if fit.disturbance is None else fit.disturbance.effects
+    choices = () if fit.disturbance is None else fit.disturbance.choices
+    fitter = _Fitter(windows, fit.spec, fit.fs, disturbances, choices)
+    values = dict(fit.values)
+    refined = refine_mode(fit.estimate.a, fitter.noise_ratio(values, levels), fs=fit.fs,
+                          feasible=fitter.feasible)
+    if refined is None:
+        return fit, None
+    held_out = ''
+    check_levels = noise_levels(check) if check else None
+    if check_levels is not None:
+        ratio = _Fitter(check, fit.spec, fit.fs, disturbances, choices).noise_ratio(
+            values, check_levels)
+        before = ratio(fit.estimate.a)
+        gain = (before - ratio(refined.a)) / before
+        if not gain > MIN_CHECK_GAIN:
+            return fit, None
+        held_out = f', on the held-out shots by {100 * gain:.2f} %'
+    (hz0, zeta0), (hz, zeta) = refined.before, refined.after
+    note = (f'sensor mode corrected for the accelerometer\'s noise: {hz0 / 1e3:.1f} kHz, '
+            f'ζ {zeta0:.3f} → {hz / 1e3:.1f} kHz, ζ {zeta:.3f} (least squares damp a mode '
+            f'to keep that noise out of the prediction; the loss over the noise it should '
+            f'leave fell by {100 * refined.gain:.2f} %{held_out})')
+    estimate, coef, cov = fitter.at(values, refined.a, method=(
+        f'{fit.estimate.method}; mode corrected for the accelerometer noise'))
+    value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
+                 for s in fit.spec.searches}
+    disturbance = None if coef is None else DisturbanceFit(
+        fitter.disturbances, fitter.choices, fitter.sources, coef, cov)
+    chosen = [get_effect(e) for e in fit.effects]
+    new = _finish(chosen, fit.spec, fit.inputs, estimate, values, value_std, disturbance,
+                  fit.fs, fit.denominators)
+    return replace(robust_uncertainty(new, windows), _base=fit._base), note
 
 
 def _block(disturbance: DisturbanceFit, index: int) -> tuple[np.ndarray, np.ndarray]:

@@ -18,7 +18,8 @@ import numpy as np
 from ..compensation.compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
-from .extended import BASE_DELAY, BASE_ORDERS, fit_extended, robust_uncertainty
+from .extended import (BASE_DELAY, BASE_ORDERS, corrected_for_input_noise, fit_extended,
+                       robust_uncertainty)
 from .held_base import base_fits, fit_on_base, modes_khz
 from ..shots.windows import EARLY_S, shot_channels, shot_windows, Window
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
@@ -550,6 +551,12 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
             if not denoising:  # the uncertainty is the measured data's, not the EMD's
                 fit = robust_uncertainty(fit, measured)
             notes += denoising
+    try:
+        fit, correction = corrected_for_input_noise(
+            fit, measured, check=shot_windows([s for s in sources.validation if s.shots]))
+    except (IdentError, EffectError) as exc:  # the fit stands as it was
+        correction = f'the sensor mode was not corrected for the accelerometer noise: {exc}'
+    notes += [correction] if correction else []
     # Another cause with the same map from the measured acceleration compensates alike;
     # only the name and its parameters are in doubt.
     return fit, notes + [f'{e.id}: {other}; the compensation is the same either way (the map '

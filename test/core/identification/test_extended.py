@@ -298,7 +298,7 @@ def test_a_zero_shift_outlasting_the_gap_between_shots_is_carried_as_on_the_stre
         return prediction, [float(np.std(w.y - p)) / noise
                             for w, p in zip(windows[:2], prediction.total[:2])]
     prediction, ratios = first_two()
-    assert set(prediction.carried_in) == {0} and max(ratios) < 1.25, ratios
+    assert set(prediction.initial.carried_in) == {0} and max(ratios) < 1.25, ratios
     # identify's validation credits the model as the prediction does, and says what the
     # first shot from rest (as compensate starts the recording) leaves.
     found = identify([calib], validation=[valid], structure='oe', orders=(2, 3), delay=0,
@@ -307,7 +307,7 @@ def test_a_zero_shift_outlasting_the_gap_between_shots_is_carried_as_on_the_stre
         1.3 * found['validation_peak_residual_percent']  # 17.4 % against 10.9 %
     monkeypatch.setattr(initial_state, 'CARRY_IN_GAIN', math.inf)
     prediction, ratios = first_two()
-    assert not prediction.carried_in and min(ratios) > 1.5, ratios
+    assert not prediction.initial.carried_in and min(ratios) > 1.5, ratios
 
 
 def test_a_high_pass_charge_left_before_a_recording_is_fitted_in_its_first_window():
@@ -330,11 +330,11 @@ def test_a_high_pass_charge_left_before_a_recording_is_fitted_in_its_first_windo
     charged = list(windows)
     charged[first] = dataclasses.replace(w, y=w.y + size * decay)
     prediction = fit.predict(charged)
-    assert not plain.charge_pa  # these shots start the recording: nothing to carry
+    assert not plain.initial.charge_pa  # these shots start the recording: nothing to carry
     # Least squares: the charge plus what of the shots' own misfit follows its decay.
     misfit = w.y - plain.total[first]
     expected = size + float(decay @ misfit) / float(decay @ decay)
-    assert prediction.charge_pa[w.source] == pytest.approx(expected, rel=1e-6)
+    assert prediction.initial.charge_pa[w.source] == pytest.approx(expected, rel=1e-6)
     assert abs(expected - size) < 0.1 * size
     left = charged[first].y - prediction.total[first]
     assert float(left @ left) <= float(misfit @ misfit)  # the fit can only lower the error

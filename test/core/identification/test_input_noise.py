@@ -1,0 +1,134 @@
+"""
+The sensor's mode corrected for the accelerometer's noise (errors in variables).
+
+Synthetic windows at 1 MS/s: a 40 kHz mode with ζ 0.06 driven by half-sine pulses of
+80-200 µs, white noise on the pressure (10 Pa) and on every acceleration axis. With
+accelerometer noise whose share through the mode is about the pressure noise, output error
+damps the mode by half again or more; the correction must bring ζ back within 20 % and the
+frequency within 2 %. With little accelerometer noise the fit must be left alone, and where
+that noise swamps the mode (the damping not fixed by the data) too.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from sensor_comp.core.identification.extended import corrected_for_input_noise, fit_extended
+from sensor_comp.core.identification.input_noise import noise_levels, refine_mode
+from sensor_comp.core.shots.inputs import mode_pair
+from sensor_comp.core.shots.windows import Window
+
+FS, FN, ZETA = 1e6, 40e3, 0.06
+PRE, N = 4000, 16000
+PRESSURE_SIGMA = 10.0
+
+
+def windows(seed: int, accel_sigma: float, *, shots: int = 6) -> list[Window]:
+    """Return shot windows of the synthetic sensor (pulse at ``PRE``)."""
+    rng = np.random.default_rng(seed)
+    a = mode_pair(FN / 1e3, ZETA, FS)
+    out = []
+    for k in range(shots):
+        width = int(rng.integers(80, 200))
+        acceleration = np.zeros((3, N))
+        acceleration[2, PRE:PRE + width] = (rng.uniform(2e3, 6e3)
+                                            * np.sin(np.pi * np.arange(width) / width))
+        y = (signal.lfilter([a.sum()], a, acceleration[2])
+             + PRESSURE_SIGMA * rng.standard_normal(N))
+        measured = acceleration + accel_sigma * rng.standard_normal(acceleration.shape)
+        out.append(Window(acceleration=measured, y=y, start=2 * k * N, baseline=PRE,
+                          source=0, end=PRE + width))
+    return out
+
+
+def mode(a: np.ndarray) -> tuple[float, float]:
+    """Return ``(Hz, ζ)`` of the oscillating pair of a 2-pole denominator."""
+    s = np.log(np.roots(a).astype(complex)) * FS
+    p = s[np.argmax(s.imag)]
+    return abs(p) / (2 * math.pi), -p.real / abs(p)
+
+
+def fitted(accel_sigma: float, seed: int = 0):
+    calibration, check = windows(seed, accel_sigma), windows(seed + 100, accel_sigma)
+    fit = fit_extended(calibration, effects=(), fs=FS, nf=2, nb=3, nk=0)
+    return fit, corrected_for_input_noise(fit, calibration, check=check)
+
+
+def test_noise_levels_skip_a_pulse_rising_before_the_trigger():
+    rng = np.random.default_rng(3)
+    out = []
+    for k in range(4):
+        acceleration = 2.0 * rng.standard_normal((3, 2000))
+        acceleration[2, 1700:2000] += np.linspace(0, 500, 300)  # the pulse's foot
+        y = 5.0 * rng.standard_normal(2000)
+        y[1700:] += np.linspace(0, 300, 300)
+        out.append(Window(acceleration=acceleration, y=y, start=k * 5000, baseline=2000,
+                          source=0))
+    levels = noise_levels(out)
+    # 6000 samples per median of quarters: the variance within 10 % (about 5 std).
+    assert levels.pressure == pytest.approx(25.0, rel=0.1)
+    assert levels.axes == pytest.approx([4.0, 4.0, 4.0], rel=0.1)
+    assert noise_levels([Window(acceleration=np.zeros((3, 100)), y=np.zeros(100), start=0,
+                                baseline=0, source=0)]) is None
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_mode_damped_by_accelerometer_noise_is_moved_back(seed):
+    fit, (corrected, note) = fitted(12.0, seed)
+    hz0, zeta0 = mode(fit.estimate.a)
+    hz, zeta = mode(corrected.estimate.a)
+    assert zeta0 > 1.3 * ZETA  # the bias the correction is for
+    assert zeta == pytest.approx(ZETA, rel=0.2)
+    assert hz == pytest.approx(FN, rel=0.02)
+    assert note.startswith('sensor mode corrected for the accelerometer\'s noise: '
+                           f'{hz0 / 1e3:.1f} kHz')
+    assert 'corrected for the accelerometer noise' in corrected.estimate.method
+    # The numerators were solved at the new mode: the static gain is still the sensor's.
+    gain = corrected.estimate.b.sum() / corrected.estimate.a.sum()
+    assert gain == pytest.approx(1.0, rel=0.02)
+
+
+def test_a_fit_without_that_bias_is_left_alone():
+    fit, (corrected, note) = fitted(0.5)
+    assert note is None and corrected is fit
+
+
+def test_a_mode_swamped_by_accelerometer_noise_is_left_alone():
+    fit, (corrected, note) = fitted(40.0)
+    assert mode(fit.estimate.a)[1] > 0.3  # badly damped by the noise ...
+    assert note is None and corrected is fit  # ... but the data cannot fix the damping
+
+
+def test_refine_mode_needs_an_oscillating_pair():
+    a = np.poly([0.5, 0.9])  # two real poles
+    assert refine_mode(a, lambda trial: 1.0, fs=FS, feasible=lambda trial: True) is None
+
+
+def poles(a: np.ndarray) -> tuple[tuple[float, float], float]:
+    """Return ``((Hz, ζ), real pole's rate in 1/s)`` of a pair and one real pole."""
+    s = np.log(np.roots(a).astype(complex)) * FS
+    pair = s[np.argmax(s.imag)]
+    real = s[np.argmin(np.abs(s.imag))]
+    return (abs(pair) / (2 * math.pi), -pair.real / abs(pair)), -real.real
+
+
+def test_refine_mode_keeps_a_slow_pole_and_moves_a_fast_one():
+    def ratio(trial):  # least at 42 kHz, ζ 0.05, a real pole at 300e3 1/s
+        (hz, zeta), rate = poles(trial)
+        return (1.0 + math.log(zeta / 0.05) ** 2 + (hz / 42e3 - 1) ** 2
+                + math.log(rate / 300e3) ** 2)
+
+    pair = mode_pair(FN / 1e3, 0.3, FS)
+    slow = np.polymul(pair, [1.0, -0.999])  # a tail: 1000 1/s, not moved
+    refined = refine_mode(slow, ratio, fs=FS, feasible=lambda trial: True)
+    assert poles(refined.a)[1] == pytest.approx(poles(slow)[1], rel=1e-9)
+    assert poles(refined.a)[0] == pytest.approx((42e3, 0.05), rel=1e-2)
+    assert refined.before == pytest.approx((FN, 0.3), rel=1e-9)
+    start = ratio(slow)
+    assert refined.gain == pytest.approx((start - ratio(refined.a)) / start, rel=1e-6)
+    fast = np.polymul(pair, [1.0, -math.exp(-600e3 / FS)])  # a low-pass: moved too
+    refined = refine_mode(fast, ratio, fs=FS, feasible=lambda trial: True)
+    assert poles(refined.a)[1] == pytest.approx(300e3, rel=0.05)
+    assert poles(refined.a)[0] == pytest.approx((42e3, 0.05), rel=1e-2)
