@@ -554,7 +554,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
     try:
         fit, correction = corrected_for_input_noise(
             fit, measured, check=shot_windows([s for s in sources.validation if s.shots]))
-    except (IdentError, EffectError) as exc:  # the fit stands as it was
+    except (IdentError, EffectError, ArithmeticError, ValueError,
+            np.linalg.LinAlgError) as exc:  # the fit stands as it was
         correction = f'the sensor mode was not corrected for the accelerometer noise: {exc}'
     notes += [correction] if correction else []
     # Another cause with the same map from the measured acceleration compensates alike;

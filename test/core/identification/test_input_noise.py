@@ -132,3 +132,29 @@ def test_refine_mode_keeps_a_slow_pole_and_moves_a_fast_one():
     refined = refine_mode(fast, ratio, fs=FS, feasible=lambda trial: True)
     assert poles(refined.a)[1] == pytest.approx(300e3, rel=0.05)
     assert poles(refined.a)[0] == pytest.approx((42e3, 0.05), rel=1e-2)
+
+
+def test_identify_keeps_its_fit_when_the_correction_fails(monkeypatch):
+    from sensor_comp.core.identification import identify as module
+    from sensor_comp.core.identification.identify import identify, ShotSource
+    from sensor_comp.sim import RigConfig, simulate, TABLE2
+
+    sim = simulate(RigConfig(shots=tuple(TABLE2[i] for i in (0, 2, 3, 4, 5, 9)), fs=200e3,
+                             effects=['nonlinear_sensitivity'], seed=1))
+    source = ShotSource.detect(sim.recording)
+    options = dict(structure='oe', orders=(2, 3), delay=0, denoise=False,
+                   effects=['nonlinear_sensitivity'])
+    plain = identify([source], **options)
+
+    def broken(*args, **kwargs):
+        raise np.linalg.LinAlgError('singular matrix')
+
+    monkeypatch.setattr(module, 'corrected_for_input_noise', broken)
+    kept = identify([source], **options)
+    assert ('the sensor mode was not corrected for the accelerometer noise: singular matrix'
+            in kept.notes)
+    beta = kept.model.effects[0]['parameters']['beta_per_g']
+    truth = sim.config.effects[0].beta_per_g
+    assert beta == pytest.approx(truth, rel=0.15)
+    if not any('accelerometer\'s noise' in note for note in plain.notes):
+        assert np.allclose(kept.model.a, plain.model.a, rtol=0, atol=1e-12)
