@@ -10,7 +10,25 @@ import math
 
 import numpy as np
 
-__all__ = ['is_stable', 'max_root_radius', 'reflect_unstable', 'resonances']
+__all__ = ['ORIGIN', 'continuous_poles', 'is_stable', 'max_root_radius', 'reflect_unstable',
+           'resonances']
+
+#: A root below this modulus is a pole at the origin (a pure delay: no s-plane pole).
+ORIGIN = 1e-12
+
+
+def continuous_poles(poly: np.ndarray, fs: float) -> tuple[np.ndarray, int]:
+    """
+    Return the s-plane poles ``ln(z)·fs`` of ``poly``'s roots, and how many lie at z = 0.
+
+    Roots at the origin have no s-plane pole and are counted instead; poles whose
+    imaginary part is below 1e-9 of their modulus (round-off) are returned exactly real.
+    """
+    poly = np.asarray(poly, dtype=np.float64)
+    z = np.roots(poly).astype(complex) if poly.size > 1 else np.zeros(0, complex)
+    origin = np.abs(z) < ORIGIN
+    s = np.log(z[~origin]) * fs
+    return np.where(np.abs(s.imag) < 1e-9 * np.abs(s), s.real + 0j, s), int(origin.sum())
 
 
 def max_root_radius(poly: np.ndarray) -> float:

@@ -54,7 +54,7 @@ from ..estimators import Estimate, fit_oe, IdentError
 from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
-from ..estimators.polynomials import max_root_radius
+from ..estimators.polynomials import continuous_poles, max_root_radius
 from ..shots.inputs import input_channels, mode_pair, parse_channel
 from .input_noise import MIN_CHECK_GAIN, NoiseLevels, noise_levels, refine_mode
 from .lag_free import LagFree
@@ -398,7 +398,7 @@ def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
             return False
         if a.size < 2 or (slowest is None and spec.max_zeta is None):
             return True
-        s = _continuous_poles(a, fs)
+        s = continuous_poles(a, fs)[0]  # a pole at the origin: infinitely fast
         if slowest is not None and not np.all(np.abs(s) > 1.0 / slowest):
             return False
         if spec.max_zeta is None:
@@ -406,12 +406,6 @@ def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
         least = _least_damping(s)
         return least is not None and least <= spec.max_zeta
     return feasible
-
-
-def _continuous_poles(a: np.ndarray, fs: float) -> np.ndarray:
-    """Return the s-plane poles of the denominator ``a`` at the rate ``fs``."""
-    with np.errstate(divide='ignore', invalid='ignore'):  # a pole at 0: infinitely fast
-        return np.log(np.roots(a).astype(complex)) * fs
 
 
 def _least_damping(s: np.ndarray) -> float | None:
@@ -840,7 +834,7 @@ def _with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: flo
     if (std is None or not search.lag_unit_s or not spec.lag_free or spec.max_zeta is None
             or f.size < 3):
         return std
-    least = _least_damping(_continuous_poles(f, fs))
+    least = _least_damping(continuous_poles(f, fs)[0])
     if least is None or least < BOUND_SHARE * spec.max_zeta:
         return std
     return math.hypot(std, max(mechanics_delay_s(f, fs), 0.0) / search.lag_unit_s)

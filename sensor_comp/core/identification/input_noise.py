@@ -20,6 +20,7 @@ import math
 import numpy as np
 from scipy import optimize
 
+from ..estimators.polynomials import continuous_poles
 from ..shots.windows import Window
 
 __all__ = ['BOUND_FACTOR', 'FASTEST', 'FAST_SHARE', 'MAX_SHIFT', 'MIN_CHECK_GAIN', 'MIN_GAIN',
@@ -108,10 +109,6 @@ def noise_levels(windows: Sequence[Window]) -> NoiseLevels | None:
     return NoiseLevels(pressure, axes)
 
 
-def _continuous(a: np.ndarray, fs: float) -> np.ndarray:
-    return np.log(np.roots(a).astype(complex)) * fs
-
-
 def _least_damped(s: np.ndarray, fs: float) -> int | None:
     """Return the index of the least damped complex pole pair's upper pole, or None."""
     # A real negative z-pole maps to the Nyquist frequency: it is no pair.
@@ -128,9 +125,9 @@ def _fast_reals(s: np.ndarray, hz: float) -> list[int]:
 
 
 def _denominator(s: np.ndarray, index: int, reals: Sequence[int], x: np.ndarray,
-                 fs: float) -> np.ndarray:
+                 fs: float, origin: int) -> np.ndarray:
     """
-    Return the denominator of poles ``s`` moved to ``x``.
+    Return the denominator of poles ``s`` (and ``origin`` at z = 0) moved to ``x``.
 
     ``x``: log Hz and log ζ of the pair at ``index``, then the log rates (1/s) of the real
     poles ``reals``; the other poles stay.
@@ -140,7 +137,7 @@ def _denominator(s: np.ndarray, index: int, reals: Sequence[int], x: np.ndarray,
     kept = [q for i, q in enumerate(s)
             if i != index and i not in reals and not np.isclose(q, s[index].conj())]
     poles = kept + [p, p.conjugate()] + [complex(-math.exp(v), 0.0) for v in x[2:]]
-    return np.real(np.poly(np.exp(np.array(poles) / fs)))
+    return np.real(np.poly(np.concatenate([np.exp(np.array(poles) / fs), np.zeros(origin)])))
 
 
 def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: float,
@@ -152,9 +149,8 @@ def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: floa
     frequency (:data:`SCREEN_SHIFTS`); from the best, a bounded simplex search moves
     frequency (within :data:`MAX_SHIFT`) and damping, and the rates of the fast real poles
     (:data:`FAST_SHARE`: least squares add low-pass poles against the noise too). Slower
-    poles and other pairs stay. None when
-    ``a`` has no oscillating pair, the ratio falls by less than :data:`MIN_GAIN` or the
-    damping ends at its bound (:data:`BOUND_FACTOR`).
+    poles and other pairs stay. None when ``a`` has no oscillating pair, the ratio falls
+    by less than :data:`MIN_GAIN` or the damping ends at its bound (:data:`BOUND_FACTOR`).
 
     Args:
         a: Fitted denominator ``[1, a1, ...]``.
@@ -163,8 +159,7 @@ def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: floa
         feasible: Whether a denominator is allowed (stable, the spec's bounds).
 
     """
-    s = _continuous(np.asarray(a, dtype=np.float64), fs)
-    s = np.where(np.abs(s.imag) < 1e-9 * np.abs(s), s.real + 0j, s)
+    s, origin = continuous_poles(a, fs)
     index = _least_damped(s, fs)
     if index is None:
         return None
@@ -182,16 +177,15 @@ def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: floa
     def at(x: np.ndarray) -> float:
         if not all(lo <= v <= hi for v, lo, hi in zip(x, low, high)):
             return math.inf
-        trial = _denominator(s, index, reals, x, fs)
+        trial = _denominator(s, index, reals, x, fs, origin)
         if not feasible(trial):
             return math.inf
         value = ratio(trial)
         return value if math.isfinite(value) else math.inf
 
-    screened = [(at(np.array([math.log(hz0 * shift), z] + rates)), i, z, shift)
-                for i, z in enumerate(np.linspace(high[1], low[1], SCREEN)[1:])
-                for shift in SCREEN_SHIFTS]
-    best, _, z, shift = min(screened)
+    screened = [(at(np.array([math.log(hz0 * shift), z] + rates)), z, shift)
+                for z in np.linspace(high[1], low[1], SCREEN)[1:] for shift in SCREEN_SHIFTS]
+    best, z, shift = min(screened)
     if not best < start:
         return None
     x0 = np.array([math.log(hz0 * shift), z] + rates)
@@ -203,5 +197,5 @@ def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: floa
     hz, zeta = math.exp(x[0]), math.exp(x[1])
     if not value < start * (1 - MIN_GAIN) or zeta < MIN_ZETA * BOUND_FACTOR:
         return None
-    return Refinement(_denominator(s, index, reals, x, fs), (hz0, zeta0), (hz, zeta),
+    return Refinement(_denominator(s, index, reals, x, fs, origin), (hz0, zeta0), (hz, zeta),
                       (start - value) / start)

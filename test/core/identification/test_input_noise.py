@@ -158,3 +158,16 @@ def test_identify_keeps_its_fit_when_the_correction_fails(monkeypatch):
     assert beta == pytest.approx(truth, rel=0.15)
     if not any('accelerometer\'s noise' in note for note in plain.notes):
         assert np.allclose(kept.model.a, plain.model.a, rtol=0, atol=1e-12)
+
+
+def test_refine_mode_leaves_a_pole_at_the_origin():
+    pair = mode_pair(FN / 1e3, 0.3, FS)
+    a = np.polymul(pair, [1.0, 0.0])  # a pure delay's pole at z = 0
+
+    def ratio(trial):  # least at 42 kHz, ζ 0.05
+        hz, zeta = mode(np.polydiv(trial, [1.0, 0.0])[0])
+        return 1.0 + math.log(zeta / 0.05) ** 2 + (hz / 42e3 - 1) ** 2
+
+    refined = refine_mode(a, ratio, fs=FS, feasible=lambda trial: True)
+    assert abs(refined.a[-1]) < 1e-12  # still a root at the origin
+    assert refined.after == pytest.approx((42e3, 0.05), rel=1e-2)
