@@ -238,13 +238,17 @@ class OutputErrorProblem:
         """
         return self.profile_solution(f, transform=transform)[1]
 
-    def profile_solution(self, f: np.ndarray, *, transform: np.ndarray | None = None
+    def profile_solution(self, f: np.ndarray, *, transform: np.ndarray | None = None,
+                         noise: Callable[[np.ndarray], np.ndarray] | None = None
                          ) -> tuple[np.ndarray, np.ndarray]:
         """
         Return ``(θ, y − Φθ)``: :meth:`profile_residual` with the parameters it solved.
 
         ``θ`` holds ``F``'s coefficients (without the leading 1), then the numerators row by
-        row (mapped back through ``transform``), then the extra coefficients.
+        row (mapped back through ``transform``), then the extra coefficients. ``noise``
+        maps the numerators' block of ``ΦᵀΦ`` to the share of it the inputs' own noise
+        makes, which is subtracted: numerators bias-compensated for noisy inputs (errors in
+        variables).
         """
         q = self.n_inputs * self.nb
         p = q + self.n_extra
@@ -253,6 +257,8 @@ class OutputErrorProblem:
             g, m = self._products(s, x, self.ys[s])
             gram += g
             moment += m
+        if noise is not None:
+            gram[:q, :q] -= noise(gram[:q, :q])
         if transform is not None:
             narrow = np.zeros((p, transform.shape[1] + self.n_extra))
             narrow[:q, :transform.shape[1]] = transform
@@ -289,6 +295,12 @@ class OutputErrorProblem:
             lagged += [(row, self.nk, self.nb) for row in x]
             fixed = extra
         return lagged_products(lagged, fixed, target)
+
+    def grams(self, f: np.ndarray) -> list[np.ndarray]:
+        """Return each segment's ``ΦᵀΦ`` over the numerators at ``F``."""
+        q = self.n_inputs * self.nb
+        return [self._products(s, x, self.ys[s])[0][:q, :q]
+                for s, x in enumerate(self.filtered(f))]
 
     def filtered(self, f: np.ndarray) -> list[np.ndarray]:
         """Return every segment's inputs filtered by ``1/F`` from rest (cached)."""

@@ -56,7 +56,8 @@ from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import continuous_poles, max_root_radius
 from ..shots.inputs import input_channels, mode_pair, parse_channel
-from .input_noise import MIN_CHECK_GAIN, NoiseLevels, noise_levels, refine_mode
+from .input_noise import (MIN_CHECK_GAIN, NoiseLevels, noise_levels, refine_mode, Refinement,
+                          subtracted_noise)
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
@@ -627,14 +628,13 @@ class _Fitter:
                         covariance=lag.covariance(estimate.covariance, self.spec.nf)),
                 coef, cov)
 
-    def noise_ratio(self, values: Mapping[str, float],
-                    levels: NoiseLevels) -> Callable[[np.ndarray], float]:
+    def _impulses(self, values: Mapping[str, float], levels: NoiseLevels
+                  ) -> tuple[list[int], OutputErrorProblem, int]:
         """
-        Return the loss over the noise it should hold, at a denominator (numerators solved).
+        Return the noisy axes, the problem of their unit impulses and the samples fitted.
 
-        The noise: the pressure's white noise plus each axis's white acceleration noise
-        through the model's linear channels (the response to a unit impulse on the axis;
-        |a|-products and leaky peaks pass little of it and are left out).
+        Each segment of the problem is one axis's unit impulse through the model's linear
+        channels (|a|-products and leaky peaks pass little white noise and are left out).
         """
         names = self.spec.channels(values)
         linear = np.array([parse_channel(n).kind in ('a', 'da') for n in names])
@@ -646,7 +646,17 @@ class _Fitter:
             acceleration[k, IMPULSE_AT] = 1.0
             pulses.append(input_channels(names, acceleration, {}, fs=self.fs) * linear[:, None])
         total = sum(w.y.size for w in self.windows)
-        responses = _problem(pulses, [np.zeros(n)] * len(pulses), None, self.spec)
+        return axes, _problem(pulses, [np.zeros(n)] * len(pulses), None, self.spec), total
+
+    def noise_ratio(self, values: Mapping[str, float],
+                    levels: NoiseLevels) -> Callable[[np.ndarray], float]:
+        """
+        Return the loss over the noise it should hold, at a denominator (numerators solved).
+
+        The noise: the pressure's white noise plus each axis's white acceleration noise
+        through the model's linear channels (:meth:`_impulses`).
+        """
+        axes, responses, total = self._impulses(values, levels)
 
         def ratio(a: np.ndarray) -> float:
             lag = self.lag(values, a)
@@ -661,6 +671,28 @@ class _Fitter:
                 for i, k in enumerate(axes))
             return float(e @ e) / (total * (levels.pressure + through))
         return ratio
+
+    def compensated(self, values: Mapping[str, float], a: np.ndarray,
+                    levels: NoiseLevels) -> tuple[np.ndarray, float]:
+        """
+        Return ``θ`` at ``a``, numerators compensated for the acceleration noise, and its share.
+
+        White noise on an axis adds ``N σ²`` times the products of that axis's unit impulse
+        through the channels to ``ΦᵀΦ``; :func:`.input_noise.subtracted_noise` says how much
+        of it to subtract. The share: the noise's largest share of a regressor direction.
+        """
+        axes, responses, total = self._impulses(values, levels)
+        noise = total * sum(levels.axes[k] * g for k, g in zip(axes, responses.grams(a)))
+        shares = []
+
+        def subtracted(gram: np.ndarray) -> np.ndarray:
+            part, share = subtracted_noise(gram, noise, largest=levels.largest_share)
+            shares.append(share)
+            return part
+        lag = self.lag(values, a)
+        theta, _ = self.problem(values).profile_solution(
+            a, transform=None if lag is None else lag.transform, noise=subtracted)
+        return theta, shares[0]
 
     def _profile_descent(self, values: Mapping[str, float], a: np.ndarray, max_iter: int, *,
                          steps_only: bool = False):
@@ -1031,45 +1063,34 @@ def _finish(chosen, spec, inputs, estimate, values, value_std, disturbance, fs,
 def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
                               check: Sequence[Window] = ()) -> tuple[ExtendedFit, str | None]:
     """
-    Return ``fit`` with its sensor mode corrected for the accelerometer's noise, and a note.
+    Return ``fit`` corrected for the accelerometer's noise, and a note saying how.
 
     The least damped pair moves to the least ratio of the loss on ``windows`` (the measured
-    ones) to the noise the model should leave (:func:`.input_noise.refine_mode`); the
-    numerators, disturbance coefficients and uncertainties are then solved at it, the
-    searched values kept. With ``check`` (held-out windows), the ratio there must fall by
+    ones) to the noise the model should leave (:func:`.input_noise.refine_mode`); with
+    ``check`` (held-out windows) the ratio there must fall by
     :data:`~.input_noise.MIN_CHECK_GAIN` too: a narrow mode can fit the calibration noise.
-    Returns ``(fit, None)`` unchanged when the windows have no pre-trigger to measure the
-    noise on or the ratio does not fall enough.
+    At that denominator (moved or not) the numerators and disturbance coefficients are
+    solved bias-compensated (:meth:`_Fitter.compensated`), the uncertainties recomputed and
+    the searched values kept. Returns ``(fit, None)`` unchanged when the windows have no
+    pre-trigger to measure the noise on.
     """
-    windows, check = list(windows), list(check)
+    windows = list(windows)
     levels = noise_levels(windows)
-    if levels is None or fit.spec.nf < 2:
+    if levels is None:
         return fit, None
     disturbances = () if fit.disturbance is None else fit.disturbance.effects
     choices = () if fit.disturbance is None else fit.disturbance.choices
     fitter = _Fitter(windows, fit.spec, fit.fs, disturbances, choices)
     values = dict(fit.values)
-    refined = refine_mode(fit.estimate.a, fitter.noise_ratio(values, levels), fs=fit.fs,
-                          feasible=fitter.feasible)
-    if refined is None:
-        return fit, None
-    held_out = ''
-    check_levels = noise_levels(check) if check else None
-    if check_levels is not None:
-        ratio = _Fitter(check, fit.spec, fit.fs, disturbances, choices).noise_ratio(
-            values, check_levels)
-        before = ratio(fit.estimate.a)
-        gain = (before - ratio(refined.a)) / before
-        if not gain > MIN_CHECK_GAIN:
-            return fit, None
-        held_out = f', on the held-out shots by {100 * gain:.2f} %'
-    (hz0, zeta0), (hz, zeta) = refined.before, refined.after
-    note = (f'sensor mode corrected for the accelerometer\'s noise: {hz0 / 1e3:.1f} kHz, '
-            f'ζ {zeta0:.3f} → {hz / 1e3:.1f} kHz, ζ {zeta:.3f} (least squares damp a mode '
-            f'to keep that noise out of the prediction; the loss over the noise it should '
-            f'leave fell by {100 * refined.gain:.2f} %{held_out})')
-    estimate, coef, cov = fitter.at(values, refined.a, method=(
-        f'{fit.estimate.method}; mode corrected for the accelerometer noise'))
+    refined, moved = _moved_mode(fit, fitter, values, levels, list(check))
+    a = fit.estimate.a if refined is None else refined.a
+    estimate, coef, cov = fitter.at(values, a, method=(
+        f'{fit.estimate.method}; corrected for the accelerometer noise'))
+    theta, share = fitter.compensated(values, a, levels)
+    nf, q = fit.spec.nf, estimate.b.size
+    estimate = replace(estimate, b=theta[nf:nf + q].reshape(estimate.b.shape))
+    if coef is not None:
+        coef = theta[nf + q:]
     value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
                  for s in fit.spec.searches}
     disturbance = None if coef is None else DisturbanceFit(
@@ -1077,7 +1098,38 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     chosen = [get_effect(e) for e in fit.effects]
     new = _finish(chosen, fit.spec, fit.inputs, estimate, values, value_std, disturbance,
                   fit.fs, fit.denominators)
+    held = (f', held at {100 * levels.largest_share:.0f} %'
+            if share > levels.largest_share else '')
+    note = (f'corrected for the accelerometer\'s noise (errors in variables): {moved}'
+            f'numerators bias-compensated (the noise makes up to {100 * share:.1f} % of a '
+            f'regressor direction{held})')
     return replace(robust_uncertainty(new, windows), _base=fit._base), note
+
+
+def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLevels,
+                check: list[Window]) -> tuple[Refinement | None, str]:
+    """Return the refined mode of ``fit`` (None: it stays) and words for the note."""
+    if fit.spec.nf < 2:
+        return None, ''
+    refined = refine_mode(fit.estimate.a, fitter.noise_ratio(values, levels), fs=fit.fs,
+                          feasible=fitter.feasible)
+    if refined is None:
+        return None, ''
+    held_out = ''
+    check_levels = noise_levels(check) if check else None
+    if check_levels is not None:
+        ratio = _Fitter(check, fit.spec, fit.fs, fitter.disturbances,
+                        fitter.choices).noise_ratio(values, check_levels)
+        before = ratio(fit.estimate.a)
+        gain = (before - ratio(refined.a)) / before
+        if not gain > MIN_CHECK_GAIN:
+            return None, ''
+        held_out = f', on the held-out shots by {100 * gain:.2f} %'
+    (hz0, zeta0), (hz, zeta) = refined.before, refined.after
+    return refined, (f'sensor mode {hz0 / 1e3:.1f} kHz, ζ {zeta0:.3f} → {hz / 1e3:.1f} kHz, '
+                     f'ζ {zeta:.3f} (least squares damp a mode to keep that noise out of '
+                     f'the prediction; the loss over the noise it should leave fell by '
+                     f'{100 * refined.gain:.2f} %{held_out}); ')
 
 
 def _block(disturbance: DisturbanceFit, index: int) -> tuple[np.ndarray, np.ndarray]:

@@ -556,7 +556,7 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
             fit, measured, check=shot_windows([s for s in sources.validation if s.shots]))
     except (IdentError, EffectError, ArithmeticError, ValueError,
             np.linalg.LinAlgError) as exc:  # the fit stands as it was
-        correction = f'the sensor mode was not corrected for the accelerometer noise: {exc}'
+        correction = f'the fit was not corrected for the accelerometer noise: {exc}'
     notes += [correction] if correction else []
     # Another cause with the same map from the measured acceleration compensates alike;
     # only the name and its parameters are in doubt.

@@ -8,7 +8,10 @@ variables): at 1.2 MS/s a 42 kHz mode with ζ 0.08 read ζ 0.25 and left the pul
 ringing in the residual. :func:`refine_mode` moves the least damped pole pair to the least
 ratio of the loss to the noise the model should leave, the pressure's own plus the
 acceleration noise through the model (Koopmans' criterion, numerators by least squares).
-Reasoning and measurements: ``doc/identification.md`` (accelerometer noise).
+The numerators are attenuated alike (a derivative input, whose noise can outweigh its
+signal, most): :func:`subtracted_noise` gives the noise's share of the regressors' products
+to subtract (bias-compensated least squares). Reasoning and measurements:
+``doc/identification.md`` (accelerometer noise).
 """
 
 from __future__ import annotations
@@ -23,9 +26,9 @@ from scipy import optimize
 from ..estimators.polynomials import continuous_poles
 from ..shots.windows import Window
 
-__all__ = ['BOUND_FACTOR', 'FASTEST', 'FAST_SHARE', 'MAX_SHIFT', 'MIN_CHECK_GAIN', 'MIN_GAIN',
-           'MIN_ZETA', 'QUIET_PARTS', 'NoiseLevels', 'Refinement', 'noise_levels',
-           'refine_mode']
+__all__ = ['BOUND_FACTOR', 'CORRECTION_ERROR', 'FASTEST', 'FAST_SHARE', 'MAX_SHIFT',
+           'MIN_CHECK_GAIN', 'MIN_GAIN', 'MIN_ZETA', 'QUIET_PARTS', 'NoiseLevels', 'Refinement',
+           'noise_levels', 'refine_mode', 'subtracted_noise']
 
 #: Least damping the refined mode may take: below it a pair is a narrow band filter whose
 #: noise gain the finite data estimate too poorly to correct for.
@@ -50,6 +53,10 @@ MAX_EVALUATIONS = 80
 #: filters the accelerometer's noise away alike), slower ones (tails) stay; and the
 #: fastest rate they may take, in units of the sample rate (2π fs).
 FAST_SHARE, FASTEST = 0.1, 10.0
+#: Largest relative error of a numerator's compensation that the noise variance's own
+#: sampling error may cause: where the noise makes a share λ of a regressor direction, the
+#: compensation 1/(1 − λ) errs by λ/(1 − λ) times the variance's relative error.
+CORRECTION_ERROR = 0.1
 
 
 @dataclass(frozen=True)
@@ -60,11 +67,24 @@ class NoiseLevels:
     Attributes:
         pressure: Of the pressure, Pa².
         axes: Of each acceleration axis (x, y, z), (m/s²)².
+        samples: Pre-trigger samples they were measured on.
 
     """
 
     pressure: float
     axes: np.ndarray
+    samples: int = 0
+
+    @property
+    def largest_share(self) -> float:
+        """
+        Return the largest noise share of a regressor direction to compensate fully.
+
+        The variances' relative standard error is about ``√(2/samples)``; beyond this share
+        the compensation would err by more than :data:`CORRECTION_ERROR`.
+        """
+        error = math.sqrt(2 / max(self.samples, 1))
+        return CORRECTION_ERROR / (CORRECTION_ERROR + error)
 
 
 @dataclass(frozen=True)
@@ -106,7 +126,27 @@ def noise_levels(windows: Sequence[Window]) -> NoiseLevels | None:
         return None
     axes = np.array([_quiet_variance([w.acceleration[k, :w.baseline] for w in pre])
                      for k in range(3)], dtype=np.float64)
-    return NoiseLevels(pressure, axes)
+    return NoiseLevels(pressure, axes, sum(w.baseline for w in pre))
+
+
+def subtracted_noise(gram: np.ndarray, noise: np.ndarray, *,
+                     largest: float) -> tuple[np.ndarray, float]:
+    """
+    Return the part of ``gram`` (``ΦᵀΦ``) to subtract for the inputs' noise, and its top share.
+
+    ``noise`` is its expected share of ``ΦᵀΦ``. In the directions where that share
+    exceeds ``largest`` it is held to ``largest``: there the compensation ``1/(1 − λ)``
+    grows without bound and the noise level is not known well enough to apply it; and
+    nothing when ``gram`` is not positive definite (least squares stand). The top share is
+    the noise's largest share of a direction, before the hold (0 without a subtraction).
+    """
+    try:
+        c = np.linalg.cholesky(gram)
+    except np.linalg.LinAlgError:
+        return np.zeros_like(noise), 0.0
+    m = np.linalg.solve(c, np.linalg.solve(c, noise).T)
+    share, u = np.linalg.eigh((m + m.T) / 2)
+    return c @ (u * np.clip(share, 0.0, largest)) @ u.T @ c.T, float(max(share[-1], 0.0))
 
 
 def _least_damped(s: np.ndarray, fs: float) -> int | None:
