@@ -538,6 +538,7 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                f'on nf={chosen}')
         if not gain > 0:
             held = None
+    denoised = False
     if held is not None:
         fit, notes = held, [f'{names} fitted as the diagnosis fits it (two poles, lag-free '
                             f'numerators, a lightly damped mode, on the measured pressure): '
@@ -548,15 +549,19 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
         if data.denoiser is not None:
             fit, denoising = _undenoised(fit, doubts[chosen], measured, effects, sources.fs,
                                          base)
-            if not denoising:  # the uncertainty is the measured data's, not the EMD's
-                fit = robust_uncertainty(fit, measured)
+            denoised = not denoising
             notes += denoising
     try:
-        fit, correction = corrected_for_input_noise(
+        corrected, correction = corrected_for_input_noise(
             fit, measured, check=shot_windows([s for s in sources.validation if s.shots]))
     except (IdentError, EffectError, ArithmeticError, ValueError,
             np.linalg.LinAlgError) as exc:  # the fit stands as it was
+        corrected = None
         correction = f'the fit was not corrected for the accelerometer noise: {exc}'
+    if corrected is not None and correction is not None:  # its uncertainty is the measured's
+        fit = corrected
+    elif denoised:  # the uncertainty is the measured data's, not the EMD's
+        fit = robust_uncertainty(fit, measured)
     notes += [correction] if correction else []
     # Another cause with the same map from the measured acceleration compensates alike;
     # only the name and its parameters are in doubt.
