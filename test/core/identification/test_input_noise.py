@@ -18,8 +18,8 @@ from scipy import signal
 
 from sensor_comp.core.identification.extended import corrected_for_input_noise, fit_extended
 from sensor_comp.core.estimators.oe import OutputErrorProblem
-from sensor_comp.core.identification.input_noise import (noise_levels, refine_mode,
-                                                         subtracted_noise)
+from sensor_comp.core.identification.input_noise import (CORRECTION_ERROR, noise_levels,
+                                                         refine_mode, subtracted_noise)
 from sensor_comp.core.shots.inputs import mode_pair
 from sensor_comp.core.shots.windows import Window
 
@@ -73,6 +73,12 @@ def test_noise_levels_skip_a_pulse_rising_before_the_trigger():
     # 6000 samples per median of quarters: the variance within 10 % (about 5 std).
     assert levels.pressure == pytest.approx(25.0, rel=0.1)
     assert levels.axes == pytest.approx([4.0, 4.0, 4.0], rel=0.1)
+    # Known to about √(2/8000) = 1.6 %: a share λ is compensated fully while the error
+    # λ/(1 − λ) · 1.6 % stays within CORRECTION_ERROR.
+    assert levels.samples == 8000
+    error = math.sqrt(2 / 8000)
+    assert levels.largest_share / (1 - levels.largest_share) * error == pytest.approx(
+        CORRECTION_ERROR, rel=1e-9)
     assert noise_levels([Window(acceleration=np.zeros((3, 100)), y=np.zeros(100), start=0,
                                 baseline=0, source=0)]) is None
 
