@@ -109,7 +109,7 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
-#: Sample at which the unit impulse of :meth:`_Fitter.noise_ratio` is applied.
+#: Sample at which the unit impulses of :meth:`_Fitter._impulses` are applied.
 IMPULSE_AT = 64
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
