@@ -152,6 +152,7 @@ class OutputErrorProblem:
             for a, b in zip(self.offsets[:-1], self.offsets[1:])]
         self.n_parameters = nf + self.n_inputs * nb + self.n_extra
         self._last: tuple[bytes, list[np.ndarray]] | None = None
+        self._solved: tuple | None = None
 
     def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(F, B (n_inputs, nb), d)`` of the parameters ``theta``."""
@@ -260,14 +261,12 @@ class OutputErrorProblem:
         if noise is not None:
             gram[:q, :q] -= noise(gram[:q, :q])
         if transform is not None:
-            narrow = np.zeros((p, transform.shape[1] + self.n_extra))
-            narrow[:q, :transform.shape[1]] = transform
-            narrow[q:, transform.shape[1]:] = np.eye(self.n_extra)
+            narrow = self._narrow(transform)
             gram, moment = narrow.T @ gram @ narrow, narrow.T @ moment
         try:
-            theta = solve_normal(gram, moment, 0.0)
+            theta, ridge = solve_normal(gram, moment, 0.0), 0.0
         except IdentError:
-            theta = solve_normal(gram, moment, 1e-10)
+            theta, ridge = solve_normal(gram, moment, 1e-10), 1e-10
         if transform is not None:
             theta = np.concatenate([transform @ theta[:transform.shape[1]],
                                     theta[transform.shape[1]:]])
@@ -277,7 +276,88 @@ class OutputErrorProblem:
             out[self.offsets[s]:self.offsets[s + 1]] = self._output(s, x, b, d)
         if not np.all(np.isfinite(out)):
             raise IdentError('the profile residual is not finite')
-        return np.concatenate([f[1:], theta]), np.subtract(self.y, out, out=out)
+        theta, e = np.concatenate([f[1:], theta]), np.subtract(self.y, out, out=out)
+        if noise is None:  # what :meth:`profile_jacobian` projects with
+            self._solved = (self._key(f, transform), gram, ridge, theta, e)
+        return theta, e
+
+    def _narrow(self, transform: np.ndarray) -> np.ndarray:
+        """Return the map from ``(z, d)`` to ``(b row by row, d)`` of a ``transform``."""
+        q = self.n_inputs * self.nb
+        narrow = np.zeros((q + self.n_extra, transform.shape[1] + self.n_extra))
+        narrow[:q, :transform.shape[1]] = transform
+        narrow[q:, transform.shape[1]:] = np.eye(self.n_extra)
+        return narrow
+
+    @staticmethod
+    def _key(f: np.ndarray, transform: np.ndarray | None) -> tuple[bytes, bytes | None]:
+        return f.tobytes(), None if transform is None else transform.tobytes()
+
+    def profile_jacobian(self, f: np.ndarray, *, transform: np.ndarray | None = None,
+                         drift: np.ndarray | None = None,
+                         rates: np.ndarray | None = None) -> np.ndarray:
+        """
+        Return ``∂ŷ/∂(f1..fnf)`` of the profile residual at the last solution (Kaufman).
+
+        Variable projection's Jacobian without its second term: the output's derivative at
+        fixed numerators, ``−q^-j (Σ B_i x_i)/F``, projected off the regressors' span. It
+        gives the profile loss's exact gradient (the dropped term is orthogonal to the
+        residual) from one more filtered signal per segment, where forward differences
+        refilter every input once per coefficient. A ``transform`` that follows ``F`` moves
+        the numerators by ``rates[j]·drift`` (``(n_inputs, nb)``) per unit ``f_j``.
+
+        Raises:
+            ValueError: When the last :meth:`profile_solution` was not at ``f`` and
+                ``transform``.
+
+        """
+        solved = self._solved
+        if solved is None or solved[0] != self._key(f, transform):
+            raise ValueError('profile_jacobian needs the profile solution at the same F')
+        _, gram, ridge, theta, e = solved
+        _, b, d = self.unpack(theta)
+        through = self.y - e  # the output through 1/F: less the extra columns' part
+        if self.extra is not None:
+            through = through - self.extra @ d
+        columns = np.zeros((self.nf, self.y.size))  # one row per coefficient
+        for s, x in enumerate(self.filtered(f)):
+            start, stop = self.offsets[s], self.offsets[s + 1]
+            twice = signal.lfilter([1.0], f, through[start:stop])
+            moved = None if drift is None else lagged_sum(x, drift, self.nk)
+            for j in range(self.nf):
+                row = columns[j, start:stop]
+                row[j + 1:] = -twice[:row.size - j - 1]
+                if moved is not None:
+                    row += rates[j] * moved
+        # Off the span of the regressors: less their least-squares fit to each column.
+        narrow = None if transform is None else self._narrow(transform)
+        moments = self._moments(f, columns)
+        moments = moments if narrow is None else narrow.T @ moments
+        fit = np.column_stack([solve_normal(gram, m, ridge) for m in moments.T])
+        fit = fit if narrow is None else narrow @ fit
+        q = self.n_inputs * self.nb
+        for s, x in enumerate(self.filtered(f)):
+            part = columns[:, self.offsets[s]:self.offsets[s + 1]]
+            for j in range(self.nf):
+                part[j] -= self._output(s, x, fit[:q, j].reshape(self.n_inputs, self.nb),
+                                        fit[q:, j])
+        return columns.T
+
+    def _moments(self, f: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """Return ``Φᵀ cᵀ`` at ``F`` of rows ``c`` (numerator lags row by row, then extras)."""
+        q = self.n_inputs * self.nb
+        out = np.zeros((q + self.n_extra, columns.shape[0]))
+        for s, x in enumerate(self.filtered(f)):
+            c = columns[:, self.offsets[s]:self.offsets[s + 1]]
+            m = x.shape[1]
+            for i in range(self.n_inputs):
+                for k in range(self.nb):
+                    lag = self.nk + k
+                    if lag < m:
+                        out[i * self.nb + k] += c[:, lag:] @ x[i, :m - lag]
+            if self.extra is not None:
+                out[q:] += self._extra_rows[s] @ c.T
+        return out
 
     def _products(self, s: int, x: np.ndarray, target: np.ndarray,
                   z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -603,7 +603,7 @@ class _Fitter:
         A lag-free fit's constraint moves with the denominator, so the denominator is found
         first by Levenberg-Marquardt on the profile loss (numerators and disturbance
         coefficients solved exactly at every trial, the constraint at the trial's own lag;
-        a forward-difference Jacobian over the ``nf`` coefficients), then everything is
+        Kaufman's Jacobian, :meth:`_profile_residual`), then everything is
         refitted jointly at the lag found and the numerators mapped back.
         """
         method = 'output error from the best start denominator'
@@ -703,22 +703,22 @@ class _Fitter:
             max_iter=max_iter, tol=GAIN / self.problem(values).y.size, steps_only=steps_only)
 
     def _profile_residual(self, values: Mapping[str, float], x: np.ndarray, jacobian: bool):
-        """Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``)."""
-        def at(x):
-            a = np.concatenate([[1.0], x])
-            return self.problem(values).profile_residual(
-                a, transform=self.lag(values, a).transform)
+        """
+        Return the lag-free profile residual at ``F = [1, x]`` (and ``∂ŷ/∂x``).
 
-        e = at(x)
+        The Jacobian is variable projection's (Kaufman's, :meth:`.OutputErrorProblem.
+        profile_jacobian`), the held numerators moving with the lag they are held to.
+        """
+        a = np.concatenate([[1.0], x])
+        lag = self.lag(values, a)
+        problem = self.problem(values)
+        theta, e = problem.profile_solution(a, transform=lag.transform)
         if not jacobian:
             return e
-        columns = []
-        for j in range(x.size):
-            step = 1e-5 * max(abs(x[j]), 1e-2)
-            moved = x.copy()
-            moved[j] += step
-            columns.append((e - at(moved)) / step)
-        return e, np.column_stack(columns)
+        drift = lag.drift(theta[x.size:x.size + problem.n_inputs * problem.nb])
+        return e, problem.profile_jacobian(
+            a, transform=lag.transform, drift=None if drift is None else drift[0],
+            rates=None if drift is None else drift[1])
 
     def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
         """Return the least loss over the start denominators, numerators re-solved."""

@@ -24,12 +24,40 @@ import numpy as np
 from ..effects.base import centroid, mechanics_delay_s
 from ..shots.inputs import parse_channel
 
-__all__ = ['LagFree', 'target_lag']
+__all__ = ['LagFree', 'target_lag', 'target_lag_rates']
 
 
 def target_lag(a: np.ndarray, fs: float) -> float:
     """Return ``D(a)``: the numerator centroid, in samples, of a path lagging as ``a``."""
     return centroid(a) + mechanics_delay_s(a, fs) * fs
+
+
+def target_lag_rates(a: np.ndarray, fs: float) -> np.ndarray:
+    """
+    Return ``∂D/∂a_j`` for ``j = 1 … nf``: how the lag a path is held to moves with ``a``.
+
+    Analytic through the poles (``∂z/∂a_j = −z^(nf−j)/A'(z)``); by central differences
+    where two poles coincide (there ``A'(z)`` vanishes).
+    """
+    a = np.asarray(a, dtype=np.float64)
+    nf = a.size - 1
+    rates = (np.arange(1, nf + 1) - centroid(a)) / a.sum()
+    poles = np.roots(a).astype(complex)
+    slope = np.polyval(np.polyder(a), poles)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        # D's pole part is Σ −1/log z; d(−1/log z)/dz = 1/(z log² z).
+        outer = 1.0 / (poles * np.log(poles) ** 2 * slope)
+        analytic = rates - np.real(outer @ poles[:, np.newaxis] ** (nf - np.arange(1, nf + 1)))
+    if np.all(np.abs(slope) > 1e-6) and np.all(np.isfinite(analytic)):
+        return analytic
+    out = np.empty(nf)
+    for j in range(1, nf + 1):
+        step = 1e-5 * max(abs(a[j]), 1e-2)
+        up, down = a.copy(), a.copy()
+        up[j] += step
+        down[j] -= step
+        out[j - 1] = (target_lag(up, fs) - target_lag(down, fs)) / (2 * step)
+    return out
 
 
 def _free(name: str) -> bool:
@@ -52,13 +80,16 @@ class LagFree:
 
     def __init__(self, names: Sequence[str], a: np.ndarray, nb: int, nk: int, fs: float):
         self.names, self.nb = tuple(names), nb
-        self.lag = target_lag(np.asarray(a, dtype=np.float64), fs)
+        self._a, self._fs = np.asarray(a, dtype=np.float64), fs
+        self.lag = target_lag(self._a, fs)
         c = np.arange(nk, nk + nb) - self.lag
         held = nb >= 2 and np.all(np.isfinite(c))
         null = np.linalg.svd(c[np.newaxis])[2][1:] if held else np.eye(nb)
+        self._c = c
+        self._held = [held and not _free(name) for name in self.names]
         blocks, taps = [], []
-        for name in self.names:
-            block = np.eye(nb) if _free(name) or not held else null.T
+        for name, row_held in zip(self.names, self._held):
+            block = null.T if row_held else np.eye(nb)
             blocks.append(block)
             taps.append([np.concatenate([np.zeros(nk), v]) for v in block.T])
         self._taps = taps
@@ -81,6 +112,21 @@ class LagFree:
                     out[index, lag:] += t[lag] * row[:n - lag]
                 index += 1
         return out
+
+    def drift(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """
+        Return how lag-free numerators ``b`` move with ``a``: ``(direction, ∂D/∂a_j)``.
+
+        A held row moves along ``c``, ``δb = c·δD·Σb/cᵀc``, so ``cᵀb = 0`` holds to first
+        order as the lag ``D(a)`` it is held to moves (None: no row is held).
+        """
+        if not any(self._held):
+            return None
+        b = np.asarray(b, dtype=np.float64).reshape(len(self.names), self.nb)
+        direction = np.zeros_like(b)
+        rows = np.flatnonzero(self._held)
+        direction[rows] = np.outer(b[rows].sum(axis=1), self._c) / float(self._c @ self._c)
+        return direction, target_lag_rates(self._a, self._fs)
 
     def numerators(self, z: np.ndarray) -> np.ndarray:
         """Return the numerators ``(n_channels, nb)`` of expanded coefficients ``z``."""

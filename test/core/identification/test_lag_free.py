@@ -9,7 +9,7 @@ from scipy import signal
 from sensor_comp.core.effects.base import dc_delay_s, mechanics_delay_s
 from sensor_comp.core.estimators.oe import OutputErrorProblem
 from sensor_comp.core.identification.extended import fit_extended, Window
-from sensor_comp.core.identification.lag_free import LagFree, target_lag
+from sensor_comp.core.identification.lag_free import LagFree, target_lag, target_lag_rates
 from sensor_comp.core.shots.inputs import mode_pair
 
 FS = 500e3
@@ -117,3 +117,46 @@ def test_a_damping_bound_keeps_only_lightly_damped_modes():
     # The simulated sensor (40 kHz, ζ = 0.05) is inside the bound: found as it is.
     assert np.abs(s[0]) / (2 * math.pi) == pytest.approx(40e3, rel=0.01)
     assert zeta[0] == pytest.approx(0.05, abs=0.01)
+
+
+@pytest.mark.parametrize('a', [mode_pair(30.0, 0.07, FS),
+                               np.convolve(mode_pair(45.0, 0.03, FS), [1.0, -0.9])])
+def test_the_held_lag_moves_with_the_denominator_as_its_differences_say(a):
+    rates = target_lag_rates(a, FS)
+    for j in range(1, a.size):
+        step = 1e-5
+        up, down = a.copy(), a.copy()
+        up[j] += step
+        down[j] -= step
+        assert rates[j - 1] == pytest.approx(
+            (target_lag(up, FS) - target_lag(down, FS)) / (2 * step), rel=1e-5)
+
+
+def test_the_profile_gradient_follows_the_held_lag():
+    # Kaufman's Jacobian with the numerators moving along the held lag gives the profile
+    # loss's exact gradient (its columns only approximately: its second term is dropped).
+    a = mode_pair(30.0, 0.07, FS)
+    rng = np.random.default_rng(5)
+    us = [rng.standard_normal((2, 400)) for _ in range(3)]
+    num, den = _foh(25e3, 0.1)
+    ys = [signal.lfilter(num, den, u[0]) + 0.3 * signal.lfilter([0.0, 0.2], den, u[1])
+          for u in us]
+    names = ['a_z', 'da_z@mode=50.0,0.7']
+    problem = OutputErrorProblem(us, ys, 2, 3, 0)
+
+    def solution(a):
+        lag = LagFree(names, a, 3, 0, FS)
+        return lag, *problem.profile_solution(a, transform=lag.transform)
+
+    lag, theta, e = solution(a)
+    direction, rates = lag.drift(theta[2:8])
+    jac = problem.profile_jacobian(a, transform=lag.transform, drift=direction, rates=rates)
+    for j in (1, 2):
+        step = 1e-6
+        moved = a.copy()
+        moved[j] += step
+        loss = float(solution(moved)[2] @ solution(moved)[2])
+        moved[j] -= 2 * step
+        down = solution(moved)[2]
+        slope = (loss - float(down @ down)) / (2 * step)
+        assert -2 * float(e @ jac[:, j - 1]) == pytest.approx(slope, rel=1e-4)
