@@ -847,10 +847,9 @@ class _Fitter:
         else:
             at = [self.profile({**values, search.key: v}, f) for v in values_at]
         curvature = (at[2] - 2 * at[1] + at[0]) / step ** 2
-        if not curvature > 0:
-            return None
-        spread = math.sqrt(2 * variance / curvature)
-        spread = spread * value if search.log else spread
+        spread = math.sqrt(2 * variance / curvature) if curvature > 0 else None
+        if spread is not None and search.log:
+            spread *= value
         return _with_traded_lag(spread, search, self.spec, self.fs, f)
 
 
@@ -861,15 +860,17 @@ def _with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: flo
 
     Behind the anti-alias filter the data do not pin the sensor's mode: it damps itself to
     the bound and holds part of a delay (a 47.5 kHz, ζ 0.1 mode read as 20.5 kHz, ζ 0.2
-    took 3.1 µs of a 60 µs delay), which the delay's deviation must own.
+    took 3.1 µs of a 60 µs delay), which the delay's deviation must own. There the loss's
+    curvature is often not resolved (descents stop on the bound, ``std`` None): the traded
+    lag is then the deviation stated.
     """
-    if (std is None or not search.lag_unit_s or not spec.lag_free or spec.max_zeta is None
-            or f.size < 3):
+    if not search.lag_unit_s or not spec.lag_free or spec.max_zeta is None or f.size < 3:
         return std
     least = _least_damping(continuous_poles(f, fs)[0])
     if least is None or least < BOUND_SHARE * spec.max_zeta:
         return std
-    return math.hypot(std, max(mechanics_delay_s(f, fs), 0.0) / search.lag_unit_s)
+    traded = max(mechanics_delay_s(f, fs), 0.0) / search.lag_unit_s
+    return traded if std is None else math.hypot(std, traded)
 
 
 def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:

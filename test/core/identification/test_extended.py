@@ -18,12 +18,13 @@ from sensor_comp.bundled import bundled_bag
 from sensor_comp.core.compensation.filter import CompensationFilter, compensate_recording
 from sensor_comp.core.effects import EffectError
 from sensor_comp.core.compensation import initial_state
-from sensor_comp.core.identification.extended import fit_extended, shot_windows
+from sensor_comp.core.effects.base import mechanics_delay_s, ModelSpec, Search
+from sensor_comp.core.identification.extended import _with_traded_lag, fit_extended, shot_windows
 from sensor_comp.core.estimators import fit_percent, simulate_output
 from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.core.identification.model import load
 from sensor_comp.io.bag_reader import read_recording
-from sensor_comp.core.shots.inputs import input_channels
+from sensor_comp.core.shots.inputs import input_channels, mode_pair
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import G0, Recording
 
@@ -352,3 +353,17 @@ def test_a_high_pass_charge_outlasting_the_gap_between_shots_is_carried_over():
     fit = fit_extended(windows, effects=('amplifier_highpass',), fs=200e3, nf=2, nb=3, nk=0)
     tau, std = fit.parameters('amplifier_highpass')['tau_ms']
     assert abs(tau - 30.0) <= 3 * std and std < 0.03 * 30.0
+
+
+def test_a_mode_at_its_damping_bound_owns_the_lag_it_took_even_unresolved():
+    # The traded lag is the delay's deviation when the loss's curvature is not resolved.
+    fs = 200e3
+    spec = ModelSpec(nf=2, nb=3, nk=0, fs=fs, lag_free=True, max_zeta=0.2)
+    search = Search('channel_delay.delay_us', 0.0, 200.0, coupled=True, lag_unit_s=1e-6)
+    bound, free = mode_pair(30.0, 0.2, fs), mode_pair(30.0, 0.05, fs)
+    traded = 1e6 * mechanics_delay_s(bound, fs)
+    assert traded > 1.0
+    assert _with_traded_lag(None, search, spec, fs, bound) == pytest.approx(traded)
+    assert _with_traded_lag(0.5, search, spec, fs, bound) == pytest.approx(
+        math.hypot(0.5, traded))
+    assert _with_traded_lag(None, search, spec, fs, free) is None  # a resolved mode: as is
