@@ -91,7 +91,7 @@ from scipy import stats
 from ..effects import Effect, EFFECTS, get_effect, Outcome, Physical
 from ..effects.mains_hum import line_columns
 from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, Prediction,
-                                       shot_windows, Window)
+                                       search_effort, shot_windows, Window)
 from ..identification.held_base import base_fits, fit_on_base, modes_khz
 from ..estimators import estimate_delay, fit_percent
 from ..identification.identify import prepare_sources, ShotSource
@@ -555,7 +555,8 @@ def _candidates(ids: Sequence[str], ctx: _Context, progress,
     Fit and score every candidate; a failing one is a note, the others go on.
 
     The fits are independent: they are shared with a helper process when worth it
-    (:mod:`sensor_comp.sharing`; each fit is the same), the scores are computed here.
+    (:mod:`sensor_comp.sharing`; each fit is the same, the costliest started first), the
+    scores are computed here.
     """
     ranked, skipped = [], []
     context = {'modes_khz': modes_khz(ctx.base.estimate.a, ctx.fs)}
@@ -567,17 +568,20 @@ def _candidates(ids: Sequence[str], ctx: _Context, progress,
             fitted.append(effect_id)
         else:
             skipped.append(Skipped(effect_id, reason))
+    costliest = sorted(fitted, key=lambda e: -search_effort(
+        ctx.base_effects + (e,), fs=ctx.fs, lag_free=ctx.lag_free))
     nf, nb, nk = ctx.orders
     jobs = [(ctx.calibration, ctx.base_effects + (effect_id,), ctx.fs, (nf, nb, nk),
-             ctx.base.denominators, ctx.lag_free, context) for effect_id in fitted]
+             ctx.base.denominators, ctx.lag_free, context) for effect_id in costliest]
     processes = pool_size(len(jobs) * sum(w.y.size for w in ctx.calibration),
                           MIN_SHARED_COST)
     with progress('effects', len(ids)) as bar:
         for _ in skipped:
             bar.advance()
-        fits = share(_fit_candidate, jobs, processes=processes, name='diagnosis helper',
-                     done=bar.advance)
-    for effect_id, fit in zip(fitted, fits):
+        fits = dict(zip(costliest, share(_fit_candidate, jobs, processes=processes,
+                                         name='diagnosis helper', done=bar.advance)))
+    for effect_id in fitted:  # catalogue order: ties keep it
+        fit = fits[effect_id]
         if isinstance(fit, str):
             notes.append(f'{effect_id}: not fitted: {fit}')
         else:

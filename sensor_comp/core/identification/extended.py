@@ -64,7 +64,7 @@ from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_c
 
 __all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit',
            'ExtendedFit', 'Prediction', 'Window', 'corrected_for_input_noise', 'fit_extended',
-           'ringing_khz', 'robust_uncertainty', 'shot_windows']
+           'ringing_khz', 'robust_uncertainty', 'search_effort', 'shot_windows']
 
 #: The diagnosis's base structure ``(nf, nb)`` and delay (and a lag-free fit's): a sampled
 #: 2nd-order sensor, exactly.
@@ -94,6 +94,9 @@ RINGING_ZETAS = (0.02, 0.05, 0.1)
 SEARCH_STEPS = 2
 #: A mode damped at least this share of the fits' damping bound sits at the bound.
 BOUND_SHARE = 0.999
+#: Profile losses per grid point of a coupled search, over a plain search's one (the
+#: denominator's steps at each point, the polish): how :func:`search_effort` weighs it.
+COUPLED_EFFORT = 4
 #: Tolerance of a coupled search's polish, and its first step each side of the value,
 #: fractions of the search's grid spacing.
 POLISH_TOLERANCE, POLISH_STEP = 1e-3, 1e-2
@@ -879,6 +882,24 @@ def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
         return [(1.0, np.array([1.0, -math.exp(-2 * math.pi * fn / fs)]))
                 for fn in np.geomspace(fs / 2000, 0.4 * fs, 32)]
     return [(zeta, np.concatenate([pair, np.zeros(nf - 2)])) for zeta, pair in _pairs(fs)]
+
+
+def search_effort(effects: Sequence[str], *, fs: float, lag_free: bool) -> int:
+    """
+    Return how costly fitting ``effects`` is, relatively: their searches' grid points.
+
+    A coupled search's points count :data:`COUPLED_EFFORT` times in a lag-free fit. Shared
+    fits are started costliest first, so that the longest does not start last.
+
+    Raises:
+        EffectError: On an unknown effect.
+
+    """
+    spec = ModelSpec(fs=fs, lag_free=lag_free)
+    for effect in ordered(effects):
+        spec = effect.extend(spec)
+    return sum(s.grid * (COUPLED_EFFORT if s.coupled and lag_free else 1)
+               for s in spec.searches)
 
 
 def fit_extended(windows: Sequence[Window], *, effects: Sequence[str], fs: float,

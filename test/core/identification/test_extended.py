@@ -19,7 +19,8 @@ from sensor_comp.core.compensation.filter import CompensationFilter, compensate_
 from sensor_comp.core.effects import EffectError
 from sensor_comp.core.compensation import initial_state
 from sensor_comp.core.effects.base import mechanics_delay_s, ModelSpec, Search
-from sensor_comp.core.identification.extended import _with_traded_lag, fit_extended, shot_windows
+from sensor_comp.core.identification.extended import (_with_traded_lag, fit_extended,
+                                                      search_effort, shot_windows)
 from sensor_comp.core.estimators import fit_percent, simulate_output
 from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.core.identification.model import load
@@ -353,6 +354,17 @@ def test_a_high_pass_charge_outlasting_the_gap_between_shots_is_carried_over():
     fit = fit_extended(windows, effects=('amplifier_highpass',), fs=200e3, nf=2, nb=3, nk=0)
     tau, std = fit.parameters('amplifier_highpass')['tau_ms']
     assert abs(tau - 30.0) <= 3 * std and std < 0.03 * 30.0
+
+
+def test_search_effort_puts_the_coupled_delay_search_first():
+    # Grid points of the searches, a coupled one's weighted: the order shared fits start in.
+    efforts = {e: search_effort((e,), fs=1e6, lag_free=True)
+               for e in ('channel_delay', 'second_resonance', 'zero_shift',
+                         'transverse_sensitivity')}
+    assert efforts['transverse_sensitivity'] == 0
+    assert efforts['channel_delay'] > efforts['second_resonance'] > efforts['zero_shift'] > 0
+    # Without lag-free numerators the delay is searched uncoupled: its grid alone.
+    assert search_effort(('channel_delay',), fs=1e6, lag_free=False) == 21
 
 
 def test_a_mode_at_its_damping_bound_owns_the_lag_it_took_even_unresolved():
