@@ -92,7 +92,7 @@ from ..effects import Effect, EFFECTS, get_effect, Outcome, Physical
 from ..effects.mains_hum import line_columns
 from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, Prediction,
                                        search_effort, shot_windows, Window)
-from ..identification.held_base import base_fits, fit_on_base, modes_khz
+from ..identification.held_base import fit_on_base, free_base, held_base, modes_khz
 from ..estimators import estimate_delay, fit_percent
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
@@ -435,13 +435,24 @@ def _peak_percent(windows: Sequence[Window], residuals: Sequence[np.ndarray]) ->
                      for w, r in zip(windows, residuals)))
 
 
-def _analyses(model: Model, validation, notes: list[str]) -> tuple:
-    """Return the residual analysis of ``model`` per validation recording (none on failure)."""
+def _analysed(model: Model, validation) -> tuple[tuple, str | None]:
+    """Return the residual analysis of ``model`` per validation recording and a note (a job)."""
     try:
-        return tuple(analyse(model, s.recording, s.shots) for s in validation if s.shots)
+        return tuple(analyse(model, s.recording, s.shots) for s in validation if s.shots), None
     except (SensorCompError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-        notes.append(f'residual analysis: not run: {exc}')
-        return ()
+        return (), f'residual analysis: not run: {exc}'
+
+
+def _beside_base(task: str, *args):
+    """
+    Return the lag-free base (``'held'``) or the free base's residual analysis: a job.
+
+    Both follow the free base and neither needs the other, so they are shared.
+    """
+    if task == 'held':
+        windows, free, bound, effects, fs, orders = args
+        return held_base(windows, free, bound=bound, effects=effects, fs=fs, orders=orders)
+    return _analysed(*args)
 
 
 def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Window],
@@ -481,11 +492,11 @@ def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Win
 def _context(calib, valid, fs: float, orders: tuple[int, int, int],
              base_effects: tuple[str, ...], alpha: float, residual_analysis: bool,
              progress, notes: list[str]) -> _Context:
-    """Fit the base model and measure its validation residual and the noise."""
+    """Fit the base models (the lag-free one beside the residual analysis), measure the noise."""
     cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
         [s for s in valid if s.shots])
     with progress('base model', 1) as bar:
-        free, held = base_fits(cw, effects=base_effects, fs=fs, orders=orders, notes=notes)
+        free, bound = free_base(cw, effects=base_effects, fs=fs, orders=orders, notes=notes)
         bar.advance()
     free_prediction = free.predict(vw)
     free_residual = [w.y - p for w, p in zip(vw, free_prediction.total)]
@@ -495,18 +506,24 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
                              'the noise cannot be measured; detect shots with a longer '
                              'pre-trigger')
     noise = noise_model(quiet, max(1, round(NOISE_LAG_S * fs)))
+    model = free.model()
+    jobs = [('held', cw, free, bound, base_effects, fs, orders)]
+    if residual_analysis:
+        jobs.append(('analysis', model, valid))
+    with progress('lag-free base and residual analysis', len(jobs)) as bar:
+        processes = pool_size(len(jobs) * sum(w.y.size for w in cw), MIN_SHARED_COST)
+        (held, note), *analysed = share(_beside_base, jobs, processes=processes,
+                                        name='diagnosis helper', done=bar.advance)
+    notes.append(note)
+    analyses, note = analysed[0] if analysed else ((), None)
+    if note is not None:
+        notes.append(note)
     base = held or free
     prediction = free_prediction if held is None else held.predict(vw)
     residual = [w.y - p for w, p in zip(vw, prediction.total)]
-    model = free.model()
     ringing = max(1, round(ringing_time_s(model) * fs))
     shots = [shot for s in valid if s.shots for shot in s.shots]
     bounds = [segment_bounds(shot, w.y.size, ringing) for shot, w in zip(shots, vw)]
-    analyses = ()
-    if residual_analysis:
-        with progress('residual analysis', 1) as bar:
-            analyses = _analyses(model, valid, notes)
-            bar.advance()
     return _Context(fs, cw, vw, orders, base_effects, base, prediction, residual, noise,
                     bounds, analyses, alpha, free, free_residual)
 

@@ -21,7 +21,7 @@ from ..estimators.polynomials import resonances
 from .extended import ExtendedFit, fit_extended, SENSOR_ZETA, SLOWEST_POLE_S
 from ..shots.windows import Window
 
-__all__ = ['base_fits', 'fit_on_base', 'MODE_ZETA', 'modes_khz']
+__all__ = ['base_fits', 'fit_on_base', 'free_base', 'held_base', 'MODE_ZETA', 'modes_khz']
 
 #: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
 #: a searched second mode keeps away from.
@@ -38,37 +38,63 @@ def base_fits(windows: Sequence[Window], *, effects: tuple[str, ...], fs: float,
     accelerometer noise, which an exact sensor numerator passes on, so it is the fairer
     judge of clean data); the lag-free one (:mod:`.lag_free`, with two poles: one pole is
     no sensor mode) is what every candidate is fitted and scored against, so that a lead or
-    delay is an effect's. What was done goes to ``notes``.
+    delay is an effect's. :func:`free_base`, then :func:`held_base`; what was done goes to
+    ``notes``.
 
     Raises:
         IdentError: When not even the free base can be fitted.
         EffectError: When one of ``effects`` cannot be fitted.
 
     """
+    free, bound = free_base(windows, effects=effects, fs=fs, orders=orders, notes=notes)
+    held, note = held_base(windows, free, bound=bound, effects=effects, fs=fs, orders=orders)
+    notes.append(note)
+    return free, held
+
+
+def free_base(windows: Sequence[Window], *, effects: tuple[str, ...], fs: float,
+              orders: tuple[int, int, int], notes: list[str]
+              ) -> tuple[ExtendedFit, float | None]:
+    """
+    Return the base fit with free numerators and the slowest pole it was held to.
+
+    Raises:
+        IdentError: When it cannot be fitted even without that bound.
+        EffectError: When one of ``effects`` cannot be fitted.
+
+    """
     nf, nb, nk = orders
     try:
-        free = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
-                            slowest_pole_s=SLOWEST_POLE_S)
-        bound = SLOWEST_POLE_S
+        return fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
+                            slowest_pole_s=SLOWEST_POLE_S), SLOWEST_POLE_S
     except (IdentError, EffectError) as exc:  # as free as the given model, then
         notes.append(f'base: no fit with poles faster than {1e3 * SLOWEST_POLE_S:.3g} ms '
                      f'({exc}); fitted without that bound')
-        free, bound = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk), None
+        return fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk), None
+
+
+def held_base(windows: Sequence[Window], free: ExtendedFit, *, bound: float | None,
+              effects: tuple[str, ...], fs: float, orders: tuple[int, int, int]
+              ) -> tuple[ExtendedFit | None, str]:
+    """
+    Return the lag-free base started from the free one's poles (None: not fitted), and why.
+
+    The note says which base the candidates are fitted on; one pole is no sensor mode,
+    and a fit that fails leaves the numerators free.
+    """
+    nf, nb, nk = orders
     if nf < 2:
-        notes.append('base: numerators free (one pole is no sensor mode, so a channel delay '
-                     'or base strain cannot be told from the sensor\'s own lag)')
-        return free, None
+        return None, ('base: numerators free (one pole is no sensor mode, so a channel delay '
+                      'or base strain cannot be told from the sensor\'s own lag)')
     try:
         held = fit_extended(windows, effects=effects, fs=fs, nf=nf, nb=nb, nk=nk,
                             starts=free.denominators, slowest_pole_s=bound, lag_free=True,
                             max_zeta=SENSOR_ZETA)
     except (IdentError, EffectError) as exc:
-        notes.append(f'base: numerators free (no lag-free fit: {exc})')
-        return free, None
-    notes.append('base: candidates fitted and scored with lag-free numerators (a lead or '
-                 'delay is an effect\'s, not the sensor path\'s); the verdict without an '
-                 'effect is the free-numerator base\'s')
-    return free, held
+        return None, f'base: numerators free (no lag-free fit: {exc})'
+    return held, ('base: candidates fitted and scored with lag-free numerators (a lead or '
+                  'delay is an effect\'s, not the sensor path\'s); the verdict without an '
+                  'effect is the free-numerator base\'s')
 
 
 def modes_khz(a: np.ndarray, fs: float) -> tuple[float, ...]:
