@@ -326,7 +326,8 @@ class OutputErrorProblem:
             moved = None if drift is None else lagged_sum(x, drift, self.nk)
             for j in range(self.nf):
                 row = columns[j, start:stop]
-                row[j + 1:] = -twice[:row.size - j - 1]
+                if row.size > j + 1:  # q^-(j+1) of the twice-filtered output, from rest
+                    row[j + 1:] = -twice[:row.size - j - 1]
                 if moved is not None:
                     row += rates[j] * moved
         # Off the span of the regressors: less their least-squares fit to each column.
