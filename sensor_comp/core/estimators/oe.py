@@ -246,11 +246,15 @@ class OutputErrorProblem:
         Return ``(θ, y − Φθ)``: :meth:`profile_residual` with the parameters it solved.
 
         ``θ`` holds ``F``'s coefficients (without the leading 1), then the numerators row by
-        row (mapped back through ``transform``), then the extra coefficients. ``noise``
+        row (mapped back through ``transform``), then the extra coefficients; the last
+        solution is kept and returned again for the same ``F`` (not to be modified). ``noise``
         maps the numerators' block of ``ΦᵀΦ`` to the share of it the inputs' own noise
         makes, which is subtracted: numerators bias-compensated for noisy inputs (errors in
         variables).
         """
+        if noise is None and self._solved is not None and \
+                self._solved[0] == self._key(f, transform):
+            return self._solved[3], self._solved[4]  # a descent's step, then its Jacobian
         q = self.n_inputs * self.nb
         p = q + self.n_extra
         gram, moment = np.zeros((p, p)), np.zeros(p)
