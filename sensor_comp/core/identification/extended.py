@@ -741,14 +741,15 @@ class _Fitter:
 
         grid = search.points()
         xs = np.log(grid) if search.log else grid
-        table = np.array([[self.profile(at(x), a) for a in starts] for x in xs])
-        chosen = [starts[int(i)] for i in np.argmin(table, axis=1)]
-        losses = table.min(axis=1)
         coupled = search.coupled and self.spec.lag_free
-        if coupled:  # the denominator follows each value a few steps
-            refits = [self._step(at(x), a) for x, a in zip(xs, chosen)]
-            chosen = [a for a, _ in refits]
-            losses = np.minimum(losses, [loss for _, loss in refits])
+        chosen, losses = [], np.empty(xs.size)
+        for i, x in enumerate(xs):  # one value at a time: its channels are made once
+            row = [self.profile(at(x), a) for a in starts]
+            chosen.append(starts[int(np.argmin(row))])
+            losses[i] = min(row)
+            if coupled:  # the denominator follows each value a few steps
+                chosen[i], loss = self._step(at(x), chosen[i])
+                losses[i] = min(losses[i], loss)
         best = int(np.argmin(losses))
         start = chosen[best]
         low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
