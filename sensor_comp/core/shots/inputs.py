@@ -200,6 +200,25 @@ def _fir(taps: np.ndarray):
     return stage
 
 
+def _delay(taps: np.ndarray):
+    """
+    Return the stage of :func:`fractional_delay`'s taps: the whole samples as a shift.
+
+    The same output as filtering by every tap, the leading zeros included (they only add
+    zeros), without a multiply per zero tap: a 200 µs delay at 1 MS/s is 200 of them. The
+    state is the last inputs the shift still owes and the short filter's own.
+    """
+    shift = int(np.flatnonzero(taps)[0]) if np.any(taps) else 0
+    short = _fir(taps[shift:])
+
+    def stage(x, previous):
+        owed, zi = (np.zeros(shift), None) if previous is None else previous
+        joined = np.concatenate([owed, x])
+        y, zf = short(joined[:x.size], zi)
+        return y, (joined[x.size:], zf)
+    return stage
+
+
 def _highpass(tau_ms: float, fs: float):
     pole = math.exp(-1e3 / (tau_ms * fs))
     num, den = 0.5 * (1.0 + pole) * np.array([1.0, -1.0]), np.array([1.0, -pole])
@@ -298,7 +317,7 @@ def input_channels(names: Sequence[str], acceleration: np.ndarray,
             x = _runs(a, state, f'{name}|peak', _leaky_peak(channel.tau_ms, fs))
         for index, (modifier, value) in enumerate(channel.modifiers):
             if modifier == 'delay_us':
-                stage = _fir(fractional_delay(value * 1e-6 * fs))
+                stage = _delay(fractional_delay(value * 1e-6 * fs))
             elif modifier == 'highpass_ms':
                 stage = _highpass(value, fs)
             else:

@@ -147,6 +147,18 @@ def test_fractional_delay_matches_the_delayed_sine():
     assert taps.sum() == pytest.approx(1.0, abs=1e-12)
 
 
+def test_a_delay_longer_than_its_blocks_is_every_tap_filtered():
+    # The whole samples are a shift whose owed inputs outlast blocks shorter than it.
+    acc = shocks(6000, seed=4)
+    name = ['a_z@delay_us=157.3']  # 31.5 samples at 200 kS/s
+    taps = fractional_delay(157.3e-6 * FS)
+    every = signal.lfilter(taps, [1.0], acc[2])
+    whole = input_channels(name, acc, {}, fs=FS)[0]
+    scale = np.max(np.abs(every))
+    assert np.max(np.abs(whole - every)) <= REL * scale
+    assert np.max(np.abs(in_blocks(name, acc, [5, 7, 1, 30, 2, 400])[0] - every)) <= REL * scale
+
+
 def test_highpass_leaky_peak_and_mode_follow_their_closed_forms():
     n = 4000
     step = np.zeros((3, n))
