@@ -441,6 +441,7 @@ class _Fitter:
         self.feasible = _feasibility(spec, fs)
         self._channels: dict[tuple[str, ...], list[np.ndarray]] = {}
         self._problems: dict[tuple[tuple[str, ...], bool], OutputErrorProblem] = {}
+        self._lag: tuple[tuple, LagFree] | None = None
 
     def channels(self, values: Mapping[str, float]) -> list[np.ndarray]:
         """Return the input channels of every window at ``values`` (cached)."""
@@ -455,7 +456,10 @@ class _Fitter:
         """Return the lag-free parametrisation at denominator ``a`` (None: free numerators)."""
         if not self.spec.lag_free or a is None:
             return None
-        return LagFree(self.spec.channels(values), a, self.spec.nb, self.spec.nk, self.fs)
+        key = (self.spec.channels(values), np.asarray(a, dtype=np.float64).tobytes())
+        if self._lag is None or self._lag[0] != key:  # a descent asks twice per point
+            self._lag = (key, LagFree(key[0], a, self.spec.nb, self.spec.nk, self.fs))
+        return self._lag[1]
 
     def problem(self, values: Mapping[str, float], *, early: bool = False,
                 a: np.ndarray | None = None) -> OutputErrorProblem:

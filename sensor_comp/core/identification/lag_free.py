@@ -80,7 +80,7 @@ class LagFree:
 
     def __init__(self, names: Sequence[str], a: np.ndarray, nb: int, nk: int, fs: float):
         self.names, self.nb = tuple(names), nb
-        self._a, self._fs = np.asarray(a, dtype=np.float64), fs
+        self._a, self._fs = np.array(a, dtype=np.float64), fs
         self.lag = target_lag(self._a, fs)
         c = np.arange(nk, nk + nb) - self.lag
         held = nb >= 2 and np.all(np.isfinite(c))
