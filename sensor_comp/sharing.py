@@ -1,10 +1,11 @@
 """
 Independent calls shared between this process and helper processes on the free cores.
 
-EMD windows, the structure grid's chains and the diagnosis's candidates are independent
-calls of one module-level function. :func:`share` runs them here and in helper
-:class:`~sensor_comp.worker.Worker` processes (fresh interpreters: no fork, no import of the
-caller's ``__main__``) and returns the results in order, each equal to the call made here.
+EMD windows, the structure grid's chains, the diagnosis's lag-free base beside its residual
+analysis and its candidates are independent calls of one module-level function.
+:func:`share` runs them here and in helper :class:`~sensor_comp.worker.Worker` processes
+(fresh interpreters: no fork, no import of the caller's ``__main__``) and returns the
+results in order, each equal to the call made here.
 A helper that dies or fails leaves its call to this process, so a failing call raises here,
 as it would without helpers. When helpers are worth starting: :func:`pool_size`
 (``doc/outputs-and-workers.md``). A helper stays for the next share for :data:`IDLE_S`: the

@@ -832,7 +832,8 @@ class _Fitter:
 
         For a log search the curvature is taken in ``log(value)`` (steps of 0.1 %) and the
         deviation carried back by the delta method; within a step of a bound, None (the
-        value is not resolved there).
+        value is not resolved there), as where the curvature is not positive, except for
+        the lag a bounded mode took (:func:`_with_traded_lag`).
         """
         value = values[search.key]
         if search.log:
