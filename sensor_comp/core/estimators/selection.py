@@ -152,24 +152,23 @@ def lag_gram(xs: Sequence[np.ndarray], ys: Sequence[np.ndarray],
     return np.where(first, upper, upper.T), cross
 
 
-def _oe_delay_search(segs, delays, na, nb, start, processes):
+def _oe_delay_search(segs, delays, na, nb, start):
     """
     Return ``(losses, fits)`` of output error over ``delays``, fitting only where it counts.
-
-    A round's fits are independent: ``processes`` share them.
 
     None when no fit succeeds (see ``doc/estimators.md``, input delay).
     """
     fits: dict[int, Estimate | str] = {}
 
-    def fit(todo, a=None):
-        jobs = [(segs, na, nb, nk, a) for nk in todo]
-        fits.update(zip(todo, share(_delay_fit, jobs, processes=processes,
-                                    name='structure grid helper')))
+    def fit(nk, a=None):
+        try:
+            fits[nk] = fit_oe(segs, nf=na, nb=nb, nk=nk, start=a)
+        except IdentError as exc:
+            fits[nk] = f'nk={nk}: {exc}'
 
     reference = start.a if start is not None and start.na == na else None
     if reference is None:
-        fit([min(delays, key=lambda d: abs(d - 1))])
+        fit(min(delays, key=lambda d: abs(d - 1)))
     held_at = held = None
     while True:
         good = {nk: est for nk, est in fits.items() if isinstance(est, Estimate)}
@@ -190,32 +189,22 @@ def _oe_delay_search(segs, delays, na, nb, start, processes):
         todo -= set(fits)
         if not todo:
             break
-        fit(sorted(todo), reference)
+        for nk in sorted(todo):
+            fit(nk, reference)
     losses = [fits[nk].loss if isinstance(fits.get(nk), Estimate) else float(held[i])
               for i, nk in enumerate(delays)]
     return losses, fits
 
 
-def _delay_fit(segs, na: int, nb: int, nk: int, a: np.ndarray | None) -> Estimate | str:
-    """Return one delay's output-error fit (from ``a``), or why it failed (a job)."""
-    try:
-        return fit_oe(segs, nf=na, nb=nb, nk=nk, start=a)
-    except IdentError as exc:
-        return f'nk={nk}: {exc}'
-
-
 def estimate_delay(segments: Segment | Iterable[Segment], *,
                    delays: Iterable[int] = range(0, 21), na: int = 2, nb: int = 1,
-                   method: str = 'oe', start: Estimate | None = None,
-                   processes: int = 1) -> DelayEstimate:
+                   method: str = 'oe', start: Estimate | None = None) -> DelayEstimate:
     """
     Estimate the input delay as the one of ``delays`` whose fixed-order model fits best.
 
     Trial models have ``na`` poles and ``nb`` coefficients, fitted by ``method`` (a key of
     :data:`METHODS`, output error by default); ``start``, a fit with ``na`` poles on the same
-    segments, seeds the output-error search (``doc/estimators.md``), whose fits of a round
-    ``processes`` share (:func:`~sensor_comp.sharing.share`; helpers that are worth it only
-    when already started, e.g. for the structure grid to come).
+    segments, seeds the output-error search (``doc/estimators.md``).
 
     Raises:
         IdentError: If no delay is given or every fit fails.
@@ -226,8 +215,7 @@ def estimate_delay(segments: Segment | Iterable[Segment], *,
     delays = tuple(int(d) for d in delays)
     if not delays:
         raise IdentError('estimate_delay: no delays to try')
-    found = (_oe_delay_search(segs, delays, na, nb, start, processes) if method == 'oe'
-             else None)
+    found = _oe_delay_search(segs, delays, na, nb, start) if method == 'oe' else None
     if found is None:
         found = {}
         for nk in delays:

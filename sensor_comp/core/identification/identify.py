@@ -332,16 +332,14 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     na, nb = orders or DEFAULT_ORDERS
     selection = search = provisional = None
     if structure == 'auto':
-        # The grid's helpers start now, share the delay search's rounds and are ready for
-        # the grid (a start-up saved).
-        processes = grid_processes(data.early(),
-                                   grid_size=DEFAULT_GRID if orders is None else 3)
-        prestart(processes, name='structure grid helper')
+        # The grid's helpers start now and are ready when it comes (a second saved).
+        prestart(grid_processes(data.early(), grid_size=DEFAULT_GRID if orders is None else 3),
+                 name='structure grid helper')
         with progress('structure selection', 1) as bar:
             # The delay is read on whole windows: on the pulses alone a sensor whose mode
             # the shots barely excite trades delay for a pole (doc/identification.md).
             if delay is None:
-                search = estimate_delay(data.measured, processes=processes)
+                search = estimate_delay(data.measured)
             selection = select_structure(
                 data.early(), valid_segments=data.valid(),
                 orders=None if orders is None else [orders],

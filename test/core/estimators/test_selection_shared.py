@@ -9,7 +9,7 @@ import numpy as np
 from scipy import signal
 
 import sensor_comp.core.estimators.selection as selection
-from sensor_comp.core.estimators import estimate_delay, select_structure, Segment
+from sensor_comp.core.estimators import select_structure, Segment
 
 #: Denominator of a 5 kHz resonance with ζ = 0.05 at 200 kS/s.
 POLES = np.exp((-0.05 + 1j * np.sqrt(1 - 0.05 ** 2)) * 2 * np.pi * 5e3 / 200e3)
@@ -41,12 +41,3 @@ def test_a_grid_shared_with_a_helper_equals_the_grid_fitted_here(monkeypatch):
     np.testing.assert_allclose([c.loss for c in shared.candidates],
                                [c.loss for c in here.candidates], rtol=1e-9)
     np.testing.assert_allclose(shared.estimate.a, here.estimate.a, rtol=1e-9, atol=1e-12)
-
-
-def test_a_delay_search_shared_with_a_helper_equals_the_one_made_here():
-    segs = windows(3, count=6)
-    here = estimate_delay(segs)
-    shared = estimate_delay(segs, processes=2)
-    assert shared.nk == here.nk
-    np.testing.assert_allclose(shared.losses, here.losses, rtol=1e-9)
-    assert sorted(shared.estimates) == sorted(here.estimates)
