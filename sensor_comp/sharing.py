@@ -25,8 +25,7 @@ import time
 
 from .worker import Worker
 
-__all__ = ['IDLE_S', 'PROCESSES', 'PROCESSES_ENV', 'close_idle', 'pool_size', 'prestart',
-           'share']
+__all__ = ['IDLE_S', 'PROCESSES', 'PROCESSES_ENV', 'close_idle', 'pool_size', 'share']
 
 #: Processes sharing the calls (this one included).
 PROCESSES = 2
@@ -106,20 +105,6 @@ def _runnable(pid: int, task: str) -> bool:
             return stream.read().rpartition(b')')[2].split()[0] == b'R'
     except (OSError, IndexError):
         return False
-
-
-def prestart(processes: int, *, name: str = 'helper') -> None:
-    """
-    Start the helpers of a share to come now, so that their start-up overlaps other work.
-
-    Up to ``processes − 1`` helpers wait idle, as after a share (closed after
-    :data:`IDLE_S` unused); a start-up (about a second) otherwise delays the share's first
-    jobs on the helpers' side.
-    """
-    with _idle_lock:
-        missing = processes - 1 - len(_idle)
-    if missing > 0:
-        _release([Worker(name=name, env={PROCESSES_ENV: '1'}) for _ in range(missing)])
 
 
 def share(function: Callable, jobs: Sequence[tuple], *, processes: int = 1, name: str = 'helper',

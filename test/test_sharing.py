@@ -123,22 +123,3 @@ def _running(pid):
     except ProcessLookupError:
         return False
     return True
-
-
-def test_a_prestarted_helper_takes_jobs_from_the_first_share():
-    sharing.close_idle()
-    sharing.prestart(2)
-    sharing.prestart(2)  # enough are waiting: no second one
-    helpers = [worker.pid for _, worker in sharing._idle]
-    assert len(helpers) == 1 and _running(helpers[0])
-    time.sleep(3.0)  # its start-up is over before the share comes
-    # It serves half of the very first share: 20 sleeps of 0.3 s end in about 3 s, not 6.
-    # (A sleep, not a job of this module: a helper cannot import the test package, whose
-    # name the standard library's ``test`` takes there.)
-    began = time.monotonic()
-    sharing.share(time.sleep, [(0.3,)] * 20, processes=2)
-    assert time.monotonic() - began < 5.0
-    sharing.prestart(1)  # one process: no helper asked for
-    assert [worker.pid for _, worker in sharing._idle] == helpers
-    sharing.close_idle()
-    assert not sharing._idle

@@ -26,7 +26,7 @@ from .simulate import simulate_output
 from ...sharing import pool_size, share
 
 __all__ = ['METHODS', 'Candidate', 'DelayEstimate', 'Selection', 'estimate_delay',
-           'grid_processes', 'lag_gram', 'profile_losses', 'select_structure']
+           'lag_gram', 'profile_losses', 'select_structure']
 
 
 def _fit_oe(segs, na, nb, nk):
@@ -48,8 +48,6 @@ def _fit_els(segs, na, nb, nk):
 #: Samples × grid structures of output error from which a helper process shares the grid
 #: (about 1.7 s of fits here; a helper's start-up is about 0.5 s).
 MIN_SHARED_COST = 1_000_000
-#: Fits of the default grid: ``na`` 1..4 by ``nb`` 1..3 at three delays.
-DEFAULT_GRID = 4 * 3 * 3
 #: Noise variances (of the calibration loss) below which an output-error fit of the grid
 #: stops gaining: a criterion difference of this size is far below ``criterion_margin``,
 #: and a descent in an over-parameterised valley would crawl on for dozens of steps. The
@@ -322,15 +320,6 @@ def _label(c: Candidate, method: str) -> str:
     return f'{"nf" if method == "oe" else "na"}={c.na} nb={c.nb} nk={c.nk}'
 
 
-def grid_processes(segments: Segment | Iterable[Segment], *, grid_size: int = DEFAULT_GRID,
-                   method: str = 'oe') -> int:
-    """Return how many processes share a structure grid of ``grid_size`` fits (1: one)."""
-    if method != 'oe':
-        return 1
-    return pool_size(grid_size * sum(s.y.size for s in as_segments(segments)),
-                     MIN_SHARED_COST)
-
-
 def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
               known: Mapping[tuple[int, int, int], Estimate]) -> dict:
     """
@@ -348,7 +337,8 @@ def _fit_grid(segs, method: str, grid: Sequence[tuple[int, int, int]],
         chains.setdefault(key[0], []).append(key)
     jobs = [(segs, method, keys, {k: e for k, e in known.items() if k in keys}, centre)
             for na, keys in sorted(chains.items(), reverse=True)]  # costliest first
-    processes = grid_processes(segs, grid_size=len(grid), method=method)
+    processes = 1 if method != 'oe' else pool_size(
+        len(grid) * sum(s.y.size for s in segs), MIN_SHARED_COST)
     fits: dict = {}
     for chain in share(_fit_chain, jobs, processes=processes, name='structure grid helper'):
         fits.update(chain)

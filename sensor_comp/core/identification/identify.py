@@ -26,12 +26,10 @@ from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els
                           fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
                           Selection, simulate_output)
 from ..estimators.polynomials import max_root_radius
-from ..estimators.selection import DEFAULT_GRID, grid_processes
 from .model import Model, sensitivity_problem, Source
 from ..progress import ProgressFactory, Silent
 from ..shots.detection import (dead_channel, detect_shots, mad_sigma, no_shot_message, segments,
                                Shot, ShotError, split_calibration)
-from ...sharing import prestart
 from ...streams import Recording
 
 __all__ = ['BASE_INPUTS', 'EXCITATION_BAND', 'MIN_EXCITATION', 'STRUCTURE_CHOICES',
@@ -332,9 +330,6 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
     na, nb = orders or DEFAULT_ORDERS
     selection = search = provisional = None
     if structure == 'auto':
-        # The grid's helpers start now and are ready when it comes (a second saved).
-        prestart(grid_processes(data.early(), grid_size=DEFAULT_GRID if orders is None else 3),
-                 name='structure grid helper')
         with progress('structure selection', 1) as bar:
             # The delay is read on whole windows: on the pulses alone a sensor whose mode
             # the shots barely excite trades delay for a pole (doc/identification.md).
