@@ -201,6 +201,9 @@ class Search:
             lag-free fit the denominator follows each trial value a few steps.
         lag_unit_s: The value is a lag in these seconds per unit: when the sensor's mode
             sits at its damping bound, the lag its poles took adds to the deviation.
+        early: The grid's losses are taken on the windows up to ``EARLY_S`` after each
+            pulse (a value that shows in the pulse and its ringing, not in a slow tail);
+            the refinement takes them on whole windows.
 
     """
 
@@ -213,6 +216,7 @@ class Search:
     exclude: tuple[float, float] | None = None
     coupled: bool = False
     lag_unit_s: float | None = None
+    early: bool = False
 
     @property
     def initial(self) -> float:

@@ -86,8 +86,8 @@ class SecondResonance(Effect):
         main = (context.get('modes_khz') or (spec.ringing_khz,))[0]
         exclude = None if main is None else (main / (1 + MAIN_BAND), main * (1 + MAIN_BAND))
         searches = (Search(FREQ, MIN_KHZ, 0.4 * spec.fs / 1e3, log=True, grid=40,
-                           start=0.1 * spec.fs / 1e3, exclude=exclude),
-                    Search(ZETA, 0.003, MAX_ZETA, log=True, grid=9, start=0.05))
+                           start=0.1 * spec.fs / 1e3, exclude=exclude, early=True),
+                    Search(ZETA, 0.003, MAX_ZETA, log=True, grid=9, start=0.05, early=True))
         return replace(spec, nb=spec.nb + 2, searches=spec.searches + searches,
                        modifiers=spec.modifiers + (('mode', f'{{{FREQ}}},{{{ZETA}}}'),))
 

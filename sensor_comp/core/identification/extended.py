@@ -738,7 +738,8 @@ class _Fitter:
 
         The grid tries every start denominator; the bounded refinement only the one that
         was best at the grid's best point (the others lost there already). A coupled
-        search in a lag-free fit takes each loss after :meth:`_step` instead.
+        search in a lag-free fit takes each loss after :meth:`_step` instead; an
+        ``early`` one its grid's on the pulses and their ringing (:meth:`profile`).
         """
         def at(x):
             return {**values, search.key: math.exp(x) if search.log else x}
@@ -746,15 +747,18 @@ class _Fitter:
         grid = search.points()
         xs = np.log(grid) if search.log else grid
         coupled = search.coupled and self.spec.lag_free
+        early = search.early and not coupled
         chosen, losses = [], np.empty(xs.size)
         for i, x in enumerate(xs):  # one value at a time: its channels are made once
-            row = [self.profile(at(x), a) for a in starts]
+            row = [self.profile(at(x), a, early=early) for a in starts]
             chosen.append(starts[int(np.argmin(row))])
             losses[i] = min(row)
             if coupled:  # the denominator follows each value a few steps
                 chosen[i], loss = self._step(at(x), chosen[i])
                 losses[i] = min(losses[i], loss)
         best = int(np.argmin(losses))
+        if early:  # the refinement's losses are on whole windows
+            losses[best] = self.profile(at(xs[best]), chosen[best])
         start = chosen[best]
         low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
         if search.exclude is not None:  # refine on the best point's side of the band
