@@ -298,8 +298,7 @@ class OutputErrorProblem:
         return f.tobytes(), None if transform is None else transform.tobytes()
 
     def profile_jacobian(self, f: np.ndarray, *, transform: np.ndarray | None = None,
-                         drift: np.ndarray | None = None,
-                         rates: np.ndarray | None = None) -> np.ndarray:
+                         drift: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """
         Return ``∂ŷ/∂(f1..fnf)`` of the profile residual at the last solution (Kaufman).
 
@@ -308,7 +307,8 @@ class OutputErrorProblem:
         gives the profile loss's exact gradient (the dropped term is orthogonal to the
         residual) from one more filtered signal per segment, where forward differences
         refilter every input once per coefficient. A ``transform`` that follows ``F`` moves
-        the numerators by ``rates[j]·drift`` (``(n_inputs, nb)``) per unit ``f_j``.
+        the numerators by ``rates[j]·direction`` per unit ``f_j``: ``drift`` is
+        ``(direction (n_inputs, nb), rates)`` (:meth:`.LagFree.drift`).
 
         Raises:
             ValueError: When the last :meth:`profile_solution` was not at ``f`` and
@@ -327,13 +327,13 @@ class OutputErrorProblem:
         for s, x in enumerate(self.filtered(f)):
             start, stop = self.offsets[s], self.offsets[s + 1]
             twice = signal.lfilter([1.0], f, through[start:stop])
-            moved = None if drift is None else lagged_sum(x, drift, self.nk)
+            moved = None if drift is None else lagged_sum(x, drift[0], self.nk)
             for j in range(self.nf):
                 row = columns[j, start:stop]
                 if row.size > j + 1:  # q^-(j+1) of the twice-filtered output, from rest
                     row[j + 1:] = -twice[:row.size - j - 1]
                 if moved is not None:
-                    row += rates[j] * moved
+                    row += drift[1][j] * moved
         # Off the span of the regressors: less their least-squares fit to each column.
         narrow = None if transform is None else self._narrow(transform)
         moments = self._moments(f, columns)

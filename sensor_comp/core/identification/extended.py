@@ -722,10 +722,8 @@ class _Fitter:
         theta, e = problem.profile_solution(a, transform=lag.transform)
         if not jacobian:
             return e
-        drift = lag.drift(theta[x.size:x.size + problem.n_inputs * problem.nb])
-        return e, problem.profile_jacobian(
-            a, transform=lag.transform, drift=None if drift is None else drift[0],
-            rates=None if drift is None else drift[1])
+        return e, problem.profile_jacobian(a, transform=lag.transform, drift=lag.drift(
+            theta[x.size:x.size + problem.n_inputs * problem.nb]))
 
     def loss(self, values: Mapping[str, float], starts: Sequence[np.ndarray]) -> float:
         """Return the least loss over the start denominators, numerators re-solved."""

@@ -149,8 +149,7 @@ def test_the_profile_gradient_follows_the_held_lag():
         return lag, *problem.profile_solution(a, transform=lag.transform)
 
     lag, theta, e = solution(a)
-    direction, rates = lag.drift(theta[2:8])
-    jac = problem.profile_jacobian(a, transform=lag.transform, drift=direction, rates=rates)
+    jac = problem.profile_jacobian(a, transform=lag.transform, drift=lag.drift(theta[2:8]))
     for j in (1, 2):
         step = 1e-6
         moved = a.copy()
