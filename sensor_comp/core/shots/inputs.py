@@ -204,9 +204,9 @@ def _delay(taps: np.ndarray):
     """
     Return the stage of :func:`fractional_delay`'s taps: the whole samples as a shift.
 
-    The same output as filtering by every tap, the leading zeros included (they only add
-    zeros), without a multiply per zero tap: a 200 µs delay at 1 MS/s is 200 of them. The
-    state is the last inputs the shift still owes and the short filter's own.
+    The output of filtering by every tap, the leading zeros included, to round-off (1e-13
+    of the signal), without a multiply per zero tap: a 200 µs delay at 1 MS/s is 200 of
+    them. The state is the last inputs the shift still owes and the short filter's own.
     """
     shift = int(np.flatnonzero(taps)[0]) if np.any(taps) else 0
     short = _fir(taps[shift:])
