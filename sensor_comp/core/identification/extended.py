@@ -54,7 +54,7 @@ from ..estimators import Estimate, fit_oe, IdentError
 from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
-from ..estimators.polynomials import continuous_poles, max_root_radius
+from ..estimators.polynomials import continuous_poles, max_root_radius, resonances
 from ..shots.inputs import input_channels, mode_pair, parse_channel
 from .input_noise import (MIN_CHECK_GAIN, NoiseLevels, noise_levels, refine_mode, Refinement,
                           subtracted_noise)
@@ -100,6 +100,8 @@ COUPLED_EFFORT = 4
 #: Tolerance of a coupled search's polish, and its first step each side of the value,
 #: fractions of the search's grid spacing.
 POLISH_TOLERANCE, POLISH_STEP = 1e-3, 1e-2
+#: Slowest sensor mode, as a share of the sample rate, that :func:`_other_mode` tries.
+OTHER_MODE_LOWEST = 0.01
 #: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
 #: ask for the same ones).
 CHANNEL_CACHE = 4
@@ -867,18 +869,21 @@ class _Fitter:
 def _with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: float,
                      f: np.ndarray) -> float | None:
     """
-    Return a lag's deviation with the lag the poles ``f`` hold at their damping bound.
+    Return a lag's deviation with the lag the poles ``f`` hold damped as no sensor is.
 
     Behind the anti-alias filter the data do not pin the sensor's mode: it damps itself to
     the bound and holds part of a delay (a 47.5 kHz, ζ 0.1 mode read as 20.5 kHz, ζ 0.2
     took 3.1 µs of a 60 µs delay), which the delay's deviation must own. There the loss's
     curvature is often not resolved (descents stop on the bound, ``std`` None): the traded
-    lag is then the deviation stated.
+    lag is then the deviation stated. A fit with free numerators has no bound, but a pair
+    damped beyond :data:`SENSOR_ZETA` (or real poles) is no sensor's mode either: a
+    56 kHz, ζ 0.07 mode read as 25.8 kHz, ζ 0.67 took 8 µs of a 60 µs delay.
     """
-    if not search.lag_unit_s or not spec.lag_free or spec.max_zeta is None or f.size < 3:
+    if not search.lag_unit_s or f.size < 3:
         return std
+    bound = SENSOR_ZETA if spec.max_zeta is None else spec.max_zeta
     least = _least_damping(continuous_poles(f, fs)[0])
-    if least is None or least < BOUND_SHARE * spec.max_zeta:
+    if least is not None and least < BOUND_SHARE * bound:
         return std
     traded = max(mechanics_delay_s(f, fs), 0.0) / search.lag_unit_s
     return traded if std is None else math.hypot(std, traded)
@@ -1024,6 +1029,7 @@ def _fit_spec(windows: Sequence[Window], spec: ModelSpec, fs: float,
         values, fitted = best
     if spec.lag_free:
         values, fitted = _polished(fitter, spec, values, fitted)
+        values, fitted = _other_mode(fitter, spec, values, fitted)
     return fitter, values, fitted, firsts
 
 
@@ -1041,6 +1047,46 @@ def _polished(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
         if result[0].loss < fitted[0].loss:
             values, fitted = trial, result
     return values, fitted
+
+
+def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
+                ) -> tuple[dict, tuple]:
+    """
+    Return the values and fit with the sensor's mode tried elsewhere, its lag traded.
+
+    A delay and the mode's own lag add up, so a lag-free fit has a basin where its pair
+    sits beyond the data's band and the delay takes the mode's lag: at 294 kS/s a 117 kHz
+    pair with ζ 0.0001 left a 36 kHz, ζ 0.1 mode unmodelled and read 39.06 µs for a
+    38.17 µs delay, 146 noise variances above the mode's basin. The grid's pair (ζ 0.1,
+    at least :data:`OTHER_MODE_LOWEST` of fs, not within 1.5× of the fitted mode) with the
+    least early loss, the delay moved to keep the total lag, is descended and polished;
+    the lower loss is kept.
+    """
+    lagged = [s for s in spec.searches if s.lag_unit_s and s.coupled]
+    if spec.max_zeta is None or spec.nf < 2 or len(lagged) != 1:
+        return values, fitted
+    search, fs, a = lagged[0], fitter.fs, fitted[0].a
+    modes = resonances(a, fs)
+    fitted_hz = min(modes, key=lambda m: m[1])[0] if modes else None
+    lag = mechanics_delay_s(a, fs)
+    trials = []
+    for zeta, pair in _grid(spec.nf, fs):
+        hz = resonances(pair[:3], fs)[0][0]
+        if (zeta > spec.max_zeta or hz < OTHER_MODE_LOWEST * fs or not fitter.feasible(pair)
+                or (fitted_hz is not None and abs(math.log(hz / fitted_hz)) < math.log(1.5))):
+            continue
+        value = values[search.key] + (lag - mechanics_delay_s(pair, fs)) / search.lag_unit_s
+        trial = {**values, search.key: float(np.clip(value, search.low, search.high))}
+        trials.append((fitter.profile(trial, pair, early=True), trial, pair))
+    trials = [t for t in trials if np.isfinite(t[0])]
+    if not trials:
+        return values, fitted
+    _, trial, pair = min(trials, key=lambda t: t[0])
+    try:
+        other = _polished(fitter, spec, trial, fitter.fit(trial, [pair]))
+    except IdentError:
+        return values, fitted
+    return other if other[1][0].loss < fitted[0].loss else (values, fitted)
 
 
 def _distinct(starts: Sequence[np.ndarray]) -> list[np.ndarray]:

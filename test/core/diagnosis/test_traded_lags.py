@@ -12,6 +12,10 @@ The second rig (250 kS/s, a 47.5 kHz mode behind a 25 kHz anti-alias filter, the
 the lag-free poles damp themselves to their bound and keep 3 µs of it. ``identify
 --effect channel_delay`` with free numerators read it as 9 ± 22 µs (no such effect), so it
 fits it as the diagnosis does.
+
+The third rig (556 kS/s, a 42.6 kHz mode, ζ 0.097, the pressure 60 µs late, R = 5) has a
+second basin: the pair parked at 228 kHz, where it shapes and lags nothing, and the delay
+took the mode's lag (60.63 ± 0.08 µs).
 """
 
 import math
@@ -20,11 +24,14 @@ import pytest
 
 from bench.independent_rig import draw_spec, simulate
 from sensor_comp.core.diagnosis.diagnose import diagnose
+from sensor_comp.core.estimators.polynomials import resonances
 from sensor_comp.core.identification.identify import identify, ShotSource
 
 SEED = 1013476761
 #: The rig whose mode hides behind the anti-alias filter.
 HIDDEN_SEED, HIDDEN_FS = 3071615436, 250e3
+#: The rig whose lag-free fit parked its pair beyond the data's band.
+PARKED_SEED = 2663794702
 
 
 def _halves(spec):
@@ -85,3 +92,17 @@ def test_identify_reads_that_delay_as_the_diagnosis_does_and_says_how(hidden_mod
     assert std is not None and std < 0.15 * true
     assert abs(value - true) <= 2 * std
     assert any('as the diagnosis fits it' in note for note in result.notes), result.notes
+
+
+def test_a_pair_parked_beyond_the_band_gives_the_mode_back_its_lag():
+    spec = draw_spec(PARKED_SEED, effect='channel_delay', R=5.0, rate_range=(3e5, 1e6))
+    truth, (calibration, validation) = _halves(spec)
+    result = identify([calibration], validation=[validation], effects=['channel_delay'])
+    entry = result.model.effects[0]
+    value, std = entry['parameters']['delay_us'], entry['std']['delay_us']
+    true = truth['parameters']['delay_us']
+    assert std is not None and std < 0.02 * true
+    assert abs(value - true) <= 2 * std
+    # The sensor's own mode, not a pair beyond the anti-alias filter.
+    hz, zeta = min(resonances(result.model.a, spec.fs), key=lambda m: m[1])
+    assert hz == pytest.approx(spec.fn_hz, rel=0.15) and zeta < 0.2
