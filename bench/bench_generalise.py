@@ -227,6 +227,14 @@ def _ranking(diagnosis) -> list[dict]:
             for r in diagnosis.ranking]
 
 
+def _leftover_row(left) -> dict | None:
+    if left is None:
+        return None
+    doc = left.to_dict()
+    return {k: doc[k] for k in ('energy_ratio', 'tolerance', 'peak_ratio', 'peak_limit',
+                                'peak_segment', 'consistent')}
+
+
 def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str]) -> None:
     """Run identify, diagnose and the re-identifications, filling ``row``."""
     from sensor_comp.core.diagnosis.diagnose import diagnose
@@ -255,6 +263,8 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
     row['explanation'] = diagnosis.explanation[:400]
     row['ranking'] = _ranking(diagnosis)
     row['skipped'] = [[s.effect, s.reason[:200]] for s in diagnosis.skipped]
+    row['leftover'] = {name: _leftover_row(left) for name, left in (
+        ('base', diagnosis.base_leftover), ('verdict', diagnosis.leftover))}
     if row.get('speed'):
         return
     top = diagnosis.ranking[0].effect if diagnosis.ranking else None

@@ -17,7 +17,7 @@ import numpy as np
 from scipy import fft, linalg, signal, stats
 
 __all__ = ['LEFTOVER_Z', 'PRACTICAL_SHARE', 'SEGMENTS', 'Leftover', 'NoiseModel',
-           'SegmentExcess', 'gram', 'json_number', 'leftover', 'noise_model',
+           'SegmentExcess', 'gram', 'json_number', 'leftover', 'noise_model', 'peak_limit',
            'segment_bounds']
 
 #: Structure below this share of the windows' noise energy is not worth a model change.
@@ -238,6 +238,10 @@ class Leftover:
         slow_share: Share of the excess spectrum below :data:`SLOW_HZ`.
         consistent: The residual is the noise (overall and in every segment).
         noise_variance: The noise variance it is measured against, Pa².
+        peak_ratio: The residual's largest magnitude over the noise σ (beside the pulse
+            corners), reported where the energy does not show a misfit.
+        peak_limit: The largest ``peak_ratio`` noise gives (:func:`peak_limit`).
+        peak_segment: The segment the largest magnitude lies in.
 
     """
 
@@ -249,6 +253,14 @@ class Leftover:
     slow_share: float = 0.0
     consistent: bool = True
     noise_variance: float = 0.0
+    peak_ratio: float = 0.0
+    peak_limit: float = math.inf
+    peak_segment: str = 'pulse'
+
+    @property
+    def peak_above(self) -> bool:
+        """Return whether the residual's peak stands beyond what noise reaches (not a test)."""
+        return self.peak_ratio > self.peak_limit
 
     @property
     def excess(self) -> float:
@@ -269,6 +281,9 @@ class Leftover:
         """Return the leftover in words: size in noise units, where it is, what it looks like."""
         text = (f'{self.energy_ratio:.2f}× the noise energy (RMS {self.rms_ratio:.2f}× the '
                 f'noise σ)')
+        if self.peak_above:
+            text += (f'; its largest value is {self.peak_ratio:.1f} σ '
+                     f'{_WORDS[self.peak_segment]} (noise stays below {self.peak_limit:.1f} σ)')
         if not self.consistent:
             seg = self.where
             total = sum(max(s.excess, 0.0) for s in self.segments)
@@ -286,6 +301,8 @@ class Leftover:
                 'consistent': self.consistent, 'where': self.where.name,
                 'shape': self.shape, 'line_hz': json_number(self.line_hz),
                 'slow_share': json_number(self.slow_share),
+                'peak_ratio': json_number(self.peak_ratio),
+                'peak_limit': json_number(self.peak_limit), 'peak_segment': self.peak_segment,
                 'noise_sigma_pa': json_number(math.sqrt(self.noise_variance)),
                 'segments': [s.to_dict() for s in self.segments],
                 'description': self.describe()}
@@ -294,6 +311,40 @@ class Leftover:
 def json_number(x: float | None) -> float | None:
     """Return ``x`` as a JSON-ready float, None for None, NaN or infinity."""
     return None if x is None or not math.isfinite(x) else float(x)
+
+
+def peak_limit(samples: int) -> float:
+    """
+    Return the largest ``|noise|/σ`` that ``samples`` Gaussian noise samples reach.
+
+    Exceeded with probability ``P(z > LEFTOVER_Z)`` over them all (Bonferroni over the
+    samples, both signs: conservative for correlated noise, whose samples are fewer
+    independent draws). A misfit confined to a few samples of a pulse adds little energy
+    but stands out here; the leftover reports it, it does not decide the verdict
+    (``doc/residual.md``, the noise floor).
+    """
+    return float(stats.norm.isf(stats.norm.sf(LEFTOVER_Z) / (2 * max(samples, 1))))
+
+
+def _peak(residual: Sequence[np.ndarray], bounds: Sequence[tuple]) -> tuple[float, str]:
+    """
+    Return the residual's largest magnitude and the segment it lies in.
+
+    The samples next to each pulse corner (onset, end) are left out: a sampled model cannot
+    follow a jump of the input's slope at a fractional instant (a base strain term, the
+    acceleration's derivative, left 64 σ there and 4 σ elsewhere).
+    """
+    top, where = 0.0, SEGMENTS[1]
+    for r, b in zip(residual, bounds):
+        magnitude = np.abs(r)
+        for corner in b[1:3]:
+            magnitude[max(corner - 1, 0):corner + 2] = 0.0
+        if magnitude.size:
+            k = int(np.argmax(magnitude))
+            if magnitude[k] > top:
+                top = float(magnitude[k])
+                where = SEGMENTS[int(np.searchsorted(b[1:5], k, side='right'))]
+    return top, where
 
 
 def leftover(residual: Sequence[np.ndarray], bounds: Sequence[tuple[int, int, int, int, int]],
@@ -328,11 +379,13 @@ def leftover(residual: Sequence[np.ndarray], bounds: Sequence[tuple[int, int, in
             name, n, math.sqrt(e / (n * sigma2)) if n else math.nan,
             (e - n * sigma2) / (total * sigma2),
             allowance + z * spread / total))
+    top, where = _peak(residual, bounds)
     consistent = ratio <= tolerance and not any(s.above for s in segments)
     shape, line, slow = '', None, 0.0
     if not consistent:
         shape, line, slow = _shape(residual, bounds, noise, fs)
-    return Leftover(ratio, tolerance, tuple(segments), shape, line, slow, consistent, sigma2)
+    return Leftover(ratio, tolerance, tuple(segments), shape, line, slow, consistent, sigma2,
+                    top / math.sqrt(sigma2), peak_limit(total), where)
 
 
 def _shape(residual: Sequence[np.ndarray], bounds: Sequence[tuple], noise: NoiseModel,

@@ -494,6 +494,48 @@ def test_leftover_is_noise_or_says_where_and_what_it_is():
     assert doc['where'] == 'tail' and doc['consistent'] is False
 
 
+def test_peak_limit_is_exceeded_by_noise_at_the_leftover_level():
+    # The largest |sample| of n white Gaussian samples passes the limit with probability
+    # P(z > LEFTOVER_Z) = 0.00135: 20 000 draws of 200 samples pass it about 27 times.
+    from sensor_comp.core.diagnosis.noise_floor import LEFTOVER_Z, peak_limit
+    from scipy import stats
+    p = stats.norm.sf(LEFTOVER_Z)
+    for n in (200, 10_000, 2_000_000):
+        exact = 1 - (1 - 2 * stats.norm.sf(peak_limit(n))) ** n
+        assert 0.95 * p < exact <= p
+    rng = np.random.default_rng(3)
+    top = np.max(np.abs(rng.standard_normal((20_000, 200))), axis=1)
+    assert 27 - 16 <= int(np.sum(top > peak_limit(200))) <= 27 + 16
+
+
+def test_leftover_reports_a_misfit_confined_to_the_pulse_by_its_peak():
+    # Four samples of 12 σ in one pulse add 0.036 noise energies, below the practical
+    # allowance of 0.05: consistent with the noise by energy, but the leftover says where
+    # its largest value stands beyond any noise peak. Samples next to a corner are left out.
+    from sensor_comp.core.diagnosis.noise_floor import (leftover, noise_model, peak_limit,
+                                                        PRACTICAL_SHARE)
+    rng = np.random.default_rng(11)
+    windows = [rng.standard_normal(4000) for _ in range(4)]
+    bounds = [(900, 1000, 1200, 1600, 4000)] * 4
+    noise = noise_model([w[:900] for w in windows], 50)
+    clean = leftover(windows, bounds, noise, FS)
+    assert clean.peak_limit == pytest.approx(peak_limit(16000)) and 5.0 < clean.peak_limit < 6.0
+    assert clean.consistent and 3.0 < clean.peak_ratio < clean.peak_limit
+    assert not clean.peak_above and 'largest value' not in clean.describe()
+    cornered = [w.copy() for w in windows]
+    cornered[1][999:1002] = 30.0  # at the onset: a jump no sampled model follows
+    assert leftover(cornered, bounds, noise, FS).peak_ratio < clean.peak_limit
+    spiked = [w.copy() for w in windows]
+    spiked[2][1100:1104] = 12.0
+    found = leftover(spiked, bounds, noise, FS)
+    assert found.energy_ratio - 1 < PRACTICAL_SHARE and found.consistent
+    assert found.peak_above and found.peak_segment == 'pulse'
+    assert found.peak_ratio == pytest.approx(12.0, rel=0.1)
+    assert 'largest value is 12' in found.describe() and 'during the pulse' in found.describe()
+    doc = json.loads(json.dumps(found.to_dict()))
+    assert doc['peak_segment'] == 'pulse' and doc['peak_ratio'] > doc['peak_limit']
+
+
 def test_the_package_exports_its_api_and_each_module_its_own():
     import importlib
     import pkgutil
