@@ -17,7 +17,7 @@ and scored on the VALIDATION shots, which it has never seen:
   the mechanics do (:mod:`~sensor_comp.core.identification.lag_free`: a free numerator
   leads or lags by more, and so takes in a base-strain term or a channel delay, which then
   are never named) and that mode stays lightly damped
-  (:data:`~sensor_comp.core.identification.extended.SENSOR_ZETA`: poles damped further
+  (:data:`~sensor_comp.core.effects.base.SENSOR_ZETA`: poles damped further
   trade their damping for a lag).
 - **score**: the fraction of the base model's validation residual energy the extension
   removes, ``1 − SSE_ext/SSE_base`` (each window simulated from rest, baselines removed).

@@ -28,7 +28,8 @@ __all__ = ['ACCEL_RING', 'BASE_CONTEXT', 'EDGE_FACTOR', 'FOLLOWS', 'Effect', 'Ef
            'SpectrumView', 'TrendView', 'centroid', 'dc_delay_s', 'delta_std', 'effect_entry',
            'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
            'parameters_text', 'probe_of', 'registry', 'row_of', 'segment_of', 'sentence',
-           'static_gain', 'stored_std', 'tail_share', 'unfollowed']
+           'SENSOR_ZETA', 'static_gain', 'stored_std', 'tail_share', 'traded_lag_s',
+           'unfollowed']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -549,6 +550,32 @@ def mechanics_delay_s(a: np.ndarray, fs: float) -> float:
     """Return the DC group delay of the continuous all-pole system with ``a``'s poles, s."""
     poles = np.roots(a) if a.size > 1 else np.empty(0)
     return float(sum((-1.0 / (fs * np.log(complex(z)))).real for z in poles))
+
+
+#: Most damping of a sensor's mode: a piezoelectric sensor rings (ζ of a few %); a pair
+#: damped further can trade its damping for a delay or a lag.
+SENSOR_ZETA = 0.2
+#: A pair damped at least this share of its bound sits at the bound.
+BOUND_SHARE = 0.999
+
+
+def traded_lag_s(a: np.ndarray, fs: float, *, bound: float = SENSOR_ZETA) -> float | None:
+    """
+    Return the lag ``a``'s poles hold when damped as no sensor is, s, else None.
+
+    Its least damped pair at ``bound`` or beyond, or no pair among two poles or more: the
+    data do not pin the sensor's mode, and its lag ``2ζ/ω`` may be a delay's or a
+    derivative term's (``doc/effects.md``).
+    """
+    a = np.asarray(a, dtype=np.float64)
+    if a.size < 3:
+        return None
+    z = np.roots(a).astype(complex)
+    s = np.log(z[np.abs(z) > 1e-12]) * fs
+    pairs = s[s.imag > 1e-9 * np.abs(s)]
+    if pairs.size and np.min(-pairs.real / np.abs(pairs)) < BOUND_SHARE * bound:
+        return None
+    return max(mechanics_delay_s(a, fs), 0.0)
 
 
 def excess_delay_s(model: FittedModel, a: np.ndarray, b: np.ndarray, row: int) -> float:

@@ -16,7 +16,7 @@ from scipy import signal
 
 from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
                    parameters_text, Physical, probe_of, ResidualView, row_of, sentence,
-                   static_gain, stored_std, unfollowed)
+                   static_gain, stored_std, traded_lag_s, unfollowed)
 from .probe import ProbeSpec
 from ..shots.windows import ringings, Window
 from ...streams import G0, G_PER_MS
@@ -96,6 +96,11 @@ class StrainSensitivity(Effect):
 
         std = (delta_std(coefficient, model.a, model.b, covariance) if covariance is not None
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
+        traded = traded_lag_s(model.a, model.fs)
+        if covariance is not None and traded is not None and std is not None:
+            # Poles damped as no sensor's lag by 2ζ/ω, which a lead c/S may have paid back.
+            lead = abs(static_gain(model.a, model.b, axial)) * traded * G_PER_MS
+            std = math.hypot(std, lead)
         return {'pa_per_g_per_ms': (coefficient(model.a, model.b), std)}
 
     def implausible(self, fit: FitView) -> str | None:

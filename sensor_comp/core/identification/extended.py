@@ -49,7 +49,8 @@ from scipy import optimize
 
 from ..compensation.initial_state import InitialState, simulate_from_state
 from ..effects import EffectError, get_effect, ordered
-from ..effects.base import effect_entry, Effect, mechanics_delay_s, ModelSpec, Physical, Search
+from ..effects.base import (effect_entry, Effect, mechanics_delay_s, ModelSpec, Physical, Search,
+                            SENSOR_ZETA, traded_lag_s)
 from ..estimators import Estimate, fit_oe, IdentError
 from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
@@ -62,7 +63,7 @@ from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
 
-__all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SENSOR_ZETA', 'SLOWEST_POLE_S', 'DisturbanceFit',
+__all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SLOWEST_POLE_S', 'DisturbanceFit',
            'ExtendedFit', 'Prediction', 'Window', 'corrected_for_input_noise', 'fit_extended',
            'ringing_khz', 'robust_uncertainty', 'search_effort', 'shot_windows']
 
@@ -76,9 +77,6 @@ BASE_ORDERS, BASE_DELAY = (2, 3), 0
 #: extensions for them may not. (At 1 ms, a 60 Hz hum beside the shots drew a base's mode
 #: to 216 Hz, where no extension's refit could leave it.)
 SLOWEST_POLE_S = 1 / (2 * math.pi * 1e3)
-#: Most damping of the sensor's mode in the lag-free fits: a piezoelectric sensor rings
-#: (ζ of a few %); a pair damped further can trade its damping for a delay or a lag.
-SENSOR_ZETA = 0.2
 #: Rounds of (scalar searches, refit) when the spec has 1-D parameters.
 ROUNDS = 2
 #: Most Levenberg-Marquardt iterations of a joint fit.
@@ -92,8 +90,6 @@ RINGING_ZETAS = (0.02, 0.05, 0.1)
 #: Profile Levenberg-Marquardt steps of the denominator at each grid value of a lag-free
 #: search (:meth:`_Fitter.search`).
 SEARCH_STEPS = 2
-#: A mode damped at least this share of the fits' damping bound sits at the bound.
-BOUND_SHARE = 0.999
 #: Profile losses per grid point of a coupled search, over a plain search's one (the
 #: denominator's steps at each point, the polish): how :func:`search_effort` weighs it.
 COUPLED_EFFORT = 4
@@ -879,13 +875,11 @@ def _with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: flo
     damped beyond :data:`SENSOR_ZETA` (or real poles) is no sensor's mode either: a
     56 kHz, ζ 0.07 mode read as 25.8 kHz, ζ 0.67 took 8 µs of a 60 µs delay.
     """
-    if not search.lag_unit_s or f.size < 3:
+    traded = (traded_lag_s(f, fs, bound=SENSOR_ZETA if spec.max_zeta is None
+                           else spec.max_zeta) if search.lag_unit_s else None)
+    if traded is None:
         return std
-    bound = SENSOR_ZETA if spec.max_zeta is None else spec.max_zeta
-    least = _least_damping(continuous_poles(f, fs)[0])
-    if least is not None and least < BOUND_SHARE * bound:
-        return std
-    traded = max(mechanics_delay_s(f, fs), 0.0) / search.lag_unit_s
+    traded /= search.lag_unit_s
     return traded if std is None else math.hypot(std, traded)
 
 

@@ -15,10 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..effects import EffectError
-from ..effects.base import BASE_CONTEXT
+from ..effects.base import BASE_CONTEXT, SENSOR_ZETA
 from ..estimators import IdentError
 from ..estimators.polynomials import resonances
-from .extended import ExtendedFit, fit_extended, SENSOR_ZETA, SLOWEST_POLE_S
+from .extended import ExtendedFit, fit_extended, SLOWEST_POLE_S
 from ..shots.windows import Window
 
 __all__ = ['base_fits', 'fit_on_base', 'free_base', 'held_base', 'MODE_ZETA', 'modes_khz']

@@ -20,7 +20,8 @@ from sensor_comp.core.compensation.filter import CompensationFilter
 from sensor_comp.core.effects import (describe_effects, disturbance_trackers, EFFECTS,
                                       EffectError, get_effect, ordered, Outcome)
 from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, mechanics_delay_s,
-                                           ModelSpec, ResidualView)
+                                           ModelSpec, ResidualView, SENSOR_ZETA,
+                                           traded_lag_s)
 from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
 from sensor_comp.core.shots.inputs import (carried_state, fractional_delay, input_channels,
                                            InputError, mode_pair, needs_rate, parse_channel)
@@ -286,6 +287,37 @@ def test_delays_are_read_from_the_dc_group_delay():
     physical = get_effect('zero_shift').physical(zero)
     assert physical['pa_per_g'][0] == pytest.approx(5.0 / 0.01 * G0)
     assert physical['tau_ms'] == (40.0, None)
+
+
+def test_poles_damped_as_no_sensor_is_trade_their_lag():
+    # A pair at or beyond SENSOR_ZETA, or real poles, hold 2ζ/ω a delay or lead may own.
+    assert traded_lag_s(mode_pair(5.0, 0.05, FS), FS) is None
+    damped = mode_pair(5.0, SENSOR_ZETA, FS)
+    assert traded_lag_s(damped, FS) == pytest.approx(2 * SENSOR_ZETA / (1e4 * math.pi),
+                                                     rel=1e-3)
+    assert traded_lag_s(mode_pair(5.0, 0.5, FS), FS) > traded_lag_s(damped, FS)
+    assert traded_lag_s(np.poly([0.9, 0.8]), FS) > 0
+    assert traded_lag_s(np.array([1.0, -0.9]), FS) is None  # one pole is no sensor mode
+    assert traded_lag_s(mode_pair(5.0, 0.05, FS), FS, bound=0.05) is not None
+
+
+def test_a_strain_reading_owns_the_lead_that_pays_back_an_overdamped_lag():
+    # c/S is a lead: a pair damped as no sensor is lags by 2ζ/ω more than the sensor's, and
+    # the derivative term can pay it back, so its deviation holds S·2ζ/ω.
+    inputs = ['a_z', 'da_z@mode=20.0,0.7']
+    b = np.array([[0.006, 0.004, 0.0], [1e-6, 1e-6, 0.0]])
+    covariance = np.diag(np.full(2 + b.size, 1e-16))
+    strain = get_effect('strain_sensitivity')
+    light, heavy = mode_pair(5.0, 0.05, FS), mode_pair(5.0, 0.6, FS)
+    for a in (light, heavy):
+        model = _model(inputs, b * np.sum(a) / np.sum(light), a=a, nk=0)
+        value, std = strain.physical(model, covariance=covariance)['pa_per_g_per_ms']
+        gain = 0.01 / np.sum(light)  # the a_z path's static gain, Pa per m/s²
+        if a is light:
+            assert 0 < std < 0.02 * abs(value)
+        else:
+            lead = gain * traded_lag_s(heavy, FS) * G0 * 1e3
+            assert lead <= std < lead + 0.02 * abs(value) and lead > 0.1 * abs(value)
 
 
 @pytest.mark.parametrize('searched', ['mount', 'sensor'])
