@@ -57,8 +57,8 @@ from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import continuous_poles, max_root_radius, resonances
 from ..shots.inputs import input_channels, mode_pair, parse_channel
-from .input_noise import (MIN_CHECK_GAIN, NoiseLevels, noise_levels, refine_mode, Refinement,
-                          subtracted_noise)
+from .input_noise import (MIN_CHECK_GAIN, MIN_ZETA, NoiseLevels, noise_levels, refine_mode,
+                          Refinement, subtracted_noise)
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
@@ -98,6 +98,9 @@ COUPLED_EFFORT = 4
 POLISH_TOLERANCE, POLISH_STEP = 1e-3, 1e-2
 #: Slowest sensor mode, as a share of the sample rate, that :func:`_other_mode` tries.
 OTHER_MODE_LOWEST = 0.01
+#: A lag-free fit's pair above this share of the sample rate (or damped less than
+#: ``MIN_ZETA``) is parked: :func:`_other_mode` tries the mode elsewhere (seen at 0.39–0.41).
+PARKED_SHARE = 0.3
 #: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
 #: ask for the same ones).
 CHANNEL_CACHE = 4
@@ -1046,22 +1049,24 @@ def _polished(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
 def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
                 ) -> tuple[dict, tuple]:
     """
-    Return the values and fit with the sensor's mode tried elsewhere, its lag traded.
+    Return the values and fit with the sensor's mode tried elsewhere, a delay traded.
 
-    A delay and the mode's own lag add up, so a lag-free fit has a basin where its pair
-    sits beyond the data's band and the delay takes the mode's lag: at 294 kS/s a 117 kHz
-    pair with ζ 0.0001 left a 36 kHz, ζ 0.1 mode unmodelled and read 39.06 µs for a
-    38.17 µs delay, 146 noise variances above the mode's basin. The grid's pair (ζ 0.1,
-    at least :data:`OTHER_MODE_LOWEST` of fs, not within 1.5× of the fitted mode) with the
-    least early loss, the delay moved to keep the total lag, is descended and polished;
-    the lower loss is kept.
+    A lag-free fit has a basin where its pair sits beyond the data's band, shaping and
+    lagging nothing: at 348 kS/s a 0.39 fs pair left the sensor's mode to the numerators,
+    330 noise variances above its basin. A delay there takes the mode's own lag ``2ζ/ω``
+    too: at 294 kS/s a 117 kHz pair with ζ 0.0001 read 39.06 µs for 38.17 µs. For such a
+    pair (:func:`_parked`) the grid's pair (ζ 0.1, at least :data:`OTHER_MODE_LOWEST` of
+    fs, not within 1.5× of the fitted one) with the least early loss, a delay moved so that
+    the total lag stays, is descended and polished; the lower loss is kept.
     """
     lagged = [s for s in spec.searches if s.lag_unit_s and s.coupled]
-    if spec.max_zeta is None or spec.nf < 2 or len(lagged) != 1:
+    if spec.max_zeta is None or spec.nf < 2 or len(lagged) > 1:
         return values, fitted
-    search, fs, a = lagged[0], fitter.fs, fitted[0].a
+    fs, a = fitter.fs, fitted[0].a
     modes = resonances(a, fs)
     fitted_hz = min(modes, key=lambda m: m[1])[0] if modes else None
+    if modes and not _parked(min(modes, key=lambda m: m[1]), fs):
+        return values, fitted
     lag = mechanics_delay_s(a, fs)
     trials = []
     for zeta, pair in _grid(spec.nf, fs):
@@ -1069,8 +1074,10 @@ def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
         if (zeta > spec.max_zeta or hz < OTHER_MODE_LOWEST * fs or not fitter.feasible(pair)
                 or (fitted_hz is not None and abs(math.log(hz / fitted_hz)) < math.log(1.5))):
             continue
-        value = values[search.key] + (lag - mechanics_delay_s(pair, fs)) / search.lag_unit_s
-        trial = {**values, search.key: float(np.clip(value, search.low, search.high))}
+        trial = dict(values)
+        for search in lagged:
+            value = values[search.key] + (lag - mechanics_delay_s(pair, fs)) / search.lag_unit_s
+            trial[search.key] = float(np.clip(value, search.low, search.high))
         trials.append((fitter.profile(trial, pair, early=True), trial, pair))
     trials = [t for t in trials if np.isfinite(t[0])]
     if not trials:
@@ -1081,6 +1088,12 @@ def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
     except IdentError:
         return values, fitted
     return other if other[1][0].loss < fitted[0].loss else (values, fitted)
+
+
+def _parked(mode: tuple[float, float], fs: float) -> bool:
+    """Return whether a fitted ``(Hz, ζ)`` pair sits where it shapes nothing: high or undamped."""
+    hz, zeta = mode
+    return hz > PARKED_SHARE * fs or zeta < MIN_ZETA
 
 
 def _distinct(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
