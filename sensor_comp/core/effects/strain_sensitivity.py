@@ -98,7 +98,7 @@ class StrainSensitivity(Effect):
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
         traded = traded_lag_s(model.a, model.fs)
         if covariance is not None and traded is not None and std is not None:
-            # Poles damped as no sensor's lag by 2ζ/ω, which a lead c/S may have paid back.
+            # Poles damped beyond a sensor's lag by 2ζ/ω; a lead c/S may have paid that back.
             lead = abs(static_gain(model.a, model.b, axial)) * traded * G_PER_MS
             std = math.hypot(std, lead)
         return {'pa_per_g_per_ms': (coefficient(model.a, model.b), std)}
