@@ -101,6 +101,8 @@ OTHER_MODE_LOWEST = 0.01
 #: A lag-free fit's pair above this share of the sample rate (or damped less than
 #: ``MIN_ZETA``) is parked: :func:`_other_mode` tries the mode elsewhere (seen at 0.39–0.41).
 PARKED_SHARE = 0.3
+#: Profile steps from the other mode's start before its loss must be below the parked fit's.
+OTHER_MODE_STEPS = 8
 #: Parameter sets whose input channels a fitter keeps (a fit, its loss and its deviation
 #: ask for the same ones).
 CHANNEL_CACHE = 4
@@ -1057,7 +1059,8 @@ def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
     too: at 294 kS/s a 117 kHz pair with ζ 0.0001 read 39.06 µs for 38.17 µs. For such a
     pair (:func:`_parked`) the grid's pair (ζ 0.1, at least :data:`OTHER_MODE_LOWEST` of
     fs, not within 1.5× of the fitted one) with the least early loss, a delay moved so that
-    the total lag stays, is descended and polished; the lower loss is kept.
+    the total lag stays, is descended (on only when :data:`OTHER_MODE_STEPS` steps bring it
+    below the parked fit) and polished; the lower loss is kept.
     """
     lagged = [s for s in spec.searches if s.lag_unit_s and s.coupled]
     if spec.max_zeta is None or spec.nf < 2 or len(lagged) > 1:
@@ -1083,8 +1086,12 @@ def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
     if not trials:
         return values, fitted
     _, trial, pair = min(trials, key=lambda t: t[0])
-    try:
-        other = _polished(fitter, spec, trial, fitter.fit(trial, [pair]))
+    try:  # a few steps first: most such starts fall back to the parked pair
+        probe = fitter._profile_descent(trial, pair, OTHER_MODE_STEPS)
+        start = np.concatenate([[1.0], probe.theta])
+        if not fitter.profile(trial, start) < fitter.profile(values, a):
+            return values, fitted
+        other = _polished(fitter, spec, trial, fitter.fit(trial, [start]))
     except IdentError:
         return values, fitted
     return other if other[1][0].loss < fitted[0].loss else (values, fitted)
