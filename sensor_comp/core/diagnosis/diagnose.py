@@ -793,8 +793,8 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
                 f'missing effect: {best.title} ({best.effect}) removes '
                 f'{100 * best.score:.1f} % of the validation residual energy '
                 f'(p = {best.p_value:.2g}); it leaves {best.leftover.describe()}, consistent '
-                f'with the noise{_alike(best, significant[1:])}', (best.effect,),
-                best.leftover, _share(ctx, best.leftover), ranked)
+                f'with the noise{_alike(best, significant[1:])}{_local(best.leftover)}',
+                (best.effect,), best.leftover, _share(ctx, best.leftover), ranked)
     second = _second(best, [r for r in ranked if r.relevant and r is not best], ctx)
     if second is not None and second[0].significant:
         other, left = second
@@ -806,8 +806,8 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
                     f'({other.effect}) remove {100 * best.score:.1f} % and '
                     f'{100 * other.score:.1f} % of the validation residual energy; together '
                     f'they leave {left.describe()}, consistent with the noise (add the '
-                    f'first, then diagnose again)', (best.effect, other.effect), left,
-                    _share(ctx, left), ranked)
+                    f'first, then diagnose again){_local(left)}', (best.effect, other.effect),
+                    left, _share(ctx, left), ranked)
     share = _share(ctx, best.leftover)
     part = '' if share is None else f' ({100 * share:.0f} % of what lies beyond the noise)'
     return ('partly_explained',
@@ -815,6 +815,14 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
             f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
             f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
             f'outside the catalogue remains', (best.effect,), best.leftover, share, ranked)
+
+
+def _local(left: Leftover) -> str:
+    """Return a sentence on a local misfit the energy does not show, or ''."""
+    if not left.peak_above:
+        return ''
+    return (f'. Locally it does not: {left.peak_words()}; check that part of the shots '
+            f'before taking the name for the whole answer')
 
 
 def _alike(best: Ranked, others: Sequence[Ranked]) -> str:

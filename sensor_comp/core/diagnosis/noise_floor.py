@@ -239,7 +239,7 @@ class Leftover:
         consistent: The residual is the noise (overall and in every segment).
         noise_variance: The noise variance it is measured against, Pa².
         peak_ratio: The residual's largest magnitude over the noise σ (beside the pulse
-            corners), reported where the energy does not show a misfit.
+            corners): a local misfit the energy does not show, reported, not tested.
         peak_limit: The largest ``peak_ratio`` noise gives (:func:`peak_limit`).
         peak_segment: The segment the largest magnitude lies in.
 
@@ -281,10 +281,9 @@ class Leftover:
         """Return the leftover in words: size in noise units, where it is, what it looks like."""
         text = (f'{self.energy_ratio:.2f}× the noise energy (RMS {self.rms_ratio:.2f}× the '
                 f'noise σ)')
-        if self.peak_above:
-            text += (f'; its largest value is {self.peak_ratio:.1f} σ '
-                     f'{_WORDS[self.peak_segment]} (noise stays below {self.peak_limit:.1f} σ)')
         if not self.consistent:
+            if self.peak_above:
+                text += f'; {self.peak_words()}'
             seg = self.where
             total = sum(max(s.excess, 0.0) for s in self.segments)
             share = seg.excess / total if total > 0 else 0.0
@@ -293,6 +292,11 @@ class Leftover:
             if self.shape:
                 text += f'; {self.shape}'
         return text
+
+    def peak_words(self) -> str:
+        """Return where the largest value stands against the noise's, in words."""
+        return (f'its largest value is {self.peak_ratio:.1f} σ {_WORDS[self.peak_segment]} '
+                f'(noise stays below {self.peak_limit:.1f} σ)')
 
     def to_dict(self) -> dict:
         """Return the numbers as JSON-ready values."""

@@ -531,7 +531,10 @@ def test_leftover_reports_a_misfit_confined_to_the_pulse_by_its_peak():
     assert found.energy_ratio - 1 < PRACTICAL_SHARE and found.consistent
     assert found.peak_above and found.peak_segment == 'pulse'
     assert found.peak_ratio == pytest.approx(12.0, rel=0.1)
-    assert 'largest value is 12' in found.describe() and 'during the pulse' in found.describe()
+    assert 'largest value' not in found.describe()  # it is consistent: the verdict says it
+    assert 'largest value is 12' in found.peak_words() and 'during the pulse' in found.peak_words()
+    from sensor_comp.core.diagnosis.diagnose import _local
+    assert _local(clean) == '' and 'Locally it does not: its largest value is 12' in _local(found)
     doc = json.loads(json.dumps(found.to_dict()))
     assert doc['peak_segment'] == 'pulse' and doc['peak_ratio'] > doc['peak_limit']
 
