@@ -17,6 +17,7 @@ from typing import ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 from .probe import ProbeSpec
+from ..estimators.polynomials import continuous_poles, least_damping
 from ..shots.inputs import AXES, mode_pair, parse_channel
 from ..shots.windows import Ringing, Window
 from ...errors import SensorCompError
@@ -570,10 +571,8 @@ def traded_lag_s(a: np.ndarray, fs: float, *, bound: float = SENSOR_ZETA) -> flo
     a = np.asarray(a, dtype=np.float64)
     if a.size < 3:
         return None
-    z = np.roots(a).astype(complex)
-    s = np.log(z[np.abs(z) > 1e-12]) * fs
-    pairs = s[s.imag > 1e-9 * np.abs(s)]
-    if pairs.size and np.min(-pairs.real / np.abs(pairs)) < BOUND_SHARE * bound:
+    least = least_damping(continuous_poles(a, fs)[0])
+    if least is not None and least < BOUND_SHARE * bound:
         return None
     return max(mechanics_delay_s(a, fs), 0.0)
 

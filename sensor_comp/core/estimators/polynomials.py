@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-__all__ = ['ORIGIN', 'continuous_poles', 'is_stable', 'max_root_radius', 'reflect_unstable',
-           'resonances']
+__all__ = ['ORIGIN', 'continuous_poles', 'is_stable', 'least_damping', 'max_root_radius',
+           'reflect_unstable', 'resonances']
 
 #: A root below this modulus is a pole at the origin (a pure delay: no s-plane pole).
 ORIGIN = 1e-12
@@ -61,6 +61,12 @@ def reflect_unstable(poly: np.ndarray) -> np.ndarray:
     roots = np.where(radius > 1.0, 1.0 / np.conj(roots), roots)
     roots = np.where(np.abs(roots) >= 1.0, roots * (1.0 - 1e-9), roots)
     return np.real(np.poly(roots))
+
+
+def least_damping(s: np.ndarray) -> float | None:
+    """Return the least damping ratio of the pairs among s-plane poles ``s``, or None."""
+    pairs = s[s.imag > 0]
+    return float(np.min(-pairs.real / np.abs(pairs))) if pairs.size else None
 
 
 def resonances(poly: np.ndarray, fs: float, *,

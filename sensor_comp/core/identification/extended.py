@@ -55,7 +55,8 @@ from ..estimators import Estimate, fit_oe, IdentError
 from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
-from ..estimators.polynomials import continuous_poles, max_root_radius, resonances
+from ..estimators.polynomials import (continuous_poles, least_damping, max_root_radius,
+                                      resonances)
 from ..shots.inputs import input_channels, mode_pair, parse_channel
 from .input_noise import (MIN_CHECK_GAIN, MIN_ZETA, NoiseLevels, noise_levels, refine_mode,
                           Refinement, subtracted_noise)
@@ -410,15 +411,9 @@ def _feasibility(spec: ModelSpec, fs: float) -> Callable[[np.ndarray], bool]:
             return False
         if spec.max_zeta is None:
             return True
-        least = _least_damping(s)
+        least = least_damping(s)
         return least is not None and least <= spec.max_zeta
     return feasible
-
-
-def _least_damping(s: np.ndarray) -> float | None:
-    """Return the least damping ratio of the pole pairs among ``s``, or None (no pair)."""
-    pairs = s[s.imag > 0]
-    return float(np.min(-pairs.real / np.abs(pairs))) if pairs.size else None
 
 
 class _Fitter:
