@@ -137,10 +137,14 @@ def test_a_second_mode_beside_an_anvil_ringing_is_still_named():
 def test_an_accelerometer_resonance_above_the_pulses_is_not_named_strain():
     # A 27.3 kHz mode in the accelerometer channel only (R = 1.5, 327 kS/s; seed-6 case
     # 132): below it the pressure predicted from the measured acceleration gains a leading
-    # derivative term, which the diagnosis named base strain with confidence.
+    # derivative term, which the diagnosis named base strain with confidence. Not counted:
+    # the accelerometer's ringing explains it, or (first, since the strain term owns the
+    # lead that pays back a pair damped at the bound) its coefficient is not told from zero.
     truth, (calibration, validation) = _halves('accel_resonance', 2489710441,
                                                rate_range=(3e5, 1e6))
     result = diagnose([calibration], [validation])
     entry = next(r for r in result.ranking if r.effect == 'strain_sensitivity')
-    assert not entry.significant and 'accelerometer' in entry.evidence, entry.evidence
+    assert not entry.significant, entry.evidence
+    assert ('accelerometer' in entry.evidence
+            or 'not told apart from zero' in entry.evidence), entry.evidence
     assert not result.significant, result.explanation
