@@ -96,8 +96,9 @@ class StrainSensitivity(Effect):
 
         std = (delta_std(coefficient, model.a, model.b, covariance) if covariance is not None
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
-        traded = traded_lag_s(model.a, model.fs)
-        if covariance is not None and traded is not None and std is not None:
+        traded = (traded_lag_s(model.a, model.fs)
+                  if covariance is not None and std is not None else None)
+        if traded is not None:
             # Poles damped beyond a sensor's lag by 2ζ/ω; a lead c/S may have paid that back.
             lead = abs(static_gain(model.a, model.b, axial)) * traded * G_PER_MS
             std = math.hypot(std, lead)

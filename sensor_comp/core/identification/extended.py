@@ -1062,9 +1062,10 @@ def _other_mode(fitter: _Fitter, spec: ModelSpec, values: dict, fitted: tuple
         return values, fitted
     fs, a = fitter.fs, fitted[0].a
     modes = resonances(a, fs)
-    fitted_hz = min(modes, key=lambda m: m[1])[0] if modes else None
-    if modes and not _parked(min(modes, key=lambda m: m[1]), fs):
+    least = min(modes, key=lambda m: m[1]) if modes else None
+    if least is not None and not _parked(least, fs):
         return values, fitted
+    fitted_hz = None if least is None else least[0]
     lag = mechanics_delay_s(a, fs)
     trials = []
     for zeta, pair in _grid(spec.nf, fs):
