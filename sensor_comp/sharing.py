@@ -25,7 +25,7 @@ import time
 
 from .worker import Worker
 
-__all__ = ['IDLE_S', 'PROCESSES', 'PROCESSES_ENV', 'close_idle', 'pool_size', 'share']
+__all__ = ['IDLE_S', 'PROCESSES', 'PROCESSES_ENV', 'close_idle', 'pool_size', 'share', 'warm']
 
 #: Processes sharing the calls (this one included).
 PROCESSES = 2
@@ -45,8 +45,9 @@ def pool_size(cost: float, least: float, processes: int | None = None) -> int:
     """
     Return how many processes should share work of size ``cost`` (1: this one only).
 
-    Helpers start only when ``cost`` reaches ``least`` (their start-up, ~1 s, must pay),
-    not inside a ``multiprocessing`` worker or daemon (the caller already runs in parallel),
+    Helpers start only when ``cost`` reaches ``least`` (their start-up, ~1 s, must pay);
+    idle ones already started (:func:`warm`, an earlier share) are used for any cost. Never
+    inside a ``multiprocessing`` worker or daemon (the caller already runs in parallel),
     and within the cores other programs leave free (:func:`_busy_elsewhere`). ``processes``
     defaults to ``SENSOR_COMP_PROCESSES`` or :data:`PROCESSES` (given, the load is not
     consulted).
@@ -63,10 +64,35 @@ def pool_size(cost: float, least: float, processes: int | None = None) -> int:
             cpus = min(cpus, math.floor(cpus - os.getloadavg()[0] + 1.5))
         else:
             cpus = min(cpus, cpus - busy)
-    if (cost < least or multiprocessing.parent_process() is not None
-            or multiprocessing.current_process().daemon):
+    if multiprocessing.parent_process() is not None or multiprocessing.current_process().daemon:
         return 1
+    if cost < least:
+        processes = min(processes, 1 + _ready())
     return max(1, min(processes, cpus))
+
+
+def _ready() -> int:
+    """Return how many idle helpers are running (no start-up left to pay)."""
+    with _idle_lock:
+        return sum(worker.alive for _, worker in _idle)
+
+
+def warm(cost: float, least: float, *, modules: Sequence[str] = (),
+         name: str = 'helper') -> int:
+    """
+    Start now the helpers that a later share of work ``cost`` would start; return how many.
+
+    They import ``modules`` (the shared function's) as they start and wait among the idle
+    helpers (closed after :data:`IDLE_S` unused): a start-up of about a second then runs on
+    a free core beside this process's work, instead of inside the share. ``cost`` and
+    ``least`` as :func:`pool_size`.
+    """
+    count = pool_size(cost, least) - 1 - _ready()
+    workers = [Worker(name=name, env={PROCESSES_ENV: '1'}, modules=modules)
+               for _ in range(count)]
+    if workers:
+        _release(workers)
+    return len(workers)
 
 
 def _busy_elsewhere() -> int | None:

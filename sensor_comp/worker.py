@@ -8,6 +8,7 @@ user's ``__main__``); why and how: ``doc/outputs-and-workers.md``. No ROS import
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import os
 import pickle
 import signal
@@ -19,9 +20,11 @@ import traceback
 __all__ = ['Worker', 'WorkerDied', 'serve']
 
 # Run by the worker: ignore SIGINT first, take the parent's path; no pylab (PyEMD imports
-# it for plots a worker never draws: 0.5 s of start-up).
+# it for plots a worker never draws: 0.5 s of start-up); import the modules its calls will
+# need before it waits for the first (a helper started early is then ready when called).
 _BOOTSTRAP = ('import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); import sys; '
               'sys.modules["pylab"] = None; sys.path[:] = {path!r}; '
+              'import importlib; [importlib.import_module(m) for m in {modules!r}]; '
               'from sensor_comp.worker import serve; serve({read}, {write})')
 # How long a retired worker may take to exit before it is killed.
 _EXIT_WAIT_S = 5.0
@@ -41,14 +44,18 @@ class Worker:
     Args:
         name: What the worker is, for messages (``'fit worker'``).
         env: Environment variables to set in the worker.
+        modules: Modules the worker imports as it starts, before it waits for a call (one
+            that fails to import ends it: its first call raises :class:`WorkerDied`).
 
     """
 
-    def __init__(self, *, name: str = 'worker', env: dict[str, str] | None = None):
+    def __init__(self, *, name: str = 'worker', env: dict[str, str] | None = None,
+                 modules: Sequence[str] = ()):
         self.name = name
         read, child_write = os.pipe()
         child_read, write = os.pipe()
-        code = _BOOTSTRAP.format(path=list(sys.path), read=child_read, write=child_write)
+        code = _BOOTSTRAP.format(path=list(sys.path), modules=list(modules), read=child_read,
+                                 write=child_write)
         try:
             self._process = subprocess.Popen([sys.executable, '-c', code],
                                              env=dict(os.environ, **(env or {})),

@@ -11,18 +11,24 @@ import pytest
 from sensor_comp import sharing
 from sensor_comp.worker import WorkerDied
 
-
-def power(base, exponent):
-    """Raise a number to a power: a module-level job, which a helper process can import."""
-    if base < 0:
-        raise ValueError(f'negative base {base}')
-    return base ** exponent
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from sharing_jobs import power, slow_pid  # noqa: E402 (a module helpers can import too)
+sys.path.remove(HERE)
 
 
-def slow_pid(seconds):
-    """Return the process id after a pause: a job long enough for a helper to take some."""
-    time.sleep(seconds)
-    return os.getpid()
+@pytest.fixture(autouse=True)
+def jobs_importable(monkeypatch):
+    """
+    Let helpers import the jobs' module :mod:`sharing_jobs` by its name.
+
+    pytest's importlib mode gives the test modules names no other process can import, and
+    a helper unpickles a job by importing its module (it takes this sys.path at its start).
+    """
+    monkeypatch.syspath_prepend(HERE)
+    sharing.close_idle()  # none started with another path
+    yield
+    sharing.close_idle()
 
 
 def test_results_in_order_and_each_job_reported_once():
@@ -56,6 +62,7 @@ def test_jobs_a_dead_helper_leaves_are_run_here(monkeypatch):
 
 
 def test_no_helpers_for_small_work_on_a_busy_machine_or_when_told(monkeypatch):
+    sharing.close_idle()
     cpus = len(os.sched_getaffinity(0))
     monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
     monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
@@ -107,7 +114,7 @@ def test_a_helper_serves_the_next_share_then_exits_when_idle(monkeypatch):
     # run there once it is free: a slow job leaves it some.
     pids = sharing.share(slow_pid, [(0.3,)] * 12, processes=2)
     assert [worker.pid for _, worker in sharing._idle] == helpers
-    assert set(pids) <= {os.getpid(), helpers[0]}
+    assert set(pids) == {os.getpid(), helpers[0]}
     monkeypatch.setattr(sharing, 'IDLE_S', 0.2)
     sharing.share(power, [(b, 2) for b in range(4)], processes=2)  # idle again, for 0.2 s
     deadline = time.monotonic() + 10.0
@@ -123,3 +130,34 @@ def _running(pid):
     except ProcessLookupError:
         return False
     return True
+
+
+def test_a_helper_warmed_early_serves_even_small_work(monkeypatch):
+    cpus = len(os.sched_getaffinity(0))
+    if cpus < 2:
+        pytest.skip('one core: no helper is ever started')
+    sharing.close_idle()
+    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+    assert sharing.warm(9, 10) == 0  # work too small to pay a start-up
+    assert sharing.warm(10, 10, modules=['json']) == 1
+    assert sharing.warm(10, 10) == 0  # the one started is waiting
+    helper = sharing._idle[0][1].pid
+    # Started, it costs nothing more: small work shares it.
+    processes = sharing.pool_size(1, 10)
+    assert processes == 2
+    pids = sharing.share(slow_pid, [(0.3,)] * 8, processes=processes)
+    assert helper in pids and os.getpid() in pids
+    sharing.close_idle()
+
+
+def test_a_helper_that_cannot_import_its_modules_leaves_its_jobs_here(monkeypatch):
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip('one core: no helper is ever started')
+    sharing.close_idle()
+    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+    assert sharing.warm(10, 10, modules=['sensor_comp.no_such_module']) == 1
+    assert sharing.share(power, [(b, 2) for b in range(6)], processes=2) == [
+        0, 1, 4, 9, 16, 25]
+    sharing.close_idle()

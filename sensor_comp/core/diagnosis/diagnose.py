@@ -102,7 +102,7 @@ from ..progress import ProgressFactory, Silent
 from .residual import analyse, ringing_time_s
 from .rival_forms import rival_remains
 from ...errors import SensorCompError
-from ...sharing import pool_size, share
+from ...sharing import pool_size, share, warm
 
 __all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
            'Ranked', 'Skipped', 'diagnose']
@@ -906,9 +906,12 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     progress = progress or Silent
     notes: list[str] = []
     calib, valid, fs = _prepare(calibration, validation, base, notes)
-    orders3, base_effects = _base_structure(
-        base, orders, delay, shot_windows([s for s in calib if s.shots]), notes)
+    windows = shot_windows([s for s in calib if s.shots])
+    orders3, base_effects = _base_structure(base, orders, delay, windows, notes)
     ids = _candidate_ids(candidates, base_effects)
+    # The candidates' helper starts now, beside the base fits, which then share it too.
+    warm(len(ids) * sum(w.y.size for w in windows), MIN_SHARED_COST, modules=(__name__,),
+         name='diagnosis helper')
     ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
                    residual_analysis, progress, notes)
     ranked, skipped = _candidates(ids, ctx, progress, notes)

@@ -14,7 +14,7 @@ from .metrics import fit_percent
 from .oe import fit_oe
 from .polynomials import is_stable, reflect_unstable
 from .selection import (Candidate, DelayEstimate, estimate_delay, select_structure,
-                        Selection)
+                        Selection, warm_grid_helpers)
 from .simulate import simulate_output
 
 __all__ = [
@@ -37,4 +37,5 @@ __all__ = [
     'reflect_unstable',
     'select_structure',
     'simulate_output',
+    'warm_grid_helpers',
 ]

@@ -23,10 +23,10 @@ from .metrics import fit_percent
 from .oe import fit_oe, OutputErrorProblem
 from .polynomials import is_stable
 from .simulate import simulate_output
-from ...sharing import pool_size, share
+from ...sharing import pool_size, share, warm
 
-__all__ = ['METHODS', 'Candidate', 'DelayEstimate', 'Selection', 'estimate_delay',
-           'lag_gram', 'profile_losses', 'select_structure']
+__all__ = ['GRID_ORDERS', 'METHODS', 'Candidate', 'DelayEstimate', 'Selection', 'estimate_delay',
+           'lag_gram', 'profile_losses', 'select_structure', 'warm_grid_helpers']
 
 
 def _fit_oe(segs, na, nb, nk):
@@ -45,6 +45,8 @@ def _fit_els(segs, na, nb, nk):
     return fit_armax_els(segs, na=na, nb=nb, nk=nk)
 
 
+#: The orders ``(na, nb)`` of the structure grid by default: ``na`` 1..4 by ``nb`` 1..3.
+GRID_ORDERS = tuple(itertools.product(range(1, 5), range(1, 4)))
 #: Samples × grid structures of output error from which a helper process shares the grid
 #: (about 1.7 s of fits here; a helper's start-up is about 0.5 s).
 MIN_SHARED_COST = 1_000_000
@@ -409,7 +411,7 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     Drops unstable or failed fits and, with ``valid_segments``, those more than
     ``fit_tolerance`` points below the best validation fit; of candidates within
     ``criterion_margin`` of the lowest ``criterion`` (``'bic'``, ``'aic'``, ``'aicc'``,
-    ``'fpe'``) the fewest parameters win. ``orders`` default to ``na`` 1..4 by ``nb`` 1..3,
+    ``'fpe'``) the fewest parameters win. ``orders`` default to :data:`GRID_ORDERS`,
     ``delays`` to :func:`estimate_delay` ±1; ``method`` is a key of :data:`METHODS`.
 
     Raises:
@@ -421,7 +423,7 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     _check_method(method)
     segs = as_segments(calib_segments)
     valid = None if valid_segments is None else as_segments(valid_segments)
-    orders = (tuple(itertools.product(range(1, 5), range(1, 4))) if orders is None
+    orders = (GRID_ORDERS if orders is None
               else tuple((int(na), int(nb)) for na, nb in orders))
     known = {}
     if delays is None:
@@ -454,6 +456,20 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
                            valid is not None, fit_tolerance, criterion_margin)
     return Selection(_refined(estimates[chosen], segs, method, grid[chosen]), method,
                      criterion, tuple(candidates), chosen, explanation)
+
+
+def warm_grid_helpers(calib_segments: Segment | Iterable[Segment], *,
+                      orders: Iterable[tuple[int, int]] | None = None, delays: int = 3) -> int:
+    """
+    Start now the helper process that :func:`select_structure`'s output-error grid will use.
+
+    For a caller with other work first (the delay search): the helper's start-up then runs
+    beside that work. ``orders`` as :func:`select_structure`, ``delays`` how many delays the
+    grid will try. Returns how many helpers were started (:func:`~sensor_comp.sharing.warm`).
+    """
+    structures = len(GRID_ORDERS if orders is None else tuple(orders))
+    cost = structures * delays * sum(s.y.size for s in as_segments(calib_segments))
+    return warm(cost, MIN_SHARED_COST, modules=(__name__,), name='structure grid helper')
 
 
 def _refined(est: Estimate, segs, method: str, key: tuple[int, int, int]) -> Estimate:

@@ -24,7 +24,7 @@ from .held_base import base_fits, fit_on_base, modes_khz
 from ..shots.windows import EARLY_S, shot_channels, shot_windows, Window
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                           fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
-                          Selection, simulate_output)
+                          Selection, simulate_output, warm_grid_helpers)
 from ..estimators.polynomials import max_root_radius
 from .model import Model, sensitivity_problem, Source
 from ..progress import ProgressFactory, Silent
@@ -333,10 +333,12 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
         with progress('structure selection', 1) as bar:
             # The delay is read on whole windows: on the pulses alone a sensor whose mode
             # the shots barely excite trades delay for a pole (doc/identification.md).
-            if delay is None:
+            early = data.early()
+            if delay is None:  # the grid's helper starts beside the search
+                warm_grid_helpers(early, orders=None if orders is None else [orders])
                 search = estimate_delay(data.measured)
             selection = select_structure(
-                data.early(), valid_segments=data.valid(),
+                early, valid_segments=data.valid(),
                 orders=None if orders is None else [orders],
                 delays=[delay] if search is None else search.neighbourhood(),
                 criterion=criterion)

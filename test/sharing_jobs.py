@@ -1,0 +1,17 @@
+"""Jobs for the sharing tests: module-level functions a helper process can import."""
+
+import os
+import time
+
+
+def power(base, exponent):
+    """Raise a number to a power; a negative base raises, as a failing job does."""
+    if base < 0:
+        raise ValueError(f'negative base {base}')
+    return base ** exponent
+
+
+def slow_pid(seconds):
+    """Return the process id after a pause: a job long enough for a helper to take some."""
+    time.sleep(seconds)
+    return os.getpid()
