@@ -418,6 +418,20 @@ def _params_ok(row: dict) -> bool:
     return bool(check) and all(c['ok'] for c in check.values())
 
 
+def _calibrated(rows: list[dict]) -> float:
+    """
+    Return the share of catalogue rigs at R >= 1.5 a calibrated estimator would pass.
+
+    Its errors Gaussian with the stated std, each parameter is within PARAMETER_Z std with
+    probability erf(PARAMETER_Z / √2) (95.4 %), so an effect of k parameters passes with
+    that to the k-th power: the ceiling the "params ok" rate is read against.
+    """
+    within = math.erf(PARAMETER_Z / math.sqrt(2))
+    counts = [len(r['truth']['parameters']) for r in rows
+              if r['effect'] in CATALOGUE and r['R'] >= 1.5 and r.get('truth')]
+    return statistics.fmean(within ** k for k in counts) if counts else math.nan
+
+
 def _ratio(row: dict, key: str, over: str) -> float | None:
     if key == 'top' and not _named(row):  # only a named effect is added by a user
         return None
@@ -577,7 +591,8 @@ def _criteria(clean: dict, catalogue: dict, outside: dict, rows: list[dict],
                           if v[0] < 0.9 * v[1] or v[2] < 0.9 * v[1]})
         total = [sum(v[i] for v in strong.values()) for i in range(3)]
         lines.append(f'[{"FAIL" if failing else "PASS"}] {CRITERIA[1]}: found '
-                     f'{_rate(total[0], total[1])}, parameters {_rate(total[2], total[1])}; '
+                     f'{_rate(total[0], total[1])}, parameters {_rate(total[2], total[1])} '
+                     f'(calibrated: {100 * _calibrated(rows):.0f} %); '
                      f'below 90 %: {", ".join(failing) or "none"}')
     n = sum(v[1] for v in outside.values())
     if n:
