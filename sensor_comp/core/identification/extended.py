@@ -442,6 +442,30 @@ class _Fitter:
         self._channels: dict[tuple[str, ...], list[np.ndarray]] = {}
         self._problems: dict[tuple[tuple[str, ...], bool], OutputErrorProblem] = {}
         self._lag: tuple[tuple, LagFree] | None = None
+        self._oe: tuple[tuple[str, ...], Estimate | IdentError] | None = None
+
+    def output_error(self, values: Mapping[str, float]) -> Estimate:
+        """
+        Return plain output error on the windows at ``values`` (the last one is kept).
+
+        A fresh fit's starts and the fit itself both begin with it, at the same values.
+
+        Raises:
+            IdentError: When output error cannot be fitted.
+
+        """
+        names = self.spec.channels(values)
+        if self._oe is None or self._oe[0] != names:
+            problem = self.problem(values)
+            try:
+                found = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf,
+                               nb=problem.nb, nk=problem.nk)
+            except IdentError as exc:
+                found = exc
+            self._oe = (names, found)
+        if isinstance(self._oe[1], IdentError):
+            raise self._oe[1]
+        return self._oe[1]
 
     def channels(self, values: Mapping[str, float]) -> list[np.ndarray]:
         """Return the input channels of every window at ``values`` (cached)."""
@@ -524,8 +548,7 @@ class _Fitter:
                 firsts += self._ringing_start(values, RINGING_ZETAS)
             return _distinct(firsts)
         try:
-            a = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
-                       nk=problem.nk).a
+            a = self.output_error(values).a
             if self.feasible(a):
                 firsts.append(a)
         except IdentError:
@@ -585,8 +608,7 @@ class _Fitter:
         results, failed = [], []
         if self.cols is None and fresh and not self.spec.lag_free:
             try:
-                oe = fit_oe(list(zip(problem.us, problem.ys)), nf=problem.nf, nb=problem.nb,
-                            nk=problem.nk)
+                oe = self.output_error(values)
                 if self.feasible(oe.a):
                     results.append((oe, None, None))
             except IdentError as exc:
