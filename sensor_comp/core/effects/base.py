@@ -398,6 +398,24 @@ class Effect:
         """
         if self.parameters and not fit.parameters(self.id):
             return 'its physical parameters cannot be read from the fitted model'
+        why = self.unread_search(fit)
+        if why is not None:
+            return why
+        if self.amplitude is not None:
+            value, std = fit.parameters(self.id).get(self.amplitude, (None, None))
+            if value is not None and std is not None and math.isfinite(std) and \
+                    not abs(value) > AMPLITUDE_Z * std:
+                return (f'its {self.amplitude} ({value:.3g} ± {std:.2g}) is not told apart '
+                        f'from zero')
+        return None
+
+    def unread_search(self, fit: FitView) -> str | None:
+        """
+        Return why a log-searched value of this effect is not read, or None.
+
+        At an end of its range, or not resolved (its deviation above the value: the data do
+        not tell its decade).
+        """
         for search in fit.spec.searches:
             if search.key.partition('.')[0] != self.id or not search.log:
                 continue
@@ -408,12 +426,6 @@ class Effect:
             std = fit.value_std.get(search.key)
             if std is not None and std > value:
                 return f'{name} = {value:.4g} ± {std:.2g} is not resolved by these data'
-        if self.amplitude is not None:
-            value, std = fit.parameters(self.id).get(self.amplitude, (None, None))
-            if value is not None and std is not None and math.isfinite(std) and \
-                    not abs(value) > AMPLITUDE_Z * std:
-                return (f'its {self.amplitude} ({value:.3g} ± {std:.2g}) is not told apart '
-                        f'from zero')
         return None
 
     def rival(self, analysis: ResidualView | None) -> str | None:

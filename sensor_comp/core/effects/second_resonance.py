@@ -62,6 +62,31 @@ def partial_fractions(a: np.ndarray, num: np.ndarray, fs: float
     return sorted(out, key=lambda m: -abs(m[2])), float(np.sum(k))
 
 
+def _reading(model: FittedModel, a: np.ndarray, b: np.ndarray
+             ) -> tuple[float, float, float, bool]:
+    """
+    Return the second mode's ``(kHz, ζ, relative gain, swapped)`` at polynomials ``a``, ``b``.
+
+    See :meth:`SecondResonance.physical`; ``swapped``: the searched pair carries the larger
+    static share (the sensor's mode), so the base's pair is read as the second mode.
+    """
+    row = row_of(model, 'a')
+    freq, zeta = modifier_value(model, 'mode')
+    pair = mode_pair(freq, zeta, model.fs)
+    full = np.convolve(a, pair)
+    numerator = delayed_numerator(b, model.nk)[row] * pair.sum()
+    found, direct = partial_fractions(full, numerator, model.fs)
+    searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
+    main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]), default=None)
+    if main is None:
+        raise EffectError('the fitted model has no main mode beside the second one')
+    swapped = abs(searched[2]) > abs(main[2])
+    second, first = (main, searched) if swapped else (searched, main)
+    share = second[2] + (direct if second[0] > first[0] else 0.0)
+    sensor = float(numerator.sum() / full.sum()) - share
+    return second[0] / 1e3, second[1], share / sensor if sensor else math.nan, swapped
+
+
 class SecondResonance(Effect):
     """A second mechanical mode (see the module docs)."""
 
@@ -104,26 +129,7 @@ class SecondResonance(Effect):
         the sensor's static sensitivity: the path's static gain less the second mode's,
         the path's direct term (what acts within a sample) going to the faster mode.
         """
-        row = row_of(model, 'a')
-        freq, zeta = modifier_value(model, 'mode')
-        pair = mode_pair(freq, zeta, model.fs)
-
-        def reading(a, b):
-            full = np.convolve(a, pair)
-            numerator = delayed_numerator(b, model.nk)[row] * pair.sum()
-            found, direct = partial_fractions(full, numerator, model.fs)
-            searched = min(found, key=lambda m: abs(m[0] / (freq * 1e3) - 1))
-            main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]),
-                       default=None)
-            if main is None:
-                raise EffectError('the fitted model has no main mode beside the second one')
-            swapped = abs(searched[2]) > abs(main[2])
-            second, first = (main, searched) if swapped else (searched, main)
-            share = second[2] + (direct if second[0] > first[0] else 0.0)
-            sensor = float(numerator.sum() / full.sum()) - share
-            return second[0] / 1e3, second[1], share / sensor if sensor else math.nan, swapped
-
-        values = reading(model.a, model.b)
+        values = _reading(model, model.a, model.b)
         out = {}
         for index, name in enumerate(('freq_khz', 'zeta', 'gain')):
             # A searched value's deviation is the fit's (stored); the others come from the
@@ -131,9 +137,31 @@ class SecondResonance(Effect):
             searched = index < 2 and not values[3]
             out[name] = (values[index], stored_std(model, self.id, name)
                          if covariance is None or searched else
-                         delta_std(lambda a, b, i=index: reading(a, b)[i], model.a, model.b,
-                                   covariance))
+                         delta_std(lambda a, b, i=index: _reading(model, a, b)[i], model.a,
+                                   model.b, covariance))
         return out
+
+    def unread_search(self, fit: FitView) -> str | None:
+        """
+        Return why the second mode's frequency or damping is not read, or None.
+
+        When the two modes swapped roles (:meth:`physical`), the searched pair holds the
+        sensor's mode (behind the anti-alias filter often damped to its bound) and the
+        second mode is the base's pair: its own values must be resolved instead (a
+        3.97 kHz, ζ 0.043 mode read to 0.04 % and 1 % at 213 kS/s was refused because the
+        searched sensor pair sat at ζ 0.2).
+        """
+        model = fit.model()
+        if not _reading(model, model.a, model.b)[3]:
+            return super().unread_search(fit)
+        parameters = fit.parameters(self.id)
+        for name in ('freq_khz', 'zeta'):
+            value, std = parameters[name]
+            if std is None or not math.isfinite(std) or std > value:
+                shown = 'none' if std is None else f'{std:.2g}'
+                return (f'{name} = {value:.4g} (deviation {shown}) of the base\'s pair, which '
+                        f'the second mode is read from, is not resolved by these data')
+        return None
 
     def implausible(self, fit: FitView) -> str | None:
         """

@@ -379,6 +379,39 @@ def test_a_second_mode_is_not_read_beside_a_base_of_four_poles():
     assert 'a base of 4 poles holds a mode besides the sensor' in why
 
 
+def test_a_swapped_second_mode_is_read_from_the_base_pair_not_the_searched_one():
+    # Behind the anti-alias filter a fit put the sensor's mode in the search, damped to its
+    # bound (ζ 0.2), and the true 4 kHz second mode in the base's pair, resolved to 0.04 %:
+    # the searched pair's range end says nothing about the second mode (seed 21, 213 kS/s).
+    sensor, mount = (40.0, 0.2, 1.0), (4.0, 0.043, 0.47)
+    a, pair = mode_pair(*mount[:2], FS), mode_pair(*sensor[:2], FS)
+    numerator = (mount[2] * a.sum() * pair + sensor[2] * pair.sum() * a) / pair.sum()
+    model = _model([f'a_z@mode={sensor[0]!r},{sensor[1]!r}'], numerator, a=a, nk=0)
+    effect = get_effect('second_resonance')
+    spec = effect.extend(ModelSpec(fs=FS, nf=2, nb=3, nk=0))
+    values = {'second_resonance.freq_khz': sensor[0], 'second_resonance.zeta': 0.1999}
+
+    def fit(spread):
+        covariance = np.diag(np.full(2 + 3, spread))
+        return SimpleNamespace(spec=spec, values=values, value_std={}, model=lambda: model,
+                               parameters=lambda _: effect.physical(model,
+                                                                    covariance=covariance))
+
+    resolved = fit(1e-16)
+    assert resolved.parameters('second_resonance')['freq_khz'][0] == pytest.approx(4.0)
+    assert effect.implausible(resolved) is None
+    why = effect.implausible(fit(1.0))  # the base pair's values not resolved
+    assert why is not None and "of the base's pair" in why
+    # Not swapped (the search holds the weaker mode), its range end still refuses it.
+    weak = _model([f'a_z@mode={mount[0]!r},0.1999'], numerator, a=mode_pair(*sensor[:2], FS),
+                  nk=0)
+    at_end = SimpleNamespace(spec=spec, values={'second_resonance.freq_khz': mount[0],
+                                                'second_resonance.zeta': 0.1999},
+                             value_std={}, model=lambda: weak,
+                             parameters=lambda _: effect.physical(weak))
+    assert 'sits at an end of its range' in effect.implausible(at_end)
+
+
 def test_a_second_mode_is_confounded_where_the_accelerometer_itself_rings():
     # An accelerometer mode M (fraction x) measures (1 - x + x M) a: the pressure predicted
     # from it, G / (1 - x + x M), has the second-mode form with its zero pair at M's 24 kHz.
