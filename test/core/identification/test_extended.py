@@ -19,7 +19,7 @@ from sensor_comp.core.compensation.filter import CompensationFilter, compensate_
 from sensor_comp.core.effects import EffectError
 from sensor_comp.core.compensation import initial_state
 from sensor_comp.core.effects.base import mechanics_delay_s, ModelSpec, Search
-from sensor_comp.core.identification.extended import (_walked, _with_traded_lag, fit_extended,
+from sensor_comp.core.identification.extended import (_with_traded_lag, fit_extended,
                                                       search_effort, shot_windows)
 from sensor_comp.core.estimators import fit_percent, simulate_output
 from sensor_comp.core.identification.identify import identify, ShotSource
@@ -398,23 +398,3 @@ def test_free_numerators_own_the_lag_of_a_pair_damped_as_no_sensor_is():
     assert _with_traded_lag(2.0, search, spec, fs, sensor) == 2.0
     plain = Search('zero_shift.tau_ms', 1.0, 2000.0, log=True)  # not a lag: as is
     assert _with_traded_lag(2.0, plain, spec, fs, damped) == 2.0
-
-
-@pytest.mark.parametrize('minimum', [0.37, 2.5, -4.2, 9.9])
-def test_the_polish_walk_reaches_a_minimum_beyond_its_first_step(minimum):
-    # A converged loss near its minimum is a parabola with a slight skew; the walk starts
-    # at 0 with its first step 0.1 (and the neighbours tried), and must place the minimum
-    # within its tolerance in a handful of losses, never leaving [-10, 10].
-    calls = []
-
-    def loss(v, a0):
-        calls.append(v)
-        assert -10.0 <= v <= 10.0
-        d = v - minimum
-        return 100.0 + d ** 2 + 0.05 * d ** 3 / (1 + abs(d)), a0
-
-    tried = {v: loss(v, None) for v in (-0.1, 0.0, 0.1)}
-    step = -0.1 if tried[-0.1][0] < tried[0.1][0] else 0.1
-    found = _walked(loss, tried, step, -10.0, 10.0, 1e-3)
-    assert found == pytest.approx(minimum, abs=0.002)
-    assert len(calls) <= 3 + 10
