@@ -785,9 +785,9 @@ class _Fitter:
                 high = min(high, band[0])
             else:
                 low = max(low, band[1])
-        # A coupled loss is rugged at a hundredth of a grid step (its descents end apart):
-        # the finer refinement found the lower basins there (seed 21: a 23.5 µs delay read
-        # 24.20 ± 0.09 µs at 0.1 %); elsewhere 0.1 % of the bracket is far below any deviation.
+        # A coupled loss is rugged at a hundredth of a grid step (its descents end apart), so
+        # where its refinement stops matters and it keeps the finer tolerance; elsewhere
+        # 0.1 % of the bracket is far below any deviation.
         result = optimize.minimize_scalar(
             (lambda x: self._step(at(x), start)[1]) if coupled else
             (lambda x: self.profile(at(x), start)), bounds=(low, high), method='bounded',
