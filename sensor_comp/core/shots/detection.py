@@ -324,33 +324,6 @@ def _flat_top(x: np.ndarray, sigma: float) -> tuple[float, int] | None:
     return None
 
 
-def _activity_start(pre: np.ndarray, *, gap: int) -> int | None:
-    """
-    Return where the shot's motion starts inside the pre-trigger ``pre`` (axes × samples).
-
-    A sample is active where an axis leaves its noise band (``NOISE_FACTOR`` robust σ, at
-    least a quantisation step, about the median); activity that reaches the pre-trigger's
-    end with gaps of at most ``gap`` samples belongs to the shot (anvil ringing from the
-    impact, a lateral pulse that leads the axial one). None: the pre-trigger is quiet.
-    """
-    if pre.shape[-1] < 16:
-        return None
-    active = np.zeros(pre.shape[-1], dtype=bool)
-    for row in pre:
-        finite = row[np.isfinite(row)]
-        if finite.size < 16:
-            continue
-        level = NOISE_FACTOR * max(mad_sigma(finite), _quantum(finite))
-        with np.errstate(invalid='ignore'):
-            active |= np.abs(row - np.median(finite)) > level
-    cut = pre.shape[-1]
-    for i in np.flatnonzero(active)[::-1]:
-        if cut - i > gap:
-            break
-        cut = int(i)
-    return cut if cut < pre.shape[-1] else None
-
-
 def _noise(x: np.ndarray, base: slice) -> float:
     """Return the noise σ of ``x`` from its pre-trigger, or from the whole window if short."""
     quiet = x[base]
@@ -382,16 +355,7 @@ def _measure(recording: Recording, *, index: int, start: int, stop: int, onset: 
     width = end - onset
     onset_i = min(max(start, math.floor(onset)), stop - 1)
     end_i = min(max(onset_i + 1, math.ceil(end)), stop)
-    guard = max(1, round(BASELINE_GUARD * width))
-    baseline_stop = onset_i - guard
-    active = _activity_start(recording.acceleration[:, start:max(baseline_stop, start)],
-                             gap=max(1, round(width)))
-    if active is not None:
-        baseline_stop = start + active - guard
-        notes.append(f'the acceleration leaves its noise band {onset_i - start - active} '
-                     f'samples ({1e3 * (onset_i - start - active) / fs:.3g} ms) before the '
-                     f'pulse onset (ringing or a lateral pulse first): the pre-trigger ends '
-                     f'before it')
+    baseline_stop = onset_i - max(1, round(BASELINE_GUARD * width))
     if baseline_stop <= start:
         baseline_stop = start + 1
         notes.append('no quiet pre-trigger: baseline from the first window sample')
