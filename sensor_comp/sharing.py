@@ -88,8 +88,7 @@ def warm(cost: float, least: float, *, modules: Sequence[str] = (),
     ``least`` as :func:`pool_size`.
     """
     count = pool_size(cost, least) - 1 - _ready()
-    workers = [Worker(name=name, env={PROCESSES_ENV: '1'}, modules=modules)
-               for _ in range(count)]
+    workers = [_helper(name, modules) for _ in range(count)]
     if workers:
         _release(workers)
     return len(workers)
@@ -236,8 +235,12 @@ def _take(count: int, name: str) -> list[Worker]:
         worker.close()
     for worker in taken:
         worker.name = name
-    return taken + [Worker(name=name, env={PROCESSES_ENV: '1'})
-                    for _ in range(count - len(taken))]
+    return taken + [_helper(name) for _ in range(count - len(taken))]
+
+
+def _helper(name: str, modules: Sequence[str] = ()) -> Worker:
+    """Start a helper importing ``modules``; it shares no further (``SENSOR_COMP_PROCESSES=1``)."""
+    return Worker(name=name, env={PROCESSES_ENV: '1'}, modules=modules)
 
 
 def _release(workers: Sequence[Worker]) -> None:
