@@ -1288,11 +1288,13 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
     if lag is not None:
         jac = lag.project(jac, nf)
     kept = jac.shape[1] - len(keys)
-    covariance = _sandwich(e, jac, offsets)
+    baselines = ([w.baseline for w in windows]
+                 if np.array_equal(np.diff(offsets), [w.y.size for w in windows]) else [])
+    covariance = _sandwich(e, jac, offsets, baselines)
     notes, held = [], not np.all(np.isfinite(covariance)) and bool(keys)
     if held:
         # A searched value the polynomials can imitate: the others with it held fixed.
-        covariance = _sandwich(e, jac[:, :kept], offsets)
+        covariance = _sandwich(e, jac[:, :kept], offsets, baselines)
         notes = [f'{key} = {fit.values[key]:.4g} cannot be told apart from the base '
                  f'polynomials by these data (their joint covariance is singular): no '
                  f'deviation stated; the others are given with it held fixed' for key in keys]
@@ -1377,8 +1379,34 @@ def _lag_window(e: np.ndarray, offsets: np.ndarray) -> int:
     return int(min(most, HAC_FACTOR * (above[-1] + 1)))
 
 
-def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Return the robust covariance of :func:`robust_uncertainty` (columns of ``jac``)."""
+def _baseline_meat(e: np.ndarray, unit: np.ndarray, baseline: int, lags: int) -> np.ndarray:
+    """
+    Return what the window's pre-trigger mean adds to the meat of :func:`_sandwich`.
+
+    The pressure's baseline is the mean ``n̄`` of the ``m`` pre-trigger samples, so every
+    sample after them carries ``−n̄``: an offset the whole window shares, which a lag
+    window of a few samples does not see but a slow regressor (a zero shift's decay, a
+    high-pass's tail) follows. With ``p``, ``q`` the scores summed over the pre-trigger and
+    after it, the score's variance gains ``var(n̄)·(q qᵀ − p pᵀ)``; ``var(n̄)`` is the
+    pre-trigger residual's long-run variance (Bartlett, ``lags``) over ``m``.
+    """
+    pre = e[:baseline] - np.mean(e[:baseline])
+    width = min(lags, baseline)
+    lrv = float(pre @ pre) + 2 * sum((1 - k / width) * float(pre[k:] @ pre[:-k])
+                                     for k in range(1, width))
+    lrv = max(lrv, 0.0) / baseline
+    p, q = unit[:baseline].sum(axis=0), unit[baseline:].sum(axis=0)
+    return lrv / baseline * (np.outer(q, q) - np.outer(p, p))
+
+
+def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray,
+              baselines: Sequence[int] = ()) -> np.ndarray:
+    """
+    Return the robust covariance of :func:`robust_uncertainty` (columns of ``jac``).
+
+    ``baselines``: each window's pre-trigger samples its pressure baseline was the mean of
+    (:func:`_baseline_meat`); empty: none counted.
+    """
     p = jac.shape[1]
     scale = np.linalg.norm(jac, axis=0)
     scale[scale == 0] = 1.0
@@ -1393,8 +1421,10 @@ def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray) -> np.ndarray
     rinv = np.linalg.solve(r, np.eye(p))
     lags = _lag_window(e, offsets)
     within, between = np.zeros((p, p)), np.zeros((p, p))
-    for start, stop in zip(offsets[:-1], offsets[1:]):
+    for index, (start, stop) in enumerate(zip(offsets[:-1], offsets[1:])):
         n = stop - start
+        if index < len(baselines) and 1 < baselines[index] < n:
+            within += _baseline_meat(e[start:stop], unit[start:stop], baselines[index], lags)
         sums = np.zeros((n + 1, p))
         np.cumsum(unit[start:stop] * e[start:stop, None], axis=0, out=sums[1:])
         width = min(lags, n)

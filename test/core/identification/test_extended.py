@@ -238,6 +238,34 @@ def test_the_robust_covariance_of_a_line_in_ar1_noise_is_the_analytic_one():
     assert np.median(whites) < 0.2, whites
 
 
+def test_the_robust_covariance_counts_the_error_of_the_pre_trigger_mean():
+    # y = θ x + n − n̄ over 4 windows: the baseline n̄ is the mean of m = 400 pre-trigger
+    # samples and x a slow decay after them (a zero shift's regressor). θ̂ then carries
+    # −n̄·Σx/Σx² per window: Var θ̂ = σ² (1/Σx² + (Σx)²/(m (Σx²)²)) / windows, here 9×
+    # the white formula, which neither the lag window (3 samples) nor four windows' scatter
+    # (a χ² with 3 degrees of freedom) states reliably.
+    from sensor_comp.core.identification.extended import _sandwich
+    m, n, count = 400, 4000, 4
+    x = np.concatenate([np.zeros(m), np.exp(-np.arange(n - m) / 3000.0)])
+    sxx, sx = float(x @ x), float(x.sum())
+    analytic = (1 / sxx + sx ** 2 / (m * sxx ** 2)) / count
+    rng = np.random.default_rng(11)
+    ratios, thetas, without = [], [], []
+    offsets = np.arange(count + 1) * n
+    jac = np.tile(x, count)[:, None]
+    for _ in range(200):
+        noise = rng.standard_normal((count, n))
+        e = (noise - noise[:, :m].mean(axis=1, keepdims=True)).ravel()
+        theta = float(jac[:, 0] @ e) / float(jac[:, 0] @ jac[:, 0])
+        thetas.append(theta)
+        residual = e - theta * jac[:, 0]
+        ratios.append(_sandwich(residual, jac, offsets, [m] * count)[0, 0] / analytic)
+        without.append(_sandwich(residual, jac, offsets)[0, 0] / analytic)
+    assert 0.8 < np.var(thetas) / analytic < 1.3, np.var(thetas) / analytic
+    assert 0.85 < np.median(ratios) < 1.5 and min(ratios) > 0.7, ratios
+    assert np.median(without) < 0.9 and np.mean(np.array(without) < 0.5) > 0.2, without
+
+
 def test_a_searched_value_the_polynomials_imitate_gets_no_deviation_and_a_note(monkeypatch):
     # When the joint covariance is singular only through a searched value's column, that
     # value is not resolved: no deviation and a note; the polynomial-derived parameters keep
@@ -247,9 +275,9 @@ def test_a_searched_value_the_polynomials_imitate_gets_no_deviation_and_a_note(m
     windows = shot_windows([_coloured_rig('zero_shift:pa_per_g=4', 0)])
     fit = fit_extended(windows, effects=['zero_shift'], fs=FS, nf=2, nb=3, nk=0)
     columns = fit.estimate.covariance.shape[0]
-    monkeypatch.setattr(module, '_sandwich', lambda e, jac, offsets: (
+    monkeypatch.setattr(module, '_sandwich', lambda e, jac, offsets, *rest: (
         np.full((jac.shape[1],) * 2, np.inf) if jac.shape[1] > columns
-        else real(e, jac, offsets)))
+        else real(e, jac, offsets, *rest)))
     again = module.robust_uncertainty(fit, windows)
     assert again.parameters('zero_shift')['tau_ms'][1] is None
     assert 0 < again.parameters('zero_shift')['pa_per_g'][1] < math.inf
