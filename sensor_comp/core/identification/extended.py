@@ -26,10 +26,11 @@ time constant). :func:`fit_extended` fits it all:
    covariance: one with the residual's own autocorrelation (Bartlett lag window as long as
    three times the largest lag at which the residual's autocorrelation exceeds 0.1, per
    shot window: coloured noise and a misfit that lasts a few samples count with their
-   effective number of samples), and the scatter of the scores between shot windows (a
-   misfit that differs from shot to shot, whatever its duration). The white-noise formula
-   ``σ² (JᵀJ)⁻¹`` assumed white residuals and a correct model, and gave deviations 2–8
-   times too small on coloured noise.
+   effective number of samples; with the error of each window's pre-trigger mean, the
+   pressure's baseline, which every later sample shares), and the scatter of the scores
+   between shot windows (a misfit that differs from shot to shot, whatever its duration).
+   The white-noise formula ``σ² (JᵀJ)⁻¹`` assumed white residuals and a correct model,
+   and gave deviations 2–8 times too small on coloured noise.
 
 Windows are shot windows with the pre-trigger baseline removed, as
 :func:`~sensor_comp.core.shots.detection.segments` cuts them; each keeps its position in its
