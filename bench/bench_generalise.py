@@ -78,7 +78,7 @@ R_OUTSIDE = (1.5, 5.0)
 #: Default JSON lines file (bench/out/ is git-ignored).
 DEFAULT_OUT = Path(__file__).resolve().parent / 'out' / 'generalise.jsonl'
 #: Verdicts that admit the residual is not (fully) explained by a catalogue name.
-HONEST = ('unexplained', 'partly_explained')
+HONEST = ('unexplained', 'partly_explained', 'ambiguous')
 #: A parameter is "within its stated uncertainty" when its error is at most this many std.
 PARAMETER_Z = 2.0
 #: The speed rigs' rate and shot count (the speed target's recording).
@@ -88,7 +88,8 @@ CRITERIA = (
     'clean rigs: verdict adequate in >= 95 % at every rate band',
     'catalogue effects at R >= 1.5: rank 1 and significant in >= 90 %, parameters within '
     f'their stated uncertainty ({PARAMETER_Z:g} std)',
-    'out-of-catalogue effects: unexplained/partly_explained, never a confident catalogue name',
+    'out-of-catalogue effects: unexplained/partly_explained/ambiguous, never a confident '
+    'catalogue name',
     'after adding the named effect: worst peak residual <= 1.5x the noise ceiling',
     'identify + diagnose <= 10 s for 10 shots at 1 MS/s')
 
@@ -500,8 +501,9 @@ def _outside_table(rows: list[dict]) -> tuple[str, dict]:
     Return the out-of-catalogue table and rates ``(honest, n, confident)`` per effect and R.
 
     Confident: a catalogue name given as the answer (verdict ``missing_effect``); a name
-    with ``partly_explained`` says the effect leaves a residual beyond the noise, which is
-    what the product owes the user on an effect it does not know.
+    with ``partly_explained`` says the effect leaves a residual beyond the noise, and one
+    with ``ambiguous`` that another effect explains the shots as well: what the product
+    owes the user on an effect it does not know.
     """
     out, rates = [], {}
     for effect in OUT_OF_CATALOGUE:
@@ -639,7 +641,8 @@ def summarise(rows: list[dict]) -> str:
             'medians of the worst validation peak residual; a crash counts as a miss):',
         catalogue,
         '', 'Clean rigs (false alarm = any verdict but adequate):', clean,
-        '', 'Out-of-catalogue effects (honest = unexplained/partly_explained; confident = '
+        '', 'Out-of-catalogue effects (honest = unexplained/partly_explained/ambiguous; '
+            'confident = '
             'missing_effect with a catalogue name):', outside,
         '', _crash_table(rows),
         '', times,

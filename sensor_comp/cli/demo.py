@@ -122,21 +122,26 @@ def next_step(diagnosis) -> tuple[str | None, list[str]]:
 
     Every verdict of :data:`~sensor_comp.core.diagnosis.diagnose.VERDICTS` is handled: with
     ``missing_effect`` the named effect is added; with ``partly_explained`` too, saying
-    that it leaves a residual beyond the noise (so the fall is partial); ``adequate`` and
-    ``unexplained`` add nothing, for different reasons.
+    that it leaves a residual beyond the noise (so the fall is partial); with ``ambiguous``
+    the first of the alternatives, saying that the shots cannot tell it from the others;
+    ``adequate`` and ``unexplained`` add nothing, for different reasons.
 
     Raises:
         ValueError: For a verdict that is none of these.
 
     """
     lines = [f'verdict: {diagnosis.verdict}', diagnosis.explanation]
-    if diagnosis.verdict in ('missing_effect', 'partly_explained'):
+    if diagnosis.verdict in ('missing_effect', 'ambiguous', 'partly_explained'):
         effect = diagnosis.named[0]
         entry = diagnosis.entry(effect)
         lines.append(f'evidence: {entry.evidence}')
         if diagnosis.verdict == 'partly_explained':
             lines.append(f'{effect} is added, but it leaves a residual beyond the noise: '
                          f'expect only part of the error to fall')
+        elif diagnosis.verdict == 'ambiguous':
+            lines.append(f'{effect} is added to show the loop, but these shots fit '
+                         f'{" or ".join(diagnosis.named[1:])} as well: the error falls on '
+                         f'shots like these whichever is right')
     elif diagnosis.verdict in ('adequate', 'unexplained'):
         effect = None
     else:

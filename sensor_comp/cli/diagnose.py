@@ -19,8 +19,8 @@ def register(subparsers) -> None:
         description='Fit the model plus each catalogued physical effect on the calibration '
                     'shots (the bags the model was identified from, or --calibration) and '
                     'score each on the shots of BAG, which it has not seen; print the verdict '
-                    '(missing_effect, partly_explained, adequate or unexplained), what the '
-                    'model leaves against the noise, and the ranking with evidence.')
+                    '(missing_effect, ambiguous, partly_explained, adequate or unexplained), '
+                    'what the model leaves against the noise, and the ranking with evidence.')
     parser.add_argument('model', help='model file (.json)')
     parser.add_argument('bag', help='validation recording (.mcap or .csv)')
     parser.add_argument('--calibration', nargs='+', metavar='CALIB',
@@ -50,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
     left = diagnosis.leftover
     if left is not None:
         share = diagnosis.explained_share
-        print(f'  leftover{" with " + " + ".join(diagnosis.named) if diagnosis.named else ""}: '
+        named = diagnosis.named[:1] if diagnosis.verdict == 'ambiguous' else diagnosis.named
+        print(f'  leftover{" with " + " + ".join(named) if named else ""}: '
               f'{left.energy_ratio:.2f}× the noise energy (noise alone: up to '
               f'{left.tolerance:.2f}×), RMS {left.rms_ratio:.2f} σ (σ = '
               f'{diagnosis.noise_sigma_pa:.4g} Pa)'

@@ -94,7 +94,7 @@ def diagnose_fit(calibration: tuple[ShotSource, ...], validation: tuple[ShotSour
         return DiagnosisStatus({'diagnosis_verdict': 'failed', 'diagnosis_error': str(exc)})
     verdict = {'diagnosis_verdict': found.verdict, 'diagnosis_next_step': found.next_step}
     if found.named:
-        verdict['diagnosis_named'] = ' + '.join(found.named)
+        verdict['diagnosis_named'] = found.named_words
     if found.leftover is not None:
         verdict['diagnosis_leftover_noise_energy'] = found.leftover.energy_ratio
     if found.ranking:

@@ -598,7 +598,7 @@ def verdict_status(verdict: dict) -> tuple[bool, str]:
     if name == 'failed':
         return True, f'diagnosis failed: {verdict.get("diagnosis_error", "")}'
     warn = ATTENTION[name]
-    if name in ('missing_effect', 'partly_explained'):
+    if name in ('missing_effect', 'ambiguous', 'partly_explained'):
         detail = verdict.get('diagnosis_named', '')
         left = verdict.get('diagnosis_leftover_noise_energy')
         if left is not None:

@@ -522,6 +522,7 @@ def test_every_fault_is_logged_and_skipped_and_the_model_is_the_offline_fit(
                              'energy)'),
     ('partly_explained', True, 'diagnosis: partly_explained (zero_shift; leaves 7.50× the '
                                'noise energy)'),
+    ('ambiguous', True, 'diagnosis: ambiguous (zero_shift; leaves 1.02× the noise energy)'),
     ('unexplained', True, 'diagnosis: unexplained (no catalogued effect explains the '
                           'residual)'),
     ('failed', True, 'diagnosis failed: no shots'),
@@ -531,9 +532,9 @@ def test_every_verdict_has_its_level_and_text_on_diagnostics(verdict, warn, word
     from sensor_comp.nodes.identification import verdict_status
     assert verdict in VERDICTS or verdict == 'failed'
     values = {'diagnosis_verdict': verdict, 'diagnosis_error': 'no shots'}
-    if verdict in ('missing_effect', 'partly_explained'):
+    if verdict in ('missing_effect', 'partly_explained', 'ambiguous'):
         values.update(diagnosis_named='zero_shift', diagnosis_leftover_noise_energy=(
-            1.02 if verdict == 'missing_effect' else 7.5))
+            7.5 if verdict == 'partly_explained' else 1.02))
     assert verdict_status(values) == (warn, words)
 
 

@@ -63,6 +63,11 @@ The verdict:
   group by score) leaves a residual consistent with the noise, or it and a second one do
   together (their changes added, as fitted on the calibration shots; the second is
   significant when it removes :data:`NAME_SHARE` of what the first leaves);
+- ``'ambiguous'``: the best significant effect leaves a residual consistent with the noise,
+  but so does another significant one that removes less than :data:`PRACTICAL_SHARE` noise
+  energies less: these shots cannot tell them apart (a cause outside the catalogue often
+  passes for two catalogue effects at once), so neither is named as the answer; ``named``
+  lists them, best first;
 - ``'partly_explained'``: the best significant effect removes part of the residual but
   leaves one the noise does not account for (a second effect, or one outside the
   catalogue): the explanation gives the explained share, the leftover in noise units and
@@ -110,11 +115,15 @@ __all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'Diagnosi
 #: Family-wise false-alarm probability over all candidates.
 ALPHA = 1e-3
 #: Possible verdicts.
-VERDICTS = ('missing_effect', 'partly_explained', 'adequate', 'unexplained')
+VERDICTS = ('missing_effect', 'ambiguous', 'partly_explained', 'adequate', 'unexplained')
 #: What each verdict asks of the user next, by verdict: every consumer (command line, demo,
 #: report, node) shows it, so a new verdict must come with one.
 NEXT_STEP = {
     'missing_effect': 'add the named effect (identify --effect ID) and compare again',
+    'ambiguous': 'these shots cannot tell the named effects apart: record shots that do '
+                 '(other pulse widths and amplitudes), or check each independently, before '
+                 'adding one (identify --effect ID); either removes the error from shots '
+                 'like these only',
     'partly_explained': 'add the named effect, then diagnose again: what it leaves is beyond '
                         'the noise (a second effect, or one outside the catalogue: see where '
                         'the leftover lies)',
@@ -124,8 +133,8 @@ NEXT_STEP = {
 }
 #: Verdicts that call for the user's attention (a warning on ``/diagnostics``, not green in
 #: the report): every verdict but ``'adequate'``.
-ATTENTION = {'missing_effect': True, 'partly_explained': True, 'adequate': False,
-             'unexplained': True}
+ATTENTION = {'missing_effect': True, 'ambiguous': True, 'partly_explained': True,
+             'adequate': False, 'unexplained': True}
 #: Lag range of the noise model, s (its autocovariance runs over four times as many lags).
 NOISE_LAG_S = 0.5e-3
 #: Share of the base residual's energy beyond the noise that a model with the right effect
@@ -265,9 +274,11 @@ class Diagnosis:
         alpha: Family-wise false-alarm probability.
         explanation: The verdict in words.
         notes: What the user should know (candidates not fitted, shots left out, ...).
-        named: The effects the verdict names (one, two for a pair, none).
+        named: The effects the verdict names: one; two for a pair; the alternatives, best
+            first, when ``'ambiguous'``; none.
         leftover: What the verdict's model leaves against the noise: the named effect(s)
-            added, or the base model when none is named.
+            added (the first alternative when ambiguous), or the base model when none is
+            named.
         base_leftover: What the base model leaves.
         explained_share: Share of the base residual's energy beyond the noise that the
             named effect(s) remove (None when none is named).
@@ -298,6 +309,11 @@ class Diagnosis:
     def next_step(self) -> str:
         """Return what the verdict asks of the user next (:data:`NEXT_STEP`)."""
         return NEXT_STEP[self.verdict]
+
+    @property
+    def named_words(self) -> str:
+        """Return the named effects as words: ``a + b`` for a pair, ``a or b`` if ambiguous."""
+        return (' or ' if self.verdict == 'ambiguous' else ' + ').join(self.named)
 
     @property
     def significant(self) -> list[str]:
@@ -789,11 +805,18 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
         return (*_no_effect(ctx, base_left, ranked), ranked)
     best = significant[0]
     if best.leftover.consistent:
-        return ('missing_effect',
-                f'missing effect: {best.title} ({best.effect}) removes '
-                f'{100 * best.score:.1f} % of the validation residual energy '
-                f'(p = {best.p_value:.2g}); it leaves {best.leftover.describe()}, consistent '
-                f'with the noise{_alike(best, significant[1:])}{_local(best.leftover)}',
+        # Alike: another effect leaves only noise too, and the best's advantage over it is
+        # below the yardstick an effect must meet to matter at all (PRACTICAL_SHARE).
+        alike = [r for r in significant[1:] if r.leftover.consistent
+                 and best.explained - r.explained < PRACTICAL_SHARE]
+        found = (f'{best.title} ({best.effect}) removes {100 * best.score:.1f} % of the '
+                 f'validation residual energy (p = {best.p_value:.2g}); it leaves '
+                 f'{best.leftover.describe()}, consistent with the noise')
+        if alike:
+            return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}'
+                    f'{_local(best.leftover)}', (best.effect, *(r.effect for r in alike)),
+                    best.leftover, _share(ctx, best.leftover), ranked)
+        return ('missing_effect', f'missing effect: {found}{_local(best.leftover)}',
                 (best.effect,), best.leftover, _share(ctx, best.leftover), ranked)
     second = _second(best, [r for r in ranked if r.relevant and r is not best], ctx)
     if second is not None and second[0].significant:
@@ -825,15 +848,12 @@ def _local(left: Leftover) -> str:
             f'before taking the name for the whole answer')
 
 
-def _alike(best: Ranked, others: Sequence[Ranked]) -> str:
-    """Return a clause naming the other effects that leave noise alike, or ''."""
-    alike = [r for r in others if r.leftover.consistent]
-    if not alike:
-        return ''
+def _alike(best: Ranked, alike: Sequence[Ranked]) -> str:
+    """Return the clause naming the other significant effects that leave only noise too."""
     names = ', '.join(f'{r.title} ({r.effect}, {100 * r.score:.1f} %)' for r in alike)
     return (f'; {names} also leave{"s" if len(alike) == 1 else ""} only noise: these shots '
-            f'cannot tell {"it" if len(alike) == 1 else "them"} from {best.effect} (check '
-            f'it independently before relying on the name)')
+            f'cannot tell {"it" if len(alike) == 1 else "them"} from {best.effect}, so no '
+            f'name is the answer (a cause outside the catalogue can pass for both)')
 
 
 def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]

@@ -144,7 +144,7 @@ def verdict_html(diagnosis: Mapping) -> str:
                 f'version)</p>')
     css = ('partly' if verdict == 'partly_explained' else
            'bad' if ATTENTION[verdict] else 'ok')
-    named = ', '.join(diagnosis.get('named') or ())
+    named = (' or ' if verdict == 'ambiguous' else ', ').join(diagnosis.get('named') or ())
     parts = [f'<p class="verdict {css}">Verdict: {html.escape(verdict)}'
              + (f' ({html.escape(named)})' if named else '') + '</p>']
     if diagnosis.get('explanation'):

@@ -382,7 +382,8 @@ def _fake_diagnosis(verdict):
     """Return a diagnosis-like object with ``verdict`` (what the consumers read)."""
     from types import SimpleNamespace
     from sensor_comp.core.diagnosis.diagnose import NEXT_STEP
-    named = ('zero_shift',) if verdict in ('missing_effect', 'partly_explained') else ()
+    named = {'missing_effect': ('zero_shift',), 'partly_explained': ('zero_shift',),
+             'ambiguous': ('zero_shift', 'amplifier_highpass')}.get(verdict, ())
     entry = SimpleNamespace(effect='zero_shift', evidence='removes 42 % (p = 1e-9)')
     return SimpleNamespace(verdict=verdict, named=named, explanation=f'{verdict}: why',
                            next_step=NEXT_STEP[verdict], entry=lambda effect: entry,
@@ -393,15 +394,16 @@ def _fake_diagnosis(verdict):
 def test_every_verdict_has_a_next_step_and_an_attention_flag():
     from sensor_comp.core.diagnosis.diagnose import ATTENTION, NEXT_STEP, VERDICTS
     assert set(NEXT_STEP) == set(VERDICTS) == set(ATTENTION)
-    assert set(VERDICTS) == {'missing_effect', 'partly_explained', 'adequate', 'unexplained'}
+    assert set(VERDICTS) == {'missing_effect', 'ambiguous', 'partly_explained', 'adequate',
+                             'unexplained'}
     assert [v for v in VERDICTS if not ATTENTION[v]] == ['adequate']
     # The module documentation defines each verdict.
     from sensor_comp.core.diagnosis import diagnose as module
     assert all(f"``'{v}'``" in module.__doc__ for v in VERDICTS)
 
 
-@pytest.mark.parametrize('verdict', ['missing_effect', 'partly_explained', 'adequate',
-                                     'unexplained'])
+@pytest.mark.parametrize('verdict', ['missing_effect', 'ambiguous', 'partly_explained',
+                                     'adequate', 'unexplained'])
 def test_the_demo_and_the_report_handle_every_verdict(verdict):
     from sensor_comp.cli.demo import next_step
     from sensor_comp.core.diagnosis.diagnose import NEXT_STEP
@@ -410,17 +412,53 @@ def test_the_demo_and_the_report_handle_every_verdict(verdict):
     effect, lines = next_step(fake)
     # The demo adds the named effect when one is named, and says why it stops otherwise.
     assert effect == {'missing_effect': 'zero_shift', 'partly_explained': 'zero_shift',
-                      'adequate': None, 'unexplained': None}[verdict]
+                      'ambiguous': 'zero_shift', 'adequate': None, 'unexplained': None}[verdict]
     assert lines[0] == f'verdict: {verdict}' and lines[-1] == f'next: {NEXT_STEP[verdict]}'
     assert ('leaves a residual beyond the noise' in ' '.join(lines)) == (
         verdict == 'partly_explained')
+    assert ('fit amplifier_highpass as well' in ' '.join(lines)) == (verdict == 'ambiguous')
     assert not any('nothing to add' in line for line in lines) or verdict == 'adequate'
     text = verdict_html(fake.to_dict())
-    css = {'missing_effect': 'bad', 'partly_explained': 'partly', 'adequate': 'ok',
-           'unexplained': 'bad'}[verdict]
+    css = {'missing_effect': 'bad', 'ambiguous': 'bad', 'partly_explained': 'partly',
+           'adequate': 'ok', 'unexplained': 'bad'}[verdict]
     assert f'<p class="verdict {css}">Verdict: {verdict}' in text
     assert f'{verdict}: why' in text and NEXT_STEP[verdict].split(':')[0] in text
     assert ('(zero_shift)' in text) == (verdict in ('missing_effect', 'partly_explained'))
+    assert ('(zero_shift or amplifier_highpass)' in text) == (verdict == 'ambiguous')
+
+
+def _ranked(effect, score, *, consistent, significant=True):
+    """Return a ranking entry whose leftover is (or is not) consistent with the noise."""
+    from types import SimpleNamespace
+    from sensor_comp.core.diagnosis.diagnose import Ranked
+    left = SimpleNamespace(consistent=consistent, energy_ratio=1.02 if consistent else 3.0,
+                           noise_variance=1.0, peak_above=False,
+                           describe=lambda: '1.02× the noise energy')
+    return Ranked(effect=effect, title=effect.replace('_', ' '), score=score, parameters={},
+                  evidence='', significant=significant, statistic=100.0, test='chi2',
+                  p_value=1e-9, fit_percent=99.0, peak_residual_percent=1.0, units={},
+                  explained=5.0, excess_share=0.9, relevant=True, leftover=left)
+
+
+@pytest.mark.parametrize('second_consistent, verdict', [(True, 'ambiguous'),
+                                                        (False, 'missing_effect')])
+def test_two_effects_that_each_leave_only_noise_are_ambiguous(second_consistent, verdict):
+    # An accelerometer resonance (outside the catalogue) of seed 21 was named as base strain
+    # although a second mode left only noise too: no single name is then the answer.
+    from types import SimpleNamespace
+    from sensor_comp.core.diagnosis.diagnose import _verdict
+    ranked = [_ranked('strain_sensitivity', 0.132, consistent=True),
+              _ranked('second_resonance', 0.130, consistent=second_consistent),
+              _ranked('zero_shift', 0.002, consistent=True, significant=False)]
+    ctx = SimpleNamespace(samples=1000, sse=1200.0)
+    found, explanation, named, left, _, _ = _verdict(ranked, ctx, ranked[0].leftover)
+    assert found == verdict and left is ranked[0].leftover
+    if verdict == 'ambiguous':
+        assert named == ('strain_sensitivity', 'second_resonance')
+        assert explanation.startswith('ambiguous: strain sensitivity (strain_sensitivity)')
+        assert 'cannot tell it from strain_sensitivity' in explanation
+    else:
+        assert named == ('strain_sensitivity',) and 'cannot tell' not in explanation
 
 
 def test_an_unknown_verdict_is_refused_by_the_demo_and_flagged_by_the_report():

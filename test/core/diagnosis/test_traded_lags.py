@@ -54,7 +54,11 @@ def test_the_delay_is_named_and_read_within_its_deviation(rig):
     truth, (calibration, validation) = rig
     result = diagnose([calibration], [validation])
     top = result.ranking[0]
-    assert result.verdict == 'missing_effect' and top.effect == 'channel_delay'
+    # Base strain's k·G·da/dt is a small delay's first-order error (−d·dŷ/dt): on these
+    # shots it removes 0.005 noise energies less and leaves only noise too, so the verdict
+    # says that the shots cannot tell the two apart, the delay first.
+    assert result.verdict == 'ambiguous' and top.effect == 'channel_delay'
+    assert result.named == ('channel_delay', 'strain_sensitivity')
     assert top.significant
     value, std = top.parameters['delay_us']
     true = truth['parameters']['delay_us']
