@@ -73,13 +73,13 @@ class ChannelDelay(Effect):
             return 1e6 * excess_delay_s(model, a, b, row)
 
         # The searched delay's own deviation (stored) adds to the path's: a lag-free path
-        # holds no delay of its own, so its covariance alone would state next to none.
+        # holds no delay of its own, so its covariance alone would state next to none (a
+        # searched delay without a deviation, not resolved, leaves the delay without one).
         searched = stored_std(model, self.id, 'delay_us')
         std = searched
-        if covariance is not None:
-            std = delta_std(delay, model.a, model.b, covariance)
-            if std is not None and searched is not None:
-                std = math.hypot(std, searched)
+        if covariance is not None and searched is not None:
+            path = delta_std(delay, model.a, model.b, covariance)
+            std = None if path is None else math.hypot(path, searched)
         return {'delay_us': (delay(model.a, model.b), std)}
 
     def implausible(self, fit: FitView) -> str | None:

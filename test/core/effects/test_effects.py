@@ -280,6 +280,14 @@ def test_delays_are_read_from_the_dc_group_delay():
     delayed = _model(['a_z@delay_us=25.0'], num, a=np.ravel(den), nk=0)
     assert get_effect('channel_delay').physical(delayed)['delay_us'][0] == pytest.approx(
         25.0, rel=1e-4)
+    # The searched delay's deviation adds to the path's; without one (not resolved by the
+    # data) the delay has none, however small the path's own covariance states it.
+    covariance = np.diag(np.full(2 + num.size, 1e-30))
+    for searched, stated in ((None, None), (0.4, pytest.approx(0.4, rel=1e-3))):
+        stored = _model(['a_z@delay_us=25.0'], num, a=np.ravel(den), nk=0, effects=[
+            effect_entry(get_effect('channel_delay'), {'delay_us': (25.0, searched)})])
+        assert get_effect('channel_delay').physical(
+            stored, covariance=covariance)['delay_us'][1] == stated
     entry = effect_entry(get_effect('zero_shift'), {'pa_per_g': (3.0, 0.1),
                                                     'tau_ms': (40.0, None)})
     zero = _model(['a_z', 'peak_a_z(tau_ms=40.0)'], [[1.0, 1.0], [2.0, 3.0]],
