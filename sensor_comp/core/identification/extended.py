@@ -1393,9 +1393,10 @@ def _baseline_meat(e: np.ndarray, unit: np.ndarray, baseline: int, lags: int) ->
     """
     pre = e[:baseline] - np.mean(e[:baseline])
     width = min(lags, baseline)
-    lrv = float(pre @ pre) + 2 * sum((1 - k / width) * float(pre[k:] @ pre[:-k])
-                                     for k in range(1, width))
-    lrv = max(lrv, 0.0) / baseline
+    spectrum = np.fft.rfft(pre, 2 * baseline)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:width]
+    lrv = max(float(acf[0] + 2 * np.sum((1 - np.arange(1, width) / width) * acf[1:])),
+              0.0) / baseline
     p, q = unit[:baseline].sum(axis=0), unit[baseline:].sum(axis=0)
     return lrv / baseline * (np.outer(q, q) - np.outer(p, p))
 
