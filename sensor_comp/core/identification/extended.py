@@ -1371,13 +1371,18 @@ def _lag_window(e: np.ndarray, offsets: np.ndarray) -> int:
     most = int(max(1, min(np.diff(offsets).min() // 4, HAC_MAX_LAGS)))
     acf = np.zeros(most + 1)
     for start, stop in zip(offsets[:-1], offsets[1:]):
-        x = e[start:stop] - np.mean(e[start:stop])
-        spectrum = np.fft.rfft(x, 2 * x.size)
-        acf += np.fft.irfft(spectrum * np.conj(spectrum))[:most + 1]
+        acf += _autocovariance(e[start:stop], most + 1)
     if not acf[0] > 0:
         return 1
     above = np.flatnonzero(np.abs(acf / acf[0]) > HAC_LEVEL)
     return int(min(most, HAC_FACTOR * (above[-1] + 1)))
+
+
+def _autocovariance(x: np.ndarray, lags: int) -> np.ndarray:
+    """Return the sums ``Σ x̃[t] x̃[t + k]`` of the mean-removed ``x`` for ``k < lags`` (FFT)."""
+    x = x - np.mean(x)
+    spectrum = np.fft.rfft(x, 2 * x.size)
+    return np.fft.irfft(spectrum * np.conj(spectrum))[:lags]
 
 
 def _baseline_meat(e: np.ndarray, unit: np.ndarray, baseline: int, lags: int) -> np.ndarray:
@@ -1391,10 +1396,8 @@ def _baseline_meat(e: np.ndarray, unit: np.ndarray, baseline: int, lags: int) ->
     after it, the score's variance gains ``var(n̄)·(q qᵀ − p pᵀ)``; ``var(n̄)`` is the
     pre-trigger residual's long-run variance (Bartlett, ``lags``) over ``m``.
     """
-    pre = e[:baseline] - np.mean(e[:baseline])
     width = min(lags, baseline)
-    spectrum = np.fft.rfft(pre, 2 * baseline)
-    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:width]
+    acf = _autocovariance(e[:baseline], width)
     lrv = max(float(acf[0] + 2 * np.sum((1 - np.arange(1, width) / width) * acf[1:])),
               0.0) / baseline
     p, q = unit[:baseline].sum(axis=0), unit[baseline:].sum(axis=0)
