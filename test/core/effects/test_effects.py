@@ -23,6 +23,7 @@ from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, mechanics_d
                                            ModelSpec, ResidualView, SENSOR_ZETA,
                                            traded_lag_s)
 from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
+from sensor_comp.core.effects.second_resonance import gain_threshold, SEARCH_ALPHA
 from sensor_comp.core.shots.inputs import (carried_state, fractional_delay, input_channels,
                                            InputError, mode_pair, needs_rate, parse_channel)
 from sensor_comp.core.identification.model import load, Model
@@ -505,6 +506,29 @@ def test_an_amplitude_not_told_apart_from_zero_reads_no_effect(value, std, resol
     assert (why is None) == resolved
     if not resolved:
         assert 'not told apart from zero' in why
+
+
+@pytest.mark.parametrize('zeta', [0.01, 0.04])
+def test_a_searched_modes_gain_threshold_holds_the_chance_of_a_mode_in_noise(zeta):
+    # White noise after a half-sine pulse holds no mode; the search keeps the frequency
+    # whose mode response the noise follows best. Over every mode resolved in the band its
+    # |z| must pass the threshold in at most SEARCH_ALPHA of the records (Bonferroni is
+    # conservative: neighbouring trials are correlated), yet the plain 2 std does often.
+    fs, low, high, records = 200e3, 1.0, 80.0, 400
+    t = np.arange(2000) / fs
+    pulse = np.where(t < 0.5e-3, np.sin(np.pi * t / 0.5e-3), 0.0)
+    freqs = np.exp(np.arange(math.log(low), math.log(high), zeta / 3))
+    shapes = np.array([signal.lfilter(*signal.bilinear(
+        [(2 * np.pi * f * 1e3) ** 2], [1, 4 * np.pi * f * 1e3 * zeta, (2 * np.pi * f * 1e3) ** 2],
+        fs), pulse) for f in freqs])
+    shapes /= np.linalg.norm(shapes, axis=1, keepdims=True)
+    noise = np.random.default_rng(7).standard_normal((t.size, records))
+    best = np.abs(shapes @ noise).max(axis=0)  # the searched mode's |gain| / std per record
+    least = gain_threshold(low, high, zeta)
+    passed = np.mean(best > least)
+    assert passed <= SEARCH_ALPHA + 3 * math.sqrt(SEARCH_ALPHA / records)
+    assert np.mean(best > 2.0) > 3 * SEARCH_ALPHA
+    assert least > gain_threshold(low, high, 2 * zeta) > 2.0  # lighter modes: more trials
 
 
 def test_every_effect_with_a_size_names_it_among_its_parameters():
