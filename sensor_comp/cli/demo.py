@@ -140,7 +140,7 @@ def next_step(diagnosis) -> tuple[str | None, list[str]]:
                          f'expect only part of the error to fall')
         elif diagnosis.verdict == 'ambiguous':
             lines.append(f'{effect} is added to show the loop, but these shots fit '
-                         f'{" or ".join(diagnosis.named[1:])} as well: the error falls on '
+                         f'{" or ".join(diagnosis.alternatives)} as well: the error falls on '
                          f'shots like these whichever is right')
     elif diagnosis.verdict in ('adequate', 'unexplained'):
         effect = None

@@ -67,7 +67,9 @@ The verdict:
   but so does another significant one that removes less than :data:`PRACTICAL_SHARE` noise
   energies less: these shots cannot tell them apart (a cause outside the catalogue often
   passes for two catalogue effects at once), so neither is named as the answer; ``named``
-  lists them, best first;
+  lists them, best first. So does a best effect whose form a rival outside the catalogue
+  passes for on the base residual (:func:`~.rival_forms.untold_form`: ``a|a|`` against a
+  cubic drive); ``alternatives`` lists what the first cannot be told from;
 - ``'partly_explained'``: the best significant effect removes part of the residual but
   leaves one the noise does not account for (a second effect, or one outside the
   catalogue): the explanation gives the explained share, the leftover in noise units and
@@ -105,7 +107,7 @@ from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseMod
                           PRACTICAL_SHARE, segment_bounds)
 from ..progress import ProgressFactory, Silent
 from .residual import analyse, ringing_time_s
-from .rival_forms import rival_remains
+from .rival_forms import rival_remains, untold_form
 from ...errors import SensorCompError
 from ...sharing import pool_size, share, warm
 
@@ -199,6 +201,8 @@ class Ranked:
         leftover: What the extended model leaves against the noise.
         doubt: Why the fit is no physical reading of the effect (then it is not
             significant), or None (:meth:`~sensor_comp.core.effects.Effect.implausible`).
+        untold: A form outside the catalogue the base residual does not tell from this
+            effect's, in words (:func:`~.rival_forms.untold_form`), or None.
         fit: The extended fit (not in :meth:`to_dict`).
 
     """
@@ -220,6 +224,7 @@ class Ranked:
     relevant: bool = False
     leftover: Leftover | None = field(default=None, repr=False, compare=False)
     doubt: str | None = None
+    untold: str | None = None
     fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -234,7 +239,7 @@ class Ranked:
                 'peak_residual_percent': json_number(self.peak_residual_percent),
                 'explained_noise_energy': json_number(self.explained),
                 'excess_share': json_number(self.excess_share), 'relevant': self.relevant,
-                'doubt': self.doubt,
+                'doubt': self.doubt, 'untold': self.untold,
                 'leftover': None if self.leftover is None else self.leftover.to_dict()}
 
 
@@ -313,7 +318,23 @@ class Diagnosis:
     @property
     def named_words(self) -> str:
         """Return the named effects as words: ``a + b`` for a pair, ``a or b`` if ambiguous."""
-        return (' or ' if self.verdict == 'ambiguous' else ' + ').join(self.named)
+        if self.verdict == 'ambiguous':
+            return ' or '.join((*self.named[:1], *self.alternatives))
+        return ' + '.join(self.named)
+
+    @property
+    def alternatives(self) -> tuple[str, ...]:
+        """
+        Return what an ``'ambiguous'`` verdict's first effect cannot be told from.
+
+        The other named effects, then a form outside the catalogue the first one's probes
+        do not tell from it (:attr:`Ranked.untold`); empty for other verdicts.
+        """
+        if self.verdict != 'ambiguous' or not self.named:
+            return ()
+        first = next((r for r in self.ranking if r.effect == self.named[0]), None)
+        untold = () if first is None or first.untold is None else (first.untold,)
+        return (*self.named[1:], *untold)
 
     @property
     def significant(self) -> list[str]:
@@ -344,6 +365,7 @@ class Diagnosis:
     def to_dict(self) -> dict:
         """Return the JSON-ready diagnosis (``verdict``, ``ranking``, ``leftover``, ...)."""
         return {'verdict': self.verdict, 'named': list(self.named),
+                'alternatives': list(self.alternatives),
                 'explained_share': json_number(self.explained_share),
                 'leftover': None if self.leftover is None else self.leftover.to_dict(),
                 'ranking': [r.to_dict() for r in self.ranking],
@@ -710,6 +732,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
         doubt = _after_triggers(prediction, residual, ctx)
     if doubt is not None:
         evidence = f'{evidence} Not counted: {doubt}.'
+    untold = untold_form(effect, analysis, samples=ctx.samples)
     relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
                 and doubt is None and ctx.as_free(sse))
     # Against the extended model's own noise floor: the accelerometer noise through a
@@ -724,7 +747,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
                   peak_residual_percent=_peak_percent(ctx.validation, residual), units=units,
                   explained=float(explained), excess_share=float(share),
                   relevant=bool(relevant), leftover=left, doubt=doubt,
-                  fit=fit)
+                  untold=None if untold is None else untold.words, fit=fit)
 
 
 def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
@@ -812,8 +835,8 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
         found = (f'{best.title} ({best.effect}) removes {100 * best.score:.1f} % of the '
                  f'validation residual energy (p = {best.p_value:.2g}); it leaves '
                  f'{best.leftover.describe()}, consistent with the noise')
-        if alike:
-            return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}'
+        if alike or best.untold:
+            return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}{_untold(best)}'
                     f'{_local(best.leftover)}', (best.effect, *(r.effect for r in alike)),
                     best.leftover, _share(ctx, best.leftover), ranked)
         return ('missing_effect', f'missing effect: {found}{_local(best.leftover)}',
@@ -854,6 +877,15 @@ def _alike(best: Ranked, alike: Sequence[Ranked]) -> str:
     return (f'; {names} also leave{"s" if len(alike) == 1 else ""} only noise: these shots '
             f'cannot tell {"it" if len(alike) == 1 else "them"} from {best.effect}, so no '
             f'name is the answer (a cause outside the catalogue can pass for both)')
+
+
+def _untold(best: Ranked) -> str:
+    """Return the clause naming a form outside the catalogue that passes for the best, or ''."""
+    if best.untold is None:
+        return ''
+    return (f'; {best.untold}, outside the catalogue, explains the base residual within the '
+            f'practical share of the noise as well: these shots do not tell its form from '
+            f'{best.effect}\'s')
 
 
 def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]

@@ -10,6 +10,12 @@ regressor, beyond a gain correction of the extended prediction, is significant i
 extension's validation residual (Wald χ² against the noise model; ``doc/effects.md``) and
 explains there at least :data:`RIVAL_LEFT` of the windows' noise energy (a model's own
 misfit follows a rival's regressor a little too).
+
+A rival that stays behind in neither fit can still pass for the effect: a named form must
+explain the base residual better than each rival by the practical yardstick
+(:data:`~.noise_floor.PRACTICAL_SHARE` noise energies), else the shots do not tell which
+form it is (:func:`untold_form`; a cubic drive at R = 1.5 and a|a| explain it within 0.014
+noise energies).
 """
 
 from __future__ import annotations
@@ -19,15 +25,16 @@ import functools
 
 import numpy as np
 
-from .noise_floor import NoiseModel
+from .noise_floor import NoiseModel, PRACTICAL_SHARE
 from .residual.dynamics import dynamics, through
 from .residual.probes import run_probe
-from ..effects import Effect, ProbeData
+from ..effects import Effect, ProbeData, ProbeSpec, ResidualView
+from ..effects.base import probe_of
 from ..identification.model import Model
 from ..shots.windows import Window
 from ...streams import G0
 
-__all__ = ['RIVAL_LEFT', 'rival_remains']
+__all__ = ['RIVAL_LEFT', 'rival_remains', 'untold_form']
 
 #: Least share of the windows' noise energy a rival must explain in what an extension
 #: leaves: a true zero shift's fit (R = 5, 1.02x the noise left) still had 0.18 % of it
@@ -67,4 +74,33 @@ def rival_remains(effect: Effect, model: Model, prediction: Sequence[np.ndarray]
         if probe.p_value < alpha and probe.statistic >= RIVAL_LEFT * samples:
             return (f'{spec.words} still explains {100 * probe.fraction:.1f} % of what it '
                     f'leaves (Wald χ² {probe.statistic:.3g}, p = {probe.p_value:.2g})')
+    return None
+
+
+def untold_form(effect: Effect, analysis: ResidualView | None, *,
+                samples: int) -> ProbeSpec | None:
+    """
+    Return a rival form the base residual does not tell from the effect's, or None.
+
+    Each probe's Wald χ² is the base residual's energy its regressor takes, in noise
+    variances; the effect's first probe must take :data:`~.noise_floor.PRACTICAL_SHARE`
+    of the ``samples``' noise energy more than the rival's for its form to be the reading.
+    Only fixed forms are compared: a probe searched over a grid of shapes may hold the
+    other's (a drift whose rise is short is a zero shift's jump) and a coarse grid stands
+    for the searched form only roughly.
+
+    Args:
+        effect: The effect whose :attr:`~sensor_comp.core.effects.Effect.rivals` are
+            compared with its first probe.
+        analysis: The base model's residual analysis (None: no probes, no rival).
+        samples: The validation windows' samples the probes ran over.
+
+    """
+    own = probe_of(analysis, effect.probes[0]) if effect.probes else None
+    if own is None or effect.probes[0].grid:
+        return None
+    for spec in effect.rivals:
+        other = None if spec.grid else probe_of(analysis, spec)
+        if other is not None and own.statistic - other.statistic < PRACTICAL_SHARE * samples:
+            return spec
     return None

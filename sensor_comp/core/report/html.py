@@ -144,7 +144,10 @@ def verdict_html(diagnosis: Mapping) -> str:
                 f'version)</p>')
     css = ('partly' if verdict == 'partly_explained' else
            'bad' if ATTENTION[verdict] else 'ok')
-    named = (' or ' if verdict == 'ambiguous' else ', ').join(diagnosis.get('named') or ())
+    named = list(diagnosis.get('named') or ())
+    if verdict == 'ambiguous' and diagnosis.get('alternatives') is not None:
+        named = named[:1] + list(diagnosis['alternatives'])  # older reports lack them
+    named = (' or ' if verdict == 'ambiguous' else ', ').join(named)
     parts = [f'<p class="verdict {css}">Verdict: {html.escape(verdict)}'
              + (f' ({html.escape(named)})' if named else '') + '</p>']
     if diagnosis.get('explanation'):

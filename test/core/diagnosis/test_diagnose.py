@@ -385,9 +385,12 @@ def _fake_diagnosis(verdict):
     named = {'missing_effect': ('zero_shift',), 'partly_explained': ('zero_shift',),
              'ambiguous': ('zero_shift', 'amplifier_highpass')}.get(verdict, ())
     entry = SimpleNamespace(effect='zero_shift', evidence='removes 42 % (p = 1e-9)')
-    return SimpleNamespace(verdict=verdict, named=named, explanation=f'{verdict}: why',
+    alternatives = named[1:]
+    return SimpleNamespace(verdict=verdict, named=named, alternatives=alternatives,
+                           explanation=f'{verdict}: why',
                            next_step=NEXT_STEP[verdict], entry=lambda effect: entry,
                            to_dict=lambda: {'verdict': verdict, 'named': list(named),
+                                            'alternatives': list(alternatives),
                                             'explanation': f'{verdict}: why'})
 
 
@@ -459,6 +462,29 @@ def test_two_effects_that_each_leave_only_noise_are_ambiguous(second_consistent,
         assert 'cannot tell it from strain_sensitivity' in explanation
     else:
         assert named == ('strain_sensitivity',) and 'cannot tell' not in explanation
+
+
+def test_a_form_outside_the_catalogue_that_passes_for_the_best_makes_it_ambiguous():
+    # A cubic drive (seed 21, rig 99) was named nonlinear sensitivity: its a|a| fit left only
+    # noise, and on the base residual G·a³ explained as much as G·(a|a|).
+    from dataclasses import replace
+    from types import SimpleNamespace
+    from sensor_comp.core.diagnosis.diagnose import _verdict, Diagnosis
+    best = replace(_ranked('nonlinear_sensitivity', 0.716, consistent=True),
+                   untold='G·a³ (a cubic drive)')
+    ranked = [best, _ranked('zero_shift', 0.03, consistent=False, significant=False)]
+    ctx = SimpleNamespace(samples=1000, sse=1200.0)
+    found, explanation, named, left, _, _ = _verdict(ranked, ctx, best.leftover)
+    assert found == 'ambiguous' and named == ('nonlinear_sensitivity',)
+    assert "do not tell its form from nonlinear_sensitivity's" in explanation
+    fields = dict.fromkeys(('ranking', 'skipped', 'base', 'base_effects', 'fit_percent',
+                            'peak_residual_percent', 'noise_sigma_pa', 'energy_ratio',
+                            'energy_tolerance', 'consistent_with_noise'))
+    diagnosis = Diagnosis(**dict(fields, verdict=found, ranking=tuple(ranked), named=named))
+    assert diagnosis.alternatives == ('G·a³ (a cubic drive)',)
+    assert diagnosis.named_words == 'nonlinear_sensitivity or G·a³ (a cubic drive)'
+    # Named as the answer, the same entry's form is not in doubt.
+    assert replace(diagnosis, verdict='missing_effect').alternatives == ()
 
 
 def test_an_unknown_verdict_is_refused_by_the_demo_and_flagged_by_the_report():

@@ -5,7 +5,8 @@ A cubic drive ``a + κ a³`` (outside the catalogue) is fitted almost to the noi
 catalogue's ``a|a|`` nonlinearity: over a pulse the two shapes differ by a few per cent of
 their energy. The cubic probe explains that much more of the base residual and of what the
 ``a|a|`` fit leaves, so the diagnosis says ``unexplained`` and why, while an ``a|a|`` rig is
-still named. An accelerometer resonance passes for a second mode exactly (and for base
+still found first. Where the two probes take the base residual within the practical share
+of each other, neither form is the reading: ``ambiguous``, ``a|a|`` first. An accelerometer resonance passes for a second mode exactly (and for base
 strain below its frequency), which the acceleration's own ringing tells apart
 (``Effect.confounded``). The rigs come from :mod:`bench.independent_rig` (the
 generalisation benchmark's seed-1 cases 29, 43 and 87, and seed 4's cases 9 and 97, at
@@ -18,6 +19,8 @@ import pytest
 
 from bench.independent_rig import draw_spec, simulate
 from sensor_comp.core.diagnosis.diagnose import diagnose
+from sensor_comp.core.diagnosis.noise_floor import PRACTICAL_SHARE
+from sensor_comp.core.diagnosis.rival_forms import untold_form
 from sensor_comp.core.effects import get_effect
 from sensor_comp.core.effects.base import RIVAL_MARGIN, RIVAL_SHARE
 from sensor_comp.core.identification.identify import ShotSource
@@ -49,6 +52,23 @@ def test_a_rival_must_beat_the_own_probe_by_the_margin_and_the_share():
     assert get_effect('mains_hum').rival(_analysis(own, 10 * own)) is None
 
 
+def test_a_form_is_read_only_when_it_beats_its_rival_by_the_practical_share():
+    # A cubic drive at R = 1.5 and 1 MS/s (seed 21, rig 99): G·(a|a|) and G·a³ took 31255
+    # and 33123 noise variances of the base residual over 133171 samples, within the
+    # practical share (6659) of each other, and the a|a| fit left only noise.
+    effect, samples = get_effect(NONLINEAR), 133171
+    assert untold_form(effect, _analysis(31255.0, 33123.0), samples=samples).name == 'cube'
+    edge = PRACTICAL_SHARE * samples
+    assert untold_form(effect, _analysis(1e4 + edge - 1.0, 1e4), samples=samples) is not None
+    assert untold_form(effect, _analysis(1e4 + edge + 1.0, 1e4), samples=samples) is None
+    assert untold_form(effect, None, samples=samples) is None
+    # A form searched over a grid may hold its rival's (a drift with a short rise is a jump).
+    zero_shift = get_effect('zero_shift')
+    grids = SimpleNamespace(probes={zero_shift.probes[0].name: SimpleNamespace(statistic=1.0),
+                                    zero_shift.rivals[0].name: SimpleNamespace(statistic=9.0)})
+    assert untold_form(zero_shift, grids, samples=samples) is None
+
+
 @pytest.mark.slow
 def test_a_cubic_drive_is_unexplained_not_a_sensitivity_changing_with_load():
     truth, (calibration, validation) = _halves('cubic_nonlinearity', 1179198021)
@@ -62,33 +82,43 @@ def test_a_cubic_drive_is_unexplained_not_a_sensitivity_changing_with_load():
     assert probes['cube'].statistic > (1 + RIVAL_SHARE) * probes['abs_square'].statistic
 
 
+def _found_first_form_untold(result):
+    """Assert a|a| is found first, its fit leaving noise, and its form not told from a³."""
+    top = result.ranking[0]
+    assert result.verdict == 'ambiguous' and top.effect == NONLINEAR and top.significant
+    assert result.named == (NONLINEAR,) and 'cubic drive' in result.alternatives[0]
+    assert top.leftover.consistent
+    return top
+
+
 @pytest.mark.slow
-def test_a_sensitivity_changing_with_load_is_still_named():
+def test_a_sensitivity_changing_with_load_is_found_first_though_its_form_is_untold():
+    # The base residual took 84987 noise variances of G·(a|a|) and 85403 of G·a³: within
+    # the practical share the shots do not tell the forms apart (a cubic drive alike).
     truth, (calibration, validation) = _halves(NONLINEAR, 3390017097)
     result = diagnose([calibration], [validation])
-    top = result.ranking[0]
-    assert result.verdict == 'missing_effect' and top.effect == NONLINEAR and top.significant
+    top = _found_first_form_untold(result)
     value, std = top.parameters['beta_per_g']
     assert abs(value - truth['parameters']['beta_per_g']) <= 3 * std
 
 
 @pytest.mark.slow
-def test_a_strong_sensitivity_change_at_a_low_rate_is_named_despite_the_rival():
+def test_a_strong_sensitivity_change_at_a_low_rate_is_found_despite_the_rival():
     # a|a| at R = 5 and 187 kS/s (seed-1 case 87): the base residual's misfit makes G·a³
     # explain more than G·(a|a|), but what the a|a| fit leaves holds nothing of a cubic drive.
     # While the base's mode could sit below 1 kHz the fit left 1.3x the noise and the verdict
     # was partly_explained; with the sensor's mode held at 1 kHz or more it leaves the noise.
+    # A cubic drive's a|a| fit leaves nothing of G·a³ either: the form stays untold.
     truth, (calibration, validation) = _halves(NONLINEAR, 2978456523, R=5.0)
     result = diagnose([calibration], [validation])
-    top = result.ranking[0]
-    assert result.verdict == 'missing_effect' and top.effect == NONLINEAR and top.significant
-    assert top.leftover.consistent and 'does not follow that form' in top.evidence
+    top = _found_first_form_untold(result)
+    assert 'does not follow that form' in top.evidence
     value, std = top.parameters['beta_per_g']
     assert abs(value - truth['parameters']['beta_per_g']) <= 3 * std
 
 
 @pytest.mark.slow
-def test_a_rival_the_fit_leaves_nothing_of_does_not_unname_the_effect():
+def test_a_rival_the_fit_leaves_nothing_of_does_not_unfind_the_effect():
     # a|a| at R = 5 and 695 kS/s (seed-3 case 17): the base residual's misfit makes G·a³
     # explain more of it than G·(a|a|) by more than the margin, but what the a|a| fit leaves
     # holds nothing of a cubic drive: the rival is judged there and the effect is named.
@@ -98,9 +128,8 @@ def test_a_rival_the_fit_leaves_nothing_of_does_not_unname_the_effect():
     probes = result.analyses[0].probes
     own, cube = probes['abs_square'].statistic, probes['cube'].statistic
     assert cube > (1 + RIVAL_SHARE) * own + RIVAL_MARGIN  # the old rule would unname it
-    top = result.ranking[0]
-    assert result.verdict == 'missing_effect' and top.effect == NONLINEAR and top.significant
-    assert top.leftover.consistent and 'does not follow that form' in top.evidence
+    top = _found_first_form_untold(result)
+    assert 'does not follow that form' in top.evidence
     value, std = top.parameters['beta_per_g']
     assert abs(value - truth['parameters']['beta_per_g']) <= 3 * std
 
