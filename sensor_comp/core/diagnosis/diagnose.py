@@ -872,7 +872,9 @@ def _local(left: Leftover) -> str:
 
 
 def _alike(best: Ranked, alike: Sequence[Ranked]) -> str:
-    """Return the clause naming the other significant effects that leave only noise too."""
+    """Return the clause naming the other significant effects that leave only noise too, or ''."""
+    if not alike:
+        return ''
     names = ', '.join(f'{r.title} ({r.effect}, {100 * r.score:.1f} %)' for r in alike)
     return (f'; {names} also leave{"s" if len(alike) == 1 else ""} only noise: these shots '
             f'cannot tell {"it" if len(alike) == 1 else "them"} from {best.effect}, so no '

@@ -6,7 +6,8 @@ catalogue's ``a|a|`` nonlinearity: over a pulse the two shapes differ by a few p
 their energy. The cubic probe explains that much more of the base residual and of what the
 ``a|a|`` fit leaves, so the diagnosis says ``unexplained`` and why, while an ``a|a|`` rig is
 still found first. Where the two probes take the base residual within the practical share
-of each other, neither form is the reading: ``ambiguous``, ``a|a|`` first. An accelerometer resonance passes for a second mode exactly (and for base
+of each other, neither form is the reading: ``ambiguous``, ``a|a|`` first. An accelerometer
+resonance passes for a second mode exactly (and for base
 strain below its frequency), which the acceleration's own ringing tells apart
 (``Effect.confounded``). The rigs come from :mod:`bench.independent_rig` (the
 generalisation benchmark's seed-1 cases 29, 43 and 87, and seed 4's cases 9 and 97, at
