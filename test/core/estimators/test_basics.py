@@ -93,3 +93,22 @@ def test_arx_recovers_an_arx_system_and_gls_without_noise_order():
     assert np.all(np.abs(z) < 4), z
     gls = fit_armax_gls(segs, na=2, nb=2, nk=1, nc=0, filter_by='noise')
     np.testing.assert_allclose(gls.a, est.a, rtol=1e-9)
+
+
+def test_stability_by_step_down_agrees_with_the_roots():
+    # The Schur-Cohn recursion must say what the companion matrix's roots say, margin too.
+    rng = np.random.default_rng(3)
+    for _ in range(3000):
+        n = int(rng.integers(1, 9))
+        poly = (np.real(np.poly(rng.uniform(-1.3, 1.3, n))) if rng.random() < 0.3 else
+                rng.normal(size=n + 1))
+        margin = float(rng.choice([0.0, 1e-3, 0.1]))
+        radius = float(np.max(np.abs(np.roots(poly)))) if poly[0] != 0 else 0.0
+        if abs(radius - (1 - margin)) > 1e-9:
+            assert is_stable(poly, margin=margin) == (radius < 1 - margin), (poly, margin)
+    # Roots on the circle, a leading zero, non-finite coefficients, a constant.
+    assert not is_stable(np.real(np.poly([1.0, 0.5])))
+    assert not is_stable([1.0, 0.0, 1.0])  # ±j
+    assert is_stable([0.0, 1.0, -0.5]) and not is_stable([0.0, 1.0, -2.0])
+    assert not is_stable([1.0, np.nan]) and is_stable([2.0])
+    assert is_stable([1.0, -0.95]) and not is_stable([1.0, -0.95], margin=0.1)
