@@ -164,19 +164,24 @@ def test_a_delay_longer_than_its_blocks_is_every_tap_filtered():
 def test_highpass_leaky_peak_and_mode_follow_their_closed_forms():
     n = 4000
     step = np.zeros((3, n))
-    step[2, 100:] = 1.0
+    step[2, 100:] = 100.0
     hp, peak, mode = input_channels(['a_z@highpass_ms=2.0', 'peak_a_z(tau_ms=1.0)',
                                      'a_z@mode=10.0,0.05'], step, {}, fs=FS)
     k = np.arange(n - 100)
     pole = math.exp(-1e3 / (2.0 * FS))
-    assert np.allclose(hp[100:], 0.5 * (1 + pole) * pole ** k, rtol=0, atol=1e-12)
-    assert np.allclose(peak[100:], 1.0)  # a step is its own peak
-    assert mode[-1] == pytest.approx(1.0, abs=1e-9)  # unit gain at DC
+    assert np.allclose(hp[100:], 50.0 * (1 + pole) * pole ** k, rtol=0, atol=1e-10)
+    assert np.allclose(peak[100:], 100.0)  # a step is its own peak
+    assert mode[-1] == pytest.approx(100.0, abs=1e-7)  # unit gain at DC
     impulse = np.zeros((3, n))
-    impulse[2, 10] = -5.0
+    impulse[2, 10] = -500.0
     peak = input_channels(['peak_a_z(tau_ms=1.0)'], impulse, {}, fs=FS)[0]
-    assert np.allclose(peak[10:], 5.0 * np.exp(-np.arange(n - 10) / (1e-3 * FS)))
+    assert np.allclose(peak[10:], 500.0 * np.exp(-np.arange(n - 10) / (1e-3 * FS)))
     assert np.all(peak[:10] == 0)
+    # Below PEAK_GATE_G the detector ignores the accelerometer's noise; a shock passes.
+    noise = np.random.default_rng(3).normal(0.0, G0, (3, n))  # 1 g: the gate is 5 σ
+    noise[2, 2000] = 50 * G0
+    peak = input_channels(['peak_a_z(tau_ms=1.0)'], noise, {}, fs=FS)[0]
+    assert np.all(peak[:2000] == 0) and peak[2000] == pytest.approx(50 * G0, rel=1e-12)
 
 
 def test_a_slow_state_carried_over_a_gap_equals_the_stream():
