@@ -201,13 +201,16 @@ class SecondResonance(Effect):
         gain, std = parameters.get('gain', (None, None))
         if gain is None or std is None or not math.isfinite(std):
             return None
-        search = next(s for s in fit.spec.searches if s.key == FREQ)
-        least = gain_threshold(search.low, search.high, abs(parameters['zeta'][0]))
+        search = next((s for s in fit.spec.searches if s.key == FREQ), None)
+        if search is None:  # a mode not searched is one trial
+            least, where = GAIN_Z, ''
+        else:
+            least = gain_threshold(search.low, search.high, abs(parameters['zeta'][0]))
+            where = f', what chance reaches over a {search.low:.3g}–{search.high:.3g} kHz search'
         if not abs(gain) > least * std:
             return (f'its gain ({gain:.3g} ± {std:.2g}) is not told apart from zero (|z| '
-                    f'≤ {least:.2g}, what chance reaches over a {search.low:.3g}–'
-                    f'{search.high:.3g} kHz search): the extra numerator coefficients, not '
-                    f'the mode, follow the residual')
+                    f'≤ {least:.2g}{where}): the extra numerator coefficients, not the mode, '
+                    f'follow the residual')
         return None
 
     def confounded(self, fit: FitView, windows: Sequence[Window]) -> str | None:

@@ -8,6 +8,7 @@ from models built with known coefficients. Block-size invariance is checked agai
 whole signal at 1e-9 of its peak (float64 round-off of short recursions).
 """
 
+from dataclasses import replace
 import math
 import re
 from types import SimpleNamespace
@@ -534,6 +535,27 @@ def test_a_searched_modes_gain_threshold_holds_the_chance_of_a_mode_in_noise(zet
     assert passed <= SEARCH_ALPHA + 3 * math.sqrt(SEARCH_ALPHA / records)
     assert np.mean(best > 2.0) > 3 * SEARCH_ALPHA
     assert least > gain_threshold(low, high, 2 * zeta) > 2.0  # lighter modes: more trials
+
+
+@pytest.mark.parametrize('searched', [True, False])
+def test_a_second_modes_gain_is_judged_against_its_search(searched):
+    # z = 2.5: resolved for a mode given (one trial), not for one searched over 1-80 kHz.
+    sensor, mount = (20.0, 0.05, 1.0), (6.0, 0.03, -0.5)
+    a, pair = mode_pair(*sensor[:2], FS), mode_pair(*mount[:2], FS)
+    numerator = (sensor[2] * a.sum() * pair + mount[2] * pair.sum() * a) / pair.sum()
+    model = _model([f'a_z@mode={mount[0]!r},{mount[1]!r}'], numerator, a=a, nk=0)
+    effect = get_effect('second_resonance')
+    spec = effect.extend(ModelSpec(fs=FS, nf=2, nb=3, nk=0))
+    if not searched:
+        spec = replace(spec, searches=())
+    reading = dict(effect.physical(model), gain=(-0.16, 0.064))
+    values = {'second_resonance.freq_khz': mount[0], 'second_resonance.zeta': mount[1]}
+    fit = SimpleNamespace(spec=spec, values=values, value_std={}, model=lambda: model,
+                          parameters=lambda _: reading)
+    why = effect.implausible(fit)
+    assert (why is None) == (not searched), why
+    if searched:
+        assert 'not told apart from zero' in why and 'kHz search' in why
 
 
 def test_every_effect_with_a_size_names_it_among_its_parameters():
