@@ -332,9 +332,8 @@ class Diagnosis:
         """
         if self.verdict != 'ambiguous' or not self.named:
             return ()
-        first = next((r for r in self.ranking if r.effect == self.named[0]), None)
-        untold = () if first is None or first.untold is None else (first.untold,)
-        return (*self.named[1:], *untold)
+        untold = self.entry(self.named[0]).untold  # a named effect is always ranked
+        return (*self.named[1:], *(() if untold is None else (untold,)))
 
     @property
     def significant(self) -> list[str]:

@@ -45,7 +45,7 @@ def is_stable(poly: np.ndarray, *, margin: float = 0.0) -> bool:
 
     By the Schur-Cohn step-down recursion (every reflection coefficient below 1 in
     magnitude) on the roots scaled by ``1/(1 - margin)``: a descent tests every trial step
-    of a low-order denominator, where the companion matrix's eigenvalues cost 20× more.
+    of a low-order denominator, where the companion matrix's eigenvalues cost 7× more.
     """
     poly = np.asarray(poly, dtype=np.float64)
     if not np.all(np.isfinite(poly)):
