@@ -61,6 +61,10 @@ DEFAULT_HYSTERESIS = 0.5
 DEFAULT_HOLDOFF_MS = 1.0
 #: Samples within this fraction of the pulse width before the onset stay out of the baseline.
 BASELINE_GUARD = 0.1
+#: An axis moves where it leaves its pre-trigger median by this many robust noise σ ...
+MOTION_Z = 4.0
+#: ... and the motion began after the last quiet run (every axis still) this long, s.
+QUIET_RUN_S = 10e-6
 #: Half-width of the band below a clipped extreme, in noise σ (see the module docs).
 CLIP_NOISE_Z = 4.0
 #: A flat top is this many times longer than a smooth half-sine crest could stay in the band.
@@ -283,6 +287,32 @@ def _pulse_timing(s: np.ndarray, peak: int) -> tuple[float, float, list[str]]:
     base = 1.5 * (right - left)
     onset = left - base / 6.0
     return onset, onset + base, notes
+
+
+def _first_motion(acceleration: np.ndarray, axial: np.ndarray, *, lo: int, onset: int,
+                  stop: int, run: int) -> int | None:
+    """
+    Return the sample after the last quiet run of every axis before ``stop``, or None.
+
+    The half-sine timing puts a haversine's onset an eighth of its width late, an anvil
+    ringing starts with the pulse and a lateral pulse may lead the axial one: the
+    pre-trigger (the noise every test is calibrated on) must hold none of them. ``axial``
+    replaces row z (the trigger signal may have overwritten it). Quiet is within
+    :data:`MOTION_Z` robust σ of each axis's median over ``[lo, onset)``, the pre-trigger
+    the half-sine timing gives.
+    """
+    if onset - lo < 4 * run or stop <= onset:
+        return None
+    rows = np.vstack([acceleration[:2, lo:stop], axial[np.newaxis, lo:stop]])
+    with np.errstate(invalid='ignore'):
+        center = np.nanmedian(rows[:, :onset - lo], axis=1, keepdims=True)
+        deviation = np.abs(rows - center)
+        sigma = 1.4826 * np.nanmedian(deviation[:, :onset - lo], axis=1, keepdims=True)
+        # A quantised channel may have a MAD of 0: its smallest step is then its noise.
+        floor = np.array([[np.min(d[d > 0], initial=np.inf)] for d in deviation])
+        quiet = ~np.any(deviation > MOTION_Z * np.where(sigma > 0, sigma, floor), axis=0)
+    full = np.flatnonzero(np.convolve(quiet, np.ones(run, dtype=int), 'valid') == run)
+    return int(lo + full[-1] + run) if full.size else None
 
 
 def _quantum(x: np.ndarray) -> float:
@@ -630,7 +660,7 @@ def find_windows(recording: Recording, *, threshold_g: float | None = None,
                  post_ms: float = DEFAULT_POST_MS, holdoff_ms: float = DEFAULT_HOLDOFF_MS,
                  polarity: int | None = None, scratch: bool = False) -> Detection:
     """
-    Find where the shots of a recording are, from its axial acceleration only.
+    Find where the shots of a recording are, from its acceleration.
 
     As :func:`detect_shots` (which measures what this finds); ``scratch`` lets the
     recording's axial row be overwritten by the trigger signal instead of copied.
@@ -647,17 +677,22 @@ def find_windows(recording: Recording, *, threshold_g: float | None = None,
     if not trigger.largest_g >= trigger.threshold_g:
         return Detection(trigger, (), ())
     merged = _merged_events(s, trigger.threshold_g, hysteresis, holdoff_ms * fs / 1e3)
+    pre, post = pre_ms * fs / 1e3, post_ms * fs / 1e3
     timings = []
     for i, (first, stop, count) in enumerate(merged):
         lo = merged[i - 1][1] if i else 0
         hi = merged[i + 1][0] if i + 1 < len(merged) else n
         peak = first + int(np.nanargmax(s[first:stop]))
         onset, end, notes = _pulse_timing(s[lo:hi], peak - lo)
+        onset += lo
+        moved = _first_motion(recording.acceleration, s, lo=max(lo, math.floor(onset - pre)),
+                              onset=math.floor(onset), stop=peak,
+                              run=max(4, round(QUIET_RUN_S * fs)))
+        onset = min(onset, moved if moved is not None else onset)
         if count > 1:
             notes.append(f'{count} threshold crossings within {holdoff_ms:g} ms merged '
                          f'(ringing or rebound)')
-        timings.append((onset + lo, end + lo, peak, notes))
-    pre, post = pre_ms * fs / 1e3, post_ms * fs / 1e3
+        timings.append((onset, end + lo, peak, notes))
     bounds = [[max(0, math.floor(onset - pre)), min(n, math.ceil(end + post))]
               for onset, end, _, _ in timings]
     for (onset, end, _, notes), (start, stop) in zip(timings, bounds):

@@ -79,6 +79,47 @@ def test_windows_hold_the_pulse_and_do_not_overlap():
         assert left.stop <= right.start
 
 
+def motion_recording(kind, *, ring=0.0, lead=0.0, seed=3):
+    """One 2 ms pulse at 20 ms (haversine or half-sine), anvil ringing, a lateral lead."""
+    rng = np.random.default_rng(seed)
+    n, onset, base = round(0.06 * FS), 0.02, 2e-3
+    t = np.arange(n) / FS - onset
+    phase = np.clip(t / base, 0, 1)
+    shape = np.sin(np.pi * phase) if kind == 'half_sine' else (1 - np.cos(2 * np.pi * phase)) / 2
+    az = np.where((t >= 0) & (t <= base), 1000 * G0 * shape, 0.0)
+    az += np.where(t >= 0, ring * 1000 * G0 * np.sin(2 * np.pi * 12e3 * t) *
+                   np.exp(-np.maximum(t, 0) / 0.5e-3), 0.0)
+    tx = t + lead * base
+    ax = np.where((tx >= 0) & (tx <= base), 150 * G0 * np.sin(np.pi * np.clip(tx / base, 0, 1)),
+                  0.0)
+    acc = np.vstack([ax, np.zeros(n), az]) + rng.standard_normal((3, n)) * NOISE_G * G0
+    rec = Recording(fs=FS, t0_ns=0, pressure=rng.standard_normal(n) * NOISE_PA,
+                    acceleration=acc, metadata={})
+    return rec, round((onset - lead * base) * FS)
+
+
+@pytest.mark.parametrize('kind, ring, lead', [('haversine', 0.0, 0.0), ('haversine', 0.3, 0.0),
+                                              ('half_sine', 0.0, 0.2)])
+def test_pre_trigger_holds_no_motion(kind, ring, lead):
+    # The half-sine timing alone puts a haversine's onset T/8 late (25 samples here) and
+    # cannot see a lateral pulse leading the axial one; the baseline must end before any
+    # axis moves, or every noise test is calibrated on the pulse.
+    rec, first = motion_recording(kind, ring=ring, lead=lead)
+    (shot,) = detect_shots(rec)
+    assert shot.baseline_stop <= first
+    quiet = rec.acceleration[:, shot.start:shot.baseline_stop]
+    assert np.max(np.abs(quiet)) < 5 * NOISE_G * G0   # noise only, nothing of the pulse
+    # ... and no earlier than needed: within 4 σ of the rise plus the guard (0.1 width).
+    assert first - shot.baseline_stop <= 0.1 * (shot.end - shot.onset) + 0.1 * 2e-3 * FS + 2
+
+
+def test_half_sine_onset_is_not_moved_by_the_motion_check():
+    rec, first = motion_recording('half_sine')
+    (shot,) = detect_shots(rec)
+    assert abs(shot.onset - first) <= 1
+    assert shot.width_ms == pytest.approx(2.0, rel=0.02)
+
+
 def test_close_shots_share_a_boundary_and_say_so():
     rec, _ = make(((0.02, 500.0, 1.0), (0.032, 800.0, 1.0)), duration=0.08)
     first, second = detect_shots(rec)
