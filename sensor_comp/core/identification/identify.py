@@ -23,7 +23,7 @@ from .extended import (BASE_DELAY, BASE_ORDERS, corrected_for_input_noise, fit_e
 from .held_base import base_fits, fit_on_base, modes_khz
 from ..shots.windows import EARLY_S, shot_channels, shot_windows, Window
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
-                          fit_arx, fit_oe, fit_percent, IdentError, is_stable, select_structure,
+                          fit_arx, fit_oe, fit_percent, IdentError, select_structure,
                           Selection, simulate_output, warm_grid_helpers)
 from ..estimators.polynomials import max_root_radius
 from .model import Model, sensitivity_problem, Source
@@ -422,13 +422,24 @@ def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
         except IdentError as exc:
             first = first or f'{structure} na={a} nb={b} nk={nk}: {exc}'
             continue
-        if what is not None:
-            notes.append(f'fallback: fitted {what}, because {first}')
-        if structure != 'oe' and not is_stable(estimate.a):
+        if structure != 'oe' and not max_root_radius(estimate.a) < 1.0:
             notes.append(f'fallback: output error instead of {structure}, whose estimate '
                          f'na={a} nb={b} nk={nk} is unstable (poles up to |z| = '
                          f'{max_root_radius(estimate.a):.6f})')
-            estimate = fit_oe(segs, nf=a, nb=b, nk=nk)
+            try:
+                estimate = fit_oe(segs, nf=a, nb=b, nk=nk)
+            except IdentError as exc:
+                first = first or f'oe na={a} nb={b} nk={nk}: {exc}'
+                continue
+        # Model.check_stable's test: a pole at z = 1 within round-off (an integrator that
+        # followed a drift) passes the descent's Schur-Cohn recursion but not numpy.roots.
+        if not max_root_radius(estimate.a) < 1.0:
+            first = first or (f'{structure} na={a} nb={b} nk={nk}: a pole at |z| = '
+                              f'{max_root_radius(estimate.a):.9f}, on the unit circle (an '
+                              f'integrator following a drift)')
+            continue
+        if what is not None:
+            notes.append(f'fallback: fitted {what}, because {first}')
         return estimate, a, b, notes
     raise IdentError(f'no {structure} model could be fitted, at the orders asked or lower: '
                      f'{first}')

@@ -26,7 +26,7 @@ from sensor_comp.core.effects import EffectError
 from sensor_comp.core.identification.extended import fit_extended, shot_windows
 from sensor_comp.core.estimators import estimate_delay, fit_oe, fit_percent, IdentError, is_stable
 from sensor_comp.core.estimators.least_squares import solve_least_squares
-from sensor_comp.core.estimators.polynomials import resonances
+from sensor_comp.core.estimators.polynomials import max_root_radius, resonances
 from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.core.shots.detection import segments, split_calibration
 from sensor_comp.sim import RigConfig, simulate, TABLE2
@@ -295,4 +295,26 @@ def test_an_unstable_equation_error_estimate_falls_back_to_output_error(monkeypa
     result = identify([source], structure='arx', delay=1, denoise=False)
     assert result.model.structure == 'oe'
     assert any('output error instead of arx' in n for n in result.notes), result.notes
+    _check_at_ceiling(result, sim)
+
+
+def test_an_integrator_within_round_off_falls_back_to_lower_orders(monkeypatch):
+    # Seed 21 rig 135 (a thermal drift, 519 kS/s): the whole-window fit put a pole on z = 1
+    # within round-off. The descent's Schur-Cohn test passed it, numpy.roots (which the model
+    # checks) did not, and identify crashed. Such a fit is a failed one now.
+    _, _, source, sim = table2(200e3, 6)
+    fitter = identify_module._FITTERS['oe']
+    integrator = np.array([1.0, -3.8623909880425353, 5.652835362791984, -3.7183221142661687,
+                           0.9278777395167184])
+    assert is_stable(integrator) and not max_root_radius(integrator) < 1.0
+
+    def drifting(segs, na, nb, nk):
+        estimate = fitter(segs, na, nb, nk)
+        return replace(estimate, a=integrator) if na == 3 else estimate
+
+    monkeypatch.setitem(identify_module._FITTERS, 'oe', drifting)
+    result = identify([source], structure='oe', orders=(3, 2), delay=1, denoise=False)
+    assert result.model.orders['na'] == 2
+    assert any('na=2 nb=2 instead of na=3 nb=2' in n and 'on the unit circle' in n
+               for n in result.notes), result.notes
     _check_at_ceiling(result, sim)
