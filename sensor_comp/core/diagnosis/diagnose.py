@@ -78,7 +78,9 @@ The verdict:
   noise (and the residual analysis of :mod:`sensor_comp.core.diagnosis.residual` agrees when it
   runs);
 - ``'unexplained'``: the base residual is not noise but no catalogued effect explains a
-  relevant part of it.
+  relevant part of it; or it is noise only because the model ignores a ringing of the
+  measured acceleration the pressure does not follow (:mod:`.ignored_ring`: a resonance of
+  the accelerometer channel).
 
 A candidate whose fit fails (any error: too little data, no stable model, a numerical
 failure) is one line in the notes, ``<effect>: not fitted: <why>``; the others go on. Shots
@@ -103,6 +105,7 @@ from ..identification.held_base import fit_on_base, free_base, held_base, modes_
 from ..estimators import estimate_delay, fit_percent
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
+from .ignored_ring import ignored_ring
 from .noise_floor import (json_number, Leftover, leftover, noise_model, NoiseModel,
                           PRACTICAL_SHARE, segment_bounds)
 from ..progress import ProgressFactory, Silent
@@ -893,6 +896,12 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
                ) -> tuple[str, str, tuple[str, ...], Leftover, None]:
     """Return the verdict when no effect is significant: adequate or unexplained."""
     failing = [a for a in ctx.analyses if not a.consistent_with_noise]
+    ignored = ignored_ring(ctx.validation, ctx.base.model()) if base_left.consistent else None
+    if base_left.consistent and not failing and ignored is not None:
+        return ('unexplained',
+                f'unexplained: the base residual is consistent with noise ('
+                f'{base_left.describe()}), but {ignored.words()}; no catalogued effect '
+                f'explains it: check the accelerometer and its mounting', (), base_left, None)
     if base_left.consistent and not failing:
         return ('adequate',
                 f'adequate: the base residual is consistent with noise ('

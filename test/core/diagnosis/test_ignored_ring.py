@@ -1,0 +1,92 @@
+"""An acceleration ringing the pressure ignores, against the sensor mode's own answer."""
+
+import re
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from sensor_comp.core.diagnosis.ignored_ring import ignored_ring
+from sensor_comp.core.identification.model import Model
+from sensor_comp.core.shots.inputs import mode_pair
+from sensor_comp.core.shots.windows import Window
+from sensor_comp.streams import G0
+
+FS = 200e3
+ONSETS = (0.002, 0.012, 0.022, 0.032)
+
+
+def shocks(n: int, *, ring_khz: float = 0.0, seed: int = 3) -> np.ndarray:
+    """Return 1 ms half-sine shocks ``(3, n)`` every 10 ms, with an anvil ringing if asked."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / FS
+    acc = rng.standard_normal((3, n)) * 20.0
+    for k, onset in enumerate(ONSETS):
+        s = (t - onset) / 1e-3
+        pulse = np.where((s >= 0) & (s <= 1), np.sin(np.pi * np.clip(s, 0, 1)), 0.0)
+        peak = (-1) ** k * rng.uniform(300, 2000) * G0
+        acc[2] += peak * pulse
+        if ring_khz:
+            after = np.maximum(t - onset, 0.0)
+            acc[2] += np.where(t >= onset, 0.2 * peak * np.sin(2e3 * np.pi * ring_khz * after)
+                               * np.exp(-after / 0.5e-3), 0.0)
+    return acc
+
+
+def sensor(fn_khz: float, zeta: float = 0.05):
+    """Return a mode of unit static gain: ``(b, a)``."""
+    a = mode_pair(fn_khz, zeta, FS)
+    return np.array([a.sum()]), a
+
+
+def windows(acceleration, pressure):
+    """Return windows from 2 ms before each pulse to 8 ms after its end."""
+    out = []
+    for onset in ONSETS:
+        start = round((onset - 2e-3) * FS)
+        out.append(Window(acceleration[:, start:start + 2200], pressure[start:start + 2200],
+                          start, 300, 0, end=round(3e-3 * FS)))
+    return out
+
+
+def model(b, a) -> Model:
+    return Model(fs=FS, structure='oe', inputs=('a_z',), b=np.atleast_2d(b), a=a, nk=0)
+
+
+def test_an_accelerometer_mode_the_pressure_ignores_is_found_through_a_notching_model():
+    # The accelerometer measures (1 - x + x M) a with a mode M at 24 kHz; the pressure is
+    # the sensor's (40 kHz) answer to the true a. A model notching 24 kHz with its zeros
+    # fits: the check measures against its poles alone, so the zeros cannot hide M.
+    b, a = sensor(40.0)
+    accel, x = mode_pair(24.0, 0.015, FS), 0.2
+    true = shocks(12000)
+    measured = true.copy()
+    measured[2] = (1 - x) * true[2] + x * accel.sum() * signal.lfilter([1.0], accel, true[2])
+    pressure = signal.lfilter(b, a, true[2])
+    notching = model(b[0] * accel, np.convolve(a, accel))
+    found = ignored_ring(windows(measured, pressure), notching)
+    assert found is not None
+    assert found.ring.hz == pytest.approx(24e3, rel=0.03)
+    assert found.share < 0.1   # the pressure holds nothing of it but the sensor's noise
+    words = found.words()
+    assert re.search(r'rings at 2[34](\.\d)? kHz', words) and 'accelerometer' in words
+
+
+@pytest.mark.parametrize('ring_khz, fn_khz', [(12.0, 40.0), (30.0, 10.0)])
+def test_a_ringing_the_pressure_follows_is_motion(ring_khz, fn_khz):
+    # An anvil's ringing is in the true acceleration: the pressure answers it as the
+    # sensor's mode does, also far above the mode (30 kHz over 10 kHz: about 1/8 of the
+    # static gain, which a static-gain yardstick would call ignored).
+    b, a = sensor(fn_khz)
+    acc = shocks(12000, ring_khz=ring_khz)
+    pressure = signal.lfilter(b, a, acc[2])
+    assert ignored_ring(windows(acc, pressure), model(b, a)) is None
+    if fn_khz < ring_khz:
+        h = abs(signal.freqz(b, a, worN=[ring_khz * 1e3], fs=FS)[1][0])
+        assert h < 0.5 * b.sum() / a.sum()
+
+
+def test_no_ringing_no_finding():
+    b, a = sensor(40.0)
+    acc = shocks(12000)
+    assert ignored_ring(windows(acc, signal.lfilter(b, a, acc[2])), model(b, a)) is None
