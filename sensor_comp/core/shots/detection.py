@@ -304,6 +304,9 @@ def _first_motion(acceleration: np.ndarray, axial: np.ndarray, *, lo: int, onset
     if onset - lo < 4 * run or stop <= onset:
         return None
     rows = np.vstack([acceleration[:2, lo:stop], axial[np.newaxis, lo:stop]])
+    rows = rows[np.isfinite(rows[:, :onset - lo]).any(axis=1)]  # an absent axis is no test
+    if not rows.size:
+        return None
     with np.errstate(invalid='ignore'):
         center = np.nanmedian(rows[:, :onset - lo], axis=1, keepdims=True)
         deviation = np.abs(rows - center)

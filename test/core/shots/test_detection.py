@@ -113,6 +113,18 @@ def test_pre_trigger_holds_no_motion(kind, ring, lead):
     assert first - shot.baseline_stop <= 0.1 * (shot.end - shot.onset) + 0.1 * 2e-3 * FS + 2
 
 
+def test_an_absent_lateral_axis_is_no_motion_test():
+    # A recording without lateral channels (all NaN) times its pulse on the axial one,
+    # without a warning from a median of nothing.
+    rec, first = motion_recording('haversine')
+    rec.acceleration[0] = np.nan
+    rec.acceleration[1] = 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        (shot,) = detect_shots(rec)
+    assert shot.baseline_stop <= first
+
+
 def test_half_sine_onset_is_not_moved_by_the_motion_check():
     rec, first = motion_recording('half_sine')
     (shot,) = detect_shots(rec)
