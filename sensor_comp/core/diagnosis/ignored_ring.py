@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from ..effects.base import ACCEL_RING, FOLLOWS, row_of, static_gain
+from ..effects.base import ACCEL_RING, EffectError, FOLLOWS, row_of, static_gain
 from ..identification.model import Model
 from ..shots.windows import Ringing, ringings, Window
 
@@ -69,7 +69,10 @@ def ignored_ring(windows: Sequence[Window], model: Model) -> IgnoredRing | None:
         The ignored ringing, or None.
 
     """
-    gain = abs(static_gain(model.a, model.b, row_of(model, 'a')))
+    try:
+        gain = abs(static_gain(model.a, model.b, row_of(model, 'a')))
+    except EffectError:  # no axial input: nothing to hold the ringing against
+        return None
     for ring in ringings(windows, fs=model.fs):
         if not ring.prominence >= ACCEL_RING or not np.isfinite(ring.hz):
             continue

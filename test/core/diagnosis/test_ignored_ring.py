@@ -90,3 +90,10 @@ def test_no_ringing_no_finding():
     b, a = sensor(40.0)
     acc = shocks(12000)
     assert ignored_ring(windows(acc, signal.lfilter(b, a, acc[2])), model(b, a)) is None
+
+
+def test_a_model_without_an_axial_input_holds_no_ringing():
+    b, a = sensor(40.0)
+    acc = shocks(12000, ring_khz=24.0)
+    lateral = Model(fs=FS, structure='oe', inputs=('a_x',), b=np.atleast_2d(b), a=a, nk=0)
+    assert ignored_ring(windows(acc, np.zeros(acc.shape[1])), lateral) is None
