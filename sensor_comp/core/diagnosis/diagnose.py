@@ -896,13 +896,14 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
                ) -> tuple[str, str, tuple[str, ...], Leftover, None]:
     """Return the verdict when no effect is significant: adequate or unexplained."""
     failing = [a for a in ctx.analyses if not a.consistent_with_noise]
-    ignored = ignored_ring(ctx.validation, ctx.base.model()) if base_left.consistent else None
-    if base_left.consistent and not failing and ignored is not None:
-        return ('unexplained',
-                f'unexplained: the base residual is consistent with noise ('
-                f'{base_left.describe()}), but {ignored.words()}; no catalogued effect '
-                f'explains it: check the accelerometer and its mounting', (), base_left, None)
     if base_left.consistent and not failing:
+        ignored = ignored_ring(ctx.validation, ctx.base.model())
+        if ignored is not None:
+            return ('unexplained',
+                    f'unexplained: the base residual is consistent with noise ('
+                    f'{base_left.describe()}), but {ignored.words()}; no catalogued effect '
+                    f'explains it: check the accelerometer and its mounting', (), base_left,
+                    None)
         return ('adequate',
                 f'adequate: the base residual is consistent with noise ('
                 f'{base_left.describe()}, tolerance {base_left.tolerance:.3f}) and no effect '

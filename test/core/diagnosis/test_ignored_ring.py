@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from bench.independent_rig import draw_spec, simulate as simulate_rig
+from sensor_comp.core.diagnosis.diagnose import diagnose
 from sensor_comp.core.diagnosis.ignored_ring import ignored_ring
+from sensor_comp.core.identification.identify import ShotSource
 from sensor_comp.core.identification.model import Model
 from sensor_comp.core.shots.inputs import mode_pair
 from sensor_comp.core.shots.windows import Window
@@ -97,3 +100,22 @@ def test_a_model_without_an_axial_input_holds_no_ringing():
     acc = shocks(12000, ring_khz=24.0)
     lateral = Model(fs=FS, structure='oe', inputs=('a_x',), b=np.atleast_2d(b), a=a, nk=0)
     assert ignored_ring(windows(acc, np.zeros(acc.shape[1])), lateral) is None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('effect, verdict', [('accel_resonance', 'unexplained'),
+                                             ('clean', 'adequate')])
+def test_the_diagnosis_of_an_accelerometer_mode_the_base_notches_out(effect, verdict):
+    # Seed 21's rig 132 of the generalisation benchmark: a 50 kHz accelerometer mode at
+    # 404 kS/s (R = 1.5) that the free base notches out, leaving noise only (it was
+    # `adequate`); the same rig without it stays `adequate`.
+    spec = draw_spec(806755781, effect=effect, R=1.5 if effect != 'clean' else 0.0,
+                     rate_range=(3e5, 1e6))
+    _, (calib, valid) = simulate_rig(spec).halves()
+    diagnosis = diagnose([ShotSource.detect(calib)], [ShotSource.detect(valid)])
+    assert diagnosis.verdict == verdict, diagnosis.explanation
+    assert diagnosis.consistent_with_noise
+    if verdict == 'unexplained':
+        found = re.search(r'rings at ([0-9.]+) kHz', diagnosis.explanation)
+        assert found and abs(float(found.group(1)) - 50.0) < 1.0
+        assert 'accelerometer' in diagnosis.explanation
