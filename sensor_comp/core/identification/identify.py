@@ -434,9 +434,9 @@ def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
         # Model.check_stable's test: a pole at z = 1 within round-off (an integrator that
         # followed a drift) passes the descent's Schur-Cohn recursion but not numpy.roots.
         if not max_root_radius(estimate.a) < 1.0:
-            first = first or (f'{structure} na={a} nb={b} nk={nk}: a pole at |z| = '
-                              f'{max_root_radius(estimate.a):.9f}, on the unit circle (an '
-                              f'integrator following a drift)')
+            first = first or (f'{structure} na={a} nb={b} nk={nk}: the model is unstable: a '
+                              f'pole at |z| = {max_root_radius(estimate.a):.9f} (at 1 within '
+                              f'round-off: an integrator that followed a drift)')
             continue
         if what is not None:
             notes.append(f'fallback: fitted {what}, because {first}')

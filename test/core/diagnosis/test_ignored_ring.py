@@ -39,8 +39,10 @@ def shocks(n: int, *, ring_khz: float = 0.0, seed: int = 3) -> np.ndarray:
 def measured(motion: np.ndarray, *, mode: np.ndarray | None = None, x: float = 0.2,
              seed: int = 4) -> np.ndarray:
     """
-    Return the accelerometer's reading of ``motion``: through its own mode if given
-    (fraction ``x``), then its electronic noise (20 m/s², which no mode shapes).
+    Return the accelerometer's reading of ``motion``.
+
+    Through its own mode if given (fraction ``x``), then its electronic noise (20 m/s²,
+    which no mode shapes).
     """
     out = motion.copy()
     if mode is not None:

@@ -315,6 +315,6 @@ def test_an_integrator_within_round_off_falls_back_to_lower_orders(monkeypatch):
     monkeypatch.setitem(identify_module._FITTERS, 'oe', drifting)
     result = identify([source], structure='oe', orders=(3, 2), delay=1, denoise=False)
     assert result.model.orders['na'] == 2
-    assert any('na=2 nb=2 instead of na=3 nb=2' in n and 'on the unit circle' in n
+    assert any('na=2 nb=2 instead of na=3 nb=2' in n and 'at 1 within round-off' in n
                for n in result.notes), result.notes
     _check_at_ceiling(result, sim)
