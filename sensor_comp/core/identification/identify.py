@@ -422,24 +422,27 @@ def _robust_fit(structure: str, data: _Data, na: int, nb: int, nk: int, *,
         except IdentError as exc:
             first = first or f'{structure} na={a} nb={b} nk={nk}: {exc}'
             continue
-        if structure != 'oe' and not max_root_radius(estimate.a) < 1.0:
-            notes.append(f'fallback: output error instead of {structure}, whose estimate '
-                         f'na={a} nb={b} nk={nk} is unstable (poles up to |z| = '
-                         f'{max_root_radius(estimate.a):.6f})')
+        radius, swap = max_root_radius(estimate.a), None
+        if structure != 'oe' and not radius < 1.0:
+            swap = (f'fallback: output error instead of {structure}, whose estimate '
+                    f'na={a} nb={b} nk={nk} is unstable (poles up to |z| = {radius:.6f})')
             try:
                 estimate = fit_oe(segs, nf=a, nb=b, nk=nk)
             except IdentError as exc:
                 first = first or f'oe na={a} nb={b} nk={nk}: {exc}'
                 continue
+            radius = max_root_radius(estimate.a)
         # Model.check_stable's test: a pole at z = 1 within round-off (an integrator that
         # followed a drift) passes the descent's Schur-Cohn recursion but not numpy.roots.
-        if not max_root_radius(estimate.a) < 1.0:
+        if not radius < 1.0:
             first = first or (f'{structure} na={a} nb={b} nk={nk}: the model is unstable: a '
-                              f'pole at |z| = {max_root_radius(estimate.a):.9f} (at 1 within '
-                              f'round-off: an integrator that followed a drift)')
+                              f'pole at |z| = {radius:.9f} (at 1 within round-off: an '
+                              f'integrator that followed a drift)')
             continue
         if what is not None:
             notes.append(f'fallback: fitted {what}, because {first}')
+        if swap is not None:  # only when the output-error fit replacing it is kept
+            notes.append(swap)
         return estimate, a, b, notes
     raise IdentError(f'no {structure} model could be fitted, at the orders asked or lower: '
                      f'{first}')
