@@ -308,9 +308,8 @@ def _first_motion(acceleration: np.ndarray, axial: np.ndarray, *, lo: int, onset
     if not rows.size:
         return None
     with np.errstate(invalid='ignore'):
-        center = np.nanmedian(rows[:, :onset - lo], axis=1, keepdims=True)
-        deviation = np.abs(rows - center)
-        sigma = 1.4826 * np.nanmedian(deviation[:, :onset - lo], axis=1, keepdims=True)
+        deviation = np.abs(rows - np.nanmedian(rows[:, :onset - lo], axis=1, keepdims=True))
+        sigma = np.array([[mad_sigma(row[:onset - lo])] for row in rows])
         # A quantised channel may have a MAD of 0: its smallest step is then its noise.
         floor = np.array([[np.min(d[d > 0], initial=np.inf)] for d in deviation])
         quiet = ~np.any(deviation > MOTION_Z * np.where(sigma > 0, sigma, floor), axis=0)
