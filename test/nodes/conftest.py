@@ -415,6 +415,120 @@ def _image(stamp_ns: int, *, height: int, width: int, encoding: str = '64FC1',
                                    data=data))
 
 
+class _Blocks:
+    """Publishes a recording's blocks into a :class:`FaultyStream`, counting their samples."""
+
+    def __init__(self, out: FaultyStream, pressure: np.ndarray, acceleration: np.ndarray):
+        self.out, self.pressure, self.acceleration = out, pressure, acceleration
+        self.fs, self.t0 = out.recording.fs, out.recording.t0_ns
+        self.pressure_samples = self.acceleration_samples = 0
+
+    def stamp(self, sample: int) -> int:
+        """Return the stamp of ``sample``, ns."""
+        return self.t0 + round(sample * 1e9 / self.fs)
+
+    def block(self, topic: str, start: int, stop: int, *, at: int | None = None,
+              values: np.ndarray | None = None) -> None:
+        """Send samples ``start:stop`` (or ``values``) of ``topic`` stamped ``at``."""
+        at = self.stamp(start) if at is None else at
+        if topic == 'pressure/raw':
+            data = self.pressure[start:stop] if values is None else values
+            self.pressure_samples += data.size
+            data = data[np.newaxis]
+        else:
+            data = self.acceleration[:, start:stop] if values is None else values
+            self.acceleration_samples += data.shape[1]
+        self.out.events.append((topic, encode_block(data, stamp_ns=at, frame_id='piezo')))
+
+    def pair(self, start: int, stop: int) -> None:
+        """Send the pressure and acceleration blocks of samples ``start:stop``."""
+        self.block('pressure/raw', start, stop)
+        self.block('acceleration', start, stop)
+
+    def malformed(self, topic: str, data: bytes, *fragments: str) -> None:
+        """Send an undecodable ``topic`` message whose log line holds ``fragments``."""
+        self.out.events.append((topic, data))
+        self.out.malformed += 1
+        self.out.faults.append((f'/rig/{topic}: message skipped:', *fragments))
+
+
+def _malformed_blocks(blocks: _Blocks, k: int, width: int) -> None:
+    """Send block ``k``'s malformed images (wrong encoding, shape, step or size)."""
+    odd = blocks.t0 + 7 * 10 ** 9  # stamps of the malformed blocks: easy to find in the log
+    bad = blocks.malformed
+    if k == 4:
+        bad('pressure/raw', _image(odd + 1, height=1, width=width, encoding='mono8'),
+            f'at stamp {odd + 1} ns', "encoding is 'mono8'")
+        bad('acceleration', _image(odd + 2, height=3, width=width, bigendian=1),
+            f'at stamp {odd + 2} ns', 'is_bigendian is 1')
+    elif k == 6:
+        bad('pressure/raw', _image(odd + 3, height=2, width=width),
+            f'/rig/pressure/raw block at stamp {odd + 3} ns must be one channel, '
+            f'got shape (2, {width})')
+        bad('acceleration', _image(odd + 4, height=1, width=width),
+            f'/rig/acceleration block at stamp {odd + 4} ns must have 3 rows',
+            f'got shape (1, {width})')
+    elif k == 8:
+        bad('pressure/raw', _image(odd + 5, height=1, width=width, step=8 * width + 8),
+            f'at stamp {odd + 5} ns', f'step is {8 * width + 8} bytes')
+        bad('acceleration', _image(odd + 6, height=3, width=width, data=bytes(8 * width)),
+            f'at stamp {odd + 6} ns', f'data holds {8 * width} bytes, height*step')
+    elif k == 12:
+        bad('pressure/raw', _image(odd + 7, height=1, width=width, data=b''),
+            f'at stamp {odd + 7} ns', 'data holds 0 bytes')
+        bad('acceleration', _image(odd + 8, height=3, width=0),
+            f'/rig/acceleration block at stamp {odd + 8} ns holds no sample (width 0)')
+        bad('pressure/raw', b'\x00\x01\x00\x00garbage', 'not a valid sensor_msgs/msg/Image')
+
+
+def _misplaced_blocks(blocks: _Blocks, k: int, start: int, width: int) -> None:
+    """Send block ``k``'s blocks out of order, overlapping or without a partner."""
+    stamp, faults = blocks.stamp, blocks.out.faults
+    if k == 27:  # a pair from the past (block 3, garbage values): out of order
+        garbage = np.full((3, width), 1e300)
+        blocks.block('pressure/raw', 0, width, at=stamp(3000), values=garbage[0])
+        blocks.block('acceleration', 0, width, at=stamp(3000), values=garbage)
+        faults.append((f'/rig/pressure/raw + /rig/acceleration pair at stamp {stamp(3000)} '
+                       f'ns ({width} samples) dropped: it starts {start - 3000} samples before '
+                       f'the end of the previous pair (stamp {stamp(start - width)} ns); out '
+                       f'of order',))
+    elif k == 28:  # half a block again: overlapping
+        blocks.pair(start - width // 2, start + width // 2)
+        faults.append((f'pair at stamp {stamp(start - width // 2)} ns ({width} samples) '
+                       f'dropped: it starts {width // 2} samples before',))
+    elif k == 35:  # a pressure block off the acquisition grid: no partner
+        at = stamp(start - width) + 2500
+        blocks.block('pressure/raw', start - width, start, at=at)
+        faults.append((f'/rig/pressure/raw block at stamp {at} ns ({width} samples) got no '
+                       f'/rig/acceleration block (the pair at stamp {stamp(start)} ns came '
+                       f'first): counted as unpaired',))
+    elif k == 36:  # and an acceleration block
+        at = stamp(start - width) + 7
+        blocks.block('acceleration', start - width, start, at=at)
+        faults.append((f'/rig/acceleration block at stamp {at} ns ({width} samples) got no '
+                       f'/rig/pressure/raw block (the /rig/pressure/raw block at stamp '
+                       f'{stamp(start)} ns came first)',))
+
+
+def _lost_block(blocks: _Blocks, k: int, start: int, stop: int) -> bool:
+    """Lose block ``k`` (a stamp gap, or a pair of two widths); return whether it was."""
+    out, stamp, width = blocks.out, blocks.stamp, stop - start
+    if k == 9:  # lost: a stamp gap
+        out.faults.append((f'/rig/pressure/raw + /rig/acceleration: stamp gap, {width} '
+                           f'samples missing before the pair at stamp {stamp(stop)} ns',))
+    elif k == 17:  # two widths: the pair is dropped, a gap follows
+        blocks.block('pressure/raw', start, stop)
+        blocks.block('acceleration', start, stop - 1)
+        out.faults += [(f'pair at stamp {stamp(start)} ns dropped: the pressure block has '
+                        f'{width} samples but the acceleration block {width - 1}',),
+                       (f'stamp gap, {width} samples missing before the pair at stamp '
+                        f'{stamp(stop)} ns',)]
+    else:
+        return False
+    out.lost.append((start, stop))
+    return True
+
+
 def _faulty_stream(recording: Recording, *, width: int = 1000) -> FaultyStream:
     """
     Return ``recording`` as 1000-sample blocks with every kind of fault in between.
@@ -427,10 +541,6 @@ def _faulty_stream(recording: Recording, *, width: int = 1000) -> FaultyStream:
     pressure, acceleration = recording.pressure.copy(), recording.acceleration.copy()
     pressure[1100] = np.inf  # non-finite samples in block 1
     acceleration[2, 1200:1210] = np.nan
-
-    def stamp(sample: int) -> int:
-        return t0 + round(sample * 1e9 / fs)
-
     accel_info, press_info = recording.streams()[0].info, recording.streams()[1].info
     info = encode_stream_info([accel_info, press_info], stamp_ns=t0)
     keyless = DiagnosticArray(status=[DiagnosticStatus(
@@ -444,110 +554,26 @@ def _faulty_stream(recording: Recording, *, width: int = 1000) -> FaultyStream:
         (encode_stream_info([faster], stamp_ns=t0), (
             f'/rig/stream_info: pressure/raw now at {2 * fs:g} Hz, was {fs:g} Hz',))])
     out.malformed = 2  # the undecodable stream_info messages
-    n = recording.n_samples
-    pressure_samples = acceleration_samples = 0
-
-    def send(topic: str, data: bytes) -> None:
-        out.events.append((topic, data))
-
-    def block(topic: str, start: int, stop: int, *, at: int | None = None, values=None):
-        nonlocal pressure_samples, acceleration_samples
-        at = stamp(start) if at is None else at
-        if topic == 'pressure/raw':
-            data = pressure[start:stop] if values is None else values
-            pressure_samples += data.size
-            send(topic, encode_block(data[np.newaxis], stamp_ns=at, frame_id='piezo'))
-        else:
-            data = acceleration[:, start:stop] if values is None else values
-            acceleration_samples += data.shape[1]
-            send(topic, encode_block(data, stamp_ns=at, frame_id='piezo'))
-
-    def malformed(topic: str, data: bytes, *fragments: str) -> None:
-        send(topic, data)
-        out.malformed += 1
-        out.faults.append((f'/rig/{topic}: message skipped:', *fragments))
-
-    odd = t0 + 7 * 10 ** 9  # stamps of the malformed blocks: easy to find in the log
-    garbage = np.full((3, width), 1e300)
+    blocks, n = _Blocks(out, pressure, acceleration), recording.n_samples
     for k, start in enumerate(range(0, n, width)):
         stop = min(start + width, n)
-        if k == 4:
-            malformed('pressure/raw', _image(odd + 1, height=1, width=width, encoding='mono8'),
-                      f'at stamp {odd + 1} ns', "encoding is 'mono8'")
-            malformed('acceleration', _image(odd + 2, height=3, width=width, bigendian=1),
-                      f'at stamp {odd + 2} ns', 'is_bigendian is 1')
-        elif k == 6:
-            malformed('pressure/raw', _image(odd + 3, height=2, width=width),
-                      f'/rig/pressure/raw block at stamp {odd + 3} ns must be one channel, '
-                      f'got shape (2, {width})')
-            malformed('acceleration', _image(odd + 4, height=1, width=width),
-                      f'/rig/acceleration block at stamp {odd + 4} ns must have 3 rows',
-                      f'got shape (1, {width})')
-        elif k == 8:
-            malformed('pressure/raw', _image(odd + 5, height=1, width=width, step=8 * width + 8),
-                      f'at stamp {odd + 5} ns', f'step is {8 * width + 8} bytes')
-            malformed('acceleration', _image(odd + 6, height=3, width=width,
-                                             data=bytes(8 * width)),
-                      f'at stamp {odd + 6} ns', f'data holds {8 * width} bytes, height*step')
-        elif k == 12:
-            malformed('pressure/raw', _image(odd + 7, height=1, width=width, data=b''),
-                      f'at stamp {odd + 7} ns', 'data holds 0 bytes')
-            malformed('acceleration', _image(odd + 8, height=3, width=0),
-                      f'/rig/acceleration block at stamp {odd + 8} ns holds no sample '
-                      f'(width 0)')
-            malformed('pressure/raw', b'\x00\x01\x00\x00garbage',
-                      'not a valid sensor_msgs/msg/Image')
-        elif k == 27:  # a pair from the past (block 3, garbage values): out of order
-            block('pressure/raw', 0, width, at=stamp(3000), values=garbage[0])
-            block('acceleration', 0, width, at=stamp(3000), values=garbage)
-            out.faults.append((f'/rig/pressure/raw + /rig/acceleration pair at stamp '
-                               f'{stamp(3000)} ns ({width} samples) dropped: it starts '
-                               f'{start - 3000} samples before the end of the previous pair '
-                               f'(stamp {stamp(start - width)} ns); out of order',))
-        elif k == 28:  # half a block again: overlapping
-            block('pressure/raw', start - width // 2, start + width // 2)
-            block('acceleration', start - width // 2, start + width // 2)
-            out.faults.append((f'pair at stamp {stamp(start - width // 2)} ns ({width} '
-                               f'samples) dropped: it starts {width // 2} samples before',))
-        elif k == 35:  # a pressure block off the acquisition grid: no partner
-            block('pressure/raw', start - width, start, at=stamp(start - width) + 2500)
-            out.faults.append((f'/rig/pressure/raw block at stamp {stamp(start - width) + 2500} '
-                               f'ns ({width} samples) got no /rig/acceleration block (the pair '
-                               f'at stamp {stamp(start)} ns came first): counted as unpaired',))
-        elif k == 36:  # and an acceleration block
-            block('acceleration', start - width, start, at=stamp(start - width) + 7)
-            out.faults.append((f'/rig/acceleration block at stamp {stamp(start - width) + 7} ns '
-                               f'({width} samples) got no /rig/pressure/raw block (the '
-                               f'/rig/pressure/raw block at stamp {stamp(start)} ns came first)',))
-        if k == 9:  # lost: a stamp gap
-            out.lost.append((start, stop))
-            out.faults.append((f'/rig/pressure/raw + /rig/acceleration: stamp gap, {width} '
-                               f'samples missing before the pair at stamp {stamp(stop)} ns',))
-            continue
-        if k == 17:  # two widths: the pair is dropped, a gap follows
-            block('pressure/raw', start, stop)
-            block('acceleration', start, stop - 1)
-            out.lost.append((start, stop))
-            out.faults += [(f'pair at stamp {stamp(start)} ns dropped: the pressure block has '
-                            f'{width} samples but the acceleration block {width - 1}',),
-                           (f'stamp gap, {width} samples missing before the pair at stamp '
-                            f'{stamp(stop)} ns',)]
-            continue
-        block('pressure/raw', start, stop)
-        block('acceleration', start, stop)
+        _malformed_blocks(blocks, k, width)
+        _misplaced_blocks(blocks, k, start, width)
+        if not _lost_block(blocks, k, start, stop):
+            blocks.pair(start, stop)
     out.invalid = [1100, *range(1200, 1210)]
     out.faults += [(f'/rig/pressure/raw + /rig/acceleration: non-finite samples from the block '
-                    f'at stamp {stamp(1000)} ns on (11 of its {width})',),
-                   (f'finite samples again from the block at stamp {stamp(2000)} ns: 11 '
-                    f'non-finite samples since stamp {stamp(1000)} ns',)]
+                    f'at stamp {blocks.stamp(1000)} ns on (11 of its {width})',),
+                   (f'finite samples again from the block at stamp {blocks.stamp(2000)} ns: 11 '
+                    f'non-finite samples since stamp {blocks.stamp(1000)} ns',)]
     for lost in out.lost:
         pressure[lost[0]:lost[1]] = np.nan
         acceleration[:, lost[0]:lost[1]] = np.nan
     out.recording = Recording(fs=fs, t0_ns=t0, pressure=pressure, acceleration=acceleration,
                               frame_id=recording.frame_id, metadata=recording.metadata)
-    output = n - sum(stop - start for start, stop in out.lost)
-    out.counts = {'pressure_samples': pressure_samples,
-                  'acceleration_samples': acceleration_samples, 'output_samples': output,
+    out.counts = {'pressure_samples': blocks.pressure_samples,
+                  'acceleration_samples': blocks.acceleration_samples,
+                  'output_samples': n - sum(stop - start for start, stop in out.lost),
                   'unpaired_pressure_samples': 2 * width,
                   'unpaired_acceleration_samples': 2 * width - 1,
                   'mismatched_blocks': 1, 'overlapping_samples': 2 * width,
