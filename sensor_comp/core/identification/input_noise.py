@@ -116,9 +116,11 @@ def _quiet_variance(rows: Sequence[np.ndarray]) -> float | None:
 
 def noise_levels(windows: Sequence[Window]) -> NoiseLevels | None:
     """
-    Return the noise variances of the windows' pre-triggers (None: no pre-trigger).
+    Return the noise variances of the windows' pre-triggers, or None.
 
-    The median over every window's :data:`QUIET_PARTS` parts, each less its mean.
+    The median over every window's :data:`QUIET_PARTS` parts, each less its mean. None
+    without a pre-trigger, or when no acceleration axis holds noise there (a simulated or
+    smoothed accelerometer): then there is no noise to correct for.
     """
     pre = [w for w in windows if w.baseline >= 8 * QUIET_PARTS]
     pressure = _quiet_variance([w.y[:w.baseline] for w in pre])
@@ -126,6 +128,8 @@ def noise_levels(windows: Sequence[Window]) -> NoiseLevels | None:
         return None
     axes = np.array([_quiet_variance([w.acceleration[k, :w.baseline] for w in pre])
                      for k in range(3)], dtype=np.float64)
+    if not np.any(axes > 0):
+        return None
     return NoiseLevels(pressure, axes, sum(w.baseline for w in pre))
 
 

@@ -318,3 +318,20 @@ def test_an_integrator_within_round_off_falls_back_to_lower_orders(monkeypatch):
     assert any('na=2 nb=2 instead of na=3 nb=2' in n and 'at 1 within round-off' in n
                for n in result.notes), result.notes
     _check_at_ceiling(result, sim)
+
+
+def test_an_effect_fit_on_a_noise_free_accelerometer_reaches_the_ceiling():
+    # A simulated (or smoothed) acceleration holds no noise: the correction for the
+    # accelerometer's noise built its impulse problem of no axis and raised IndexError
+    # (independent rigs with their acceleration noise removed, every effect fit).
+    sim = simulate(RigConfig(shots=TABLE2[:6], fs=500e3, accel_noise=0.0,
+                             effects=('zero_shift',)))
+    source = ShotSource.detect(sim.recording)
+    calib, valid = split_calibration(source.shots)
+    result = identify([ShotSource(source.recording, tuple(calib))],
+                      validation=[ShotSource(source.recording, tuple(valid))],
+                      effects=['zero_shift'])
+    best = ceiling(source, valid, sim.induced + sim.disturbance)
+    assert result.validation_fit_percent >= best - TOLERANCE_PP, \
+        (result.validation_fit_percent, best)
+    assert not any('accelerometer\'s noise' in note for note in result.notes), result.notes
