@@ -81,6 +81,10 @@ DEFAULT_OUT = Path(__file__).resolve().parent / 'out' / 'generalise.jsonl'
 HONEST = ('unexplained', 'partly_explained', 'ambiguous')
 #: A parameter is "within its stated uncertainty" when its error is at most this many std.
 PARAMETER_Z = 2.0
+#: An out-of-catalogue effect is absorbed when the base model alone leaves a worst
+#: validation peak residual within this many noise ceilings (criterion 4's "explained to
+#: noise"): nothing is left to name, and ``adequate`` is the honest verdict.
+ABSORBED_CEILING = 1.5
 #: The speed rigs' rate and shot count (the speed target's recording).
 SPEED_FS, SPEED_SHOTS = 1e6, 10
 #: The product's targets (issue 11), as printed under the summary.
@@ -88,7 +92,8 @@ CRITERIA = (
     'clean rigs: verdict adequate in >= 95 % at every rate band',
     'catalogue effects at R >= 1.5: rank 1 and significant in >= 90 %, parameters within '
     f'their stated uncertainty ({PARAMETER_Z:g} std)',
-    'out-of-catalogue effects: unexplained/partly_explained/ambiguous, never a confident '
+    'out-of-catalogue effects: unexplained/partly_explained/ambiguous (or adequate where '
+    f'the base alone leaves <= {ABSORBED_CEILING:g}x the noise ceiling), never a confident '
     'catalogue name',
     'after adding the named effect: worst peak residual <= 1.5x the noise ceiling',
     'identify + diagnose <= 10 s for 10 shots at 1 MS/s')
@@ -503,25 +508,34 @@ def _outside_table(rows: list[dict]) -> tuple[str, dict]:
     Confident: a catalogue name given as the answer (verdict ``missing_effect``); a name
     with ``partly_explained`` says the effect leaves a residual beyond the noise, and one
     with ``ambiguous`` that another effect explains the shots as well: what the product
-    owes the user on an effect it does not know.
+    owes the user on an effect it does not know. Honest also counts an ``adequate`` rig
+    whose effect the base model absorbs (:func:`_absorbed`): no data can tell it apart.
     """
     out, rates = [], {}
     for effect in OUT_OF_CATALOGUE:
         for R in R_OUTSIDE:
             group = [r for r in rows if r['effect'] == effect and r['R'] == R]
             honest = sum(r.get('verdict') in HONEST for r in group)
+            adequate = [r for r in group if r.get('verdict') == 'adequate']
+            absorbed = sum(map(_absorbed, adequate))
             confident = [r for r in group if _named(r) and r.get('verdict') == 'missing_effect']
             partial = [r for r in group if _named(r) and r.get('verdict') != 'missing_effect']
-            rates[effect, R] = (honest, len(group), len(confident))
+            rates[effect, R] = (honest + absorbed, len(group), len(confident))
             out.append([effect, f'{R:g}', len(group), _rate(honest, len(group)),
                         _rate(len(confident), len(group)),
-                        _rate(sum(r.get('verdict') == 'adequate' for r in group), len(group)),
-                        _names(confident), _names(partial),
+                        f'{len(adequate)} ({absorbed} absorbed)', _names(confident),
+                        _names(partial),
                         _median(_ratio(r, 'top', 'ceiling_percent') for r in group),
                         _crashes(group)])
     headers = ['effect', 'R', 'n', 'unexplained/partly', 'confident name', 'adequate',
                'named as the answer', 'named in part', 'named: after/ceiling', 'crash']
     return _table(headers, out), rates
+
+
+def _absorbed(row: dict) -> bool:
+    """Return whether the base model alone explains ``row``'s shots to the noise ceiling."""
+    before, ceiling = row.get('before_percent'), row.get('ceiling_percent')
+    return bool(before is not None and ceiling and before <= ABSORBED_CEILING * ceiling)
 
 
 def _names(rows: list[dict]) -> str:
@@ -641,9 +655,9 @@ def summarise(rows: list[dict]) -> str:
             'medians of the worst validation peak residual; a crash counts as a miss):',
         catalogue,
         '', 'Clean rigs (false alarm = any verdict but adequate):', clean,
-        '', 'Out-of-catalogue effects (honest = unexplained/partly_explained/ambiguous; '
-            'confident = '
-            'missing_effect with a catalogue name):', outside,
+        '', 'Out-of-catalogue effects (honest = unexplained/partly_explained/ambiguous, or '
+            f'adequate where the base alone leaves <= {ABSORBED_CEILING:g}x the noise ceiling '
+            '(absorbed); confident = missing_effect with a catalogue name):', outside,
         '', _crash_table(rows),
         '', times,
         '', 'Criteria:'] + _criteria(clean_rates, catalogue_rates, outside_rates, rows,
