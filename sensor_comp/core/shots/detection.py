@@ -375,9 +375,12 @@ def _non_finite(recording: Recording, window: slice) -> list[str]:
             first = window.start + int(bad[0])
             kinds = '/'.join(kind for kind, test in (('NaN', np.isnan), ('Inf', np.isinf))
                              if test(row[bad]).any())
-            out.append(f'{name} holds {bad.size} non-finite sample(s) ({kinds}: a stream gap '
-                       f'or bad data), the first at sample {first} '
-                       f'({first / recording.fs:.6f} s)')
+            text = (f'{name} holds {bad.size} non-finite sample(s) ({kinds}: a stream gap '
+                    f'or bad data), the first at sample {first} ({first / recording.fs:.6f} s)')
+            if bad.size == row.size and name != _CHANNELS[0]:
+                text += (' — the whole shot: an axis that is not measured must be zeros (as '
+                         'import-csv writes a missing lateral channel), not NaN')
+            out.append(text)
     return out
 
 

@@ -92,6 +92,21 @@ def test_a_non_finite_sample_in_a_window_leaves_that_shot_out(tmp_path, row, val
     assert 'shot 1: not usable: ' + channel in shot_table(found)
 
 
+def test_an_axis_of_nan_throughout_says_an_absent_axis_must_be_zeros():
+    rec = rig().recording
+    acceleration = rec.acceleration.copy()
+    acceleration[1] = np.nan  # a uniaxial rig that wrote NaN for the axis it lacks
+    found = detect_shots(damaged(rec, acceleration=acceleration))
+    assert [(s.start, s.stop) for s in found] == [(s.start, s.stop) for s in detect_shots(rec)]
+    assert not any(s.usable for s in found)
+    for shot in found:
+        assert shot.defects == (
+            f'acceleration y holds {shot.stop - shot.start} non-finite sample(s) (NaN: a '
+            f'stream gap or bad data), the first at sample {shot.start} '
+            f'({shot.start / FS:.6f} s) — the whole shot: an axis that is not measured must '
+            f'be zeros (as import-csv writes a missing lateral channel), not NaN',)
+
+
 def test_non_finite_samples_outside_the_windows_do_not_matter():
     rec = rig().recording
     clean = fit(rec)
