@@ -403,8 +403,10 @@ class Effect:
             return why
         if self.amplitude is not None:
             value, std = fit.parameters(self.id).get(self.amplitude, (None, None))
-            if value is not None and std is not None and math.isfinite(std) and \
-                    not abs(value) > AMPLITUDE_Z * std:
+            if value is not None and (std is None or not math.isfinite(std)):
+                return (f'its {self.amplitude} ({value:.3g}) has no deviation: the fit is '
+                        f'over-parameterised, the data do not pin it')
+            if value is not None and not abs(value) > AMPLITUDE_Z * std:
                 return (f'its {self.amplitude} ({value:.3g} ± {std:.2g}) is not told apart '
                         f'from zero')
         return None

@@ -514,6 +514,17 @@ def test_an_amplitude_not_told_apart_from_zero_reads_no_effect(value, std, resol
         assert 'not told apart from zero' in why
 
 
+@pytest.mark.parametrize('std', [None, math.inf])
+def test_an_amplitude_without_a_deviation_reads_no_effect(std):
+    # A strain fit on four free poles to a noise-free acceleration: its sandwich covariance
+    # was singular, 0.147 Pa/(g/ms) came without a deviation and was kept as the reading
+    # (0.091 ± 0.015 on the sensor's two poles, truth 0.125).
+    effect = get_effect('strain_sensitivity')
+    fit = SimpleNamespace(spec=ModelSpec(), values={}, value_std={},
+                          parameters=lambda _: {'pa_per_g_per_ms': (0.147, std)})
+    assert 'has no deviation: the fit is over-parameterised' in effect.implausible(fit)
+
+
 @pytest.mark.parametrize('zeta', [0.01, 0.04])
 def test_a_searched_modes_gain_threshold_holds_the_chance_of_a_mode_in_noise(zeta):
     # White noise after a half-sine pulse holds no mode; the search keeps the frequency
