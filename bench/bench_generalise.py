@@ -41,7 +41,9 @@ to the next rate band) until ``--cases`` rigs; ``--quick`` is the first cycle, 3
 First ``--speed N`` speed rigs (:func:`speed_plan`: 10 shots at 1 MS/s) run one at a time in
 this process, as the CLI runs (helper processes may share the work, a pool's worker may not):
 the speed target is timed on them, wall clock on the 2 cores, with the load average at each
-start in its row.
+start in its row. ``--variant`` digitises the plan's rigs another valid way
+(:data:`~bench.independent_rig.VARIANTS`, or ``mixed``: cycled by case), and the summary
+adds a table per variant.
 """
 
 from __future__ import annotations
@@ -66,7 +68,7 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 import numpy as np  # noqa: E402 (after the BLAS thread limit)
 
 from bench.independent_rig import (CATALOGUE, CLEAN, draw_spec, OUT_OF_CATALOGUE,  # noqa: E402
-                                   RATE_BANDS, simulate, write_csv)
+                                   RATE_BANDS, simulate, VARIANTS, write_csv)
 
 __all__ = ['CRITERIA', 'DEFAULT_OUT', 'R_VALUES', 'main', 'plan', 'run_case', 'speed_plan',
            'summarise']
@@ -307,7 +309,7 @@ def run_case(task: dict, *, via_csv: bool = False) -> dict:
         spec = draw_spec(task['seed'], effect=task['effect'], R=task['R'],
                          rate_range=tuple(task['rate_range']), fs=task.get('fs'),
                          shots=task.get('shots'))
-        case = simulate(spec)
+        case = simulate(spec, variant=task.get('variant', 'plain'))
         row['truth'] = case.truth
         row['fs'] = spec.fs
         with tempfile.TemporaryDirectory(prefix='generalise-') as folder:
@@ -544,6 +546,34 @@ def _names(rows: list[dict]) -> str:
         or '—'
 
 
+def _variant_table(rows: list[dict]) -> str | None:
+    """Return the main rates per digitiser variant (None when every rig is plain)."""
+    variants = Counter((r.get('truth') or {}).get('variant', r.get('variant', 'plain'))
+                       for r in rows)
+    if set(variants) <= {'plain'}:
+        return None
+    out = []
+    for name in VARIANTS:
+        group = [r for r in rows
+                 if (r.get('truth') or {}).get('variant', r.get('variant')) == name]
+        if not group:
+            continue
+        clean = [r for r in group if r['effect'] == CLEAN]
+        strong = [r for r in group if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+        outside = [r for r in group if r['effect'] in OUT_OF_CATALOGUE]
+        out.append([name, len(group), _crashes(group),
+                    _rate(sum(r.get('verdict') == 'adequate' for r in clean), len(clean)),
+                    _rate(sum(map(_detected, strong)), len(strong)),
+                    _rate(sum(map(_params_ok, strong)), len(strong)),
+                    _rate(sum(r.get('verdict') in HONEST or (r.get('verdict') == 'adequate'
+                                                             and _absorbed(r))
+                              for r in outside), len(outside)),
+                    _rate(sum(bool(_named(r)) and r.get('verdict') == 'missing_effect'
+                              for r in outside), len(outside))])
+    return _table(['variant', 'n', 'crash', 'clean adequate', 'found (R >= 1.5)',
+                   'params ok', 'outside honest', 'outside confident'], out)
+
+
 def _crash_table(rows: list[dict]) -> str:
     crashes = Counter()
     example = {}
@@ -658,6 +688,8 @@ def summarise(rows: list[dict]) -> str:
         '', 'Out-of-catalogue effects (honest = unexplained/partly_explained/ambiguous, or '
             f'adequate where the base alone leaves <= {ABSORBED_CEILING:g}x the noise ceiling '
             '(absorbed); confident = missing_effect with a catalogue name):', outside,
+        *(['', 'Per digitiser variant (bench.independent_rig.VARIANTS):', variants]
+          if (variants := _variant_table(rows)) else []),
         '', _crash_table(rows),
         '', times,
         '', 'Criteria:'] + _criteria(clean_rates, catalogue_rates, outside_rates, rows,
@@ -709,6 +741,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--speed', type=int, metavar='N',
                         help='speed rigs (10 shots at 1 MS/s) run one at a time after the plan '
                              '(default 4 with --quick, else 10; 0: none)')
+    parser.add_argument('--variant', choices=(*VARIANTS, 'mixed'), default='plain',
+                        help='how the rigs digitise (independent_rig.VARIANTS; mixed: cycled '
+                             'by case; default plain)')
     parser.add_argument('--summarise', metavar='FILE', nargs='+',
                         help='print the summary of JSON lines files and exit')
     args = parser.parse_args(argv)
@@ -720,6 +755,9 @@ def main(argv: list[str] | None = None) -> int:
         tasks = [t for t in plan(max(args.case) + 1, args.seed) if t['case'] in args.case]
     else:
         tasks = plan(count, args.seed)[args.start:]
+    for task in tasks:
+        task['variant'] = (list(VARIANTS)[task['case'] % len(VARIANTS)]
+                           if args.variant == 'mixed' else args.variant)
     n_speed = args.speed if args.speed is not None else (4 if args.quick else 10)
     speed = [] if args.case else speed_plan(n_speed, args.seed)
     out = Path(args.out)

@@ -41,7 +41,9 @@ nonlinear effects need large strengths for a given R and often sit at the limit.
 
 :func:`draw_spec` draws a rig from a seed, :func:`simulate` makes the
 :class:`~sensor_comp.streams.Recording` and the truth, :func:`write_csv` writes it in the
-public CSV import format.
+public CSV import format. A rig may digitise in other valid ways (:data:`VARIANTS`: an
+acceleration without noise, 12-bit converters, a DC-coupled accelerometer and an absolute
+pressure), the noise drawn alike.
 """
 
 from __future__ import annotations
@@ -57,8 +59,22 @@ from scipy import optimize, signal
 from sensor_comp.streams import G0, Recording
 
 __all__ = ['CATALOGUE', 'CLEAN', 'FINE_RATE', 'OUT_OF_CATALOGUE', 'POST_MS', 'PRE_MS',
-           'RATE_BANDS', 'Case', 'Pulse', 'RigSpec', 'Shot', 'draw_spec', 'project_rms',
-           'rate_band', 'ratio', 'shot_windows', 'simulate', 'write_csv']
+           'RATE_BANDS', 'VARIANTS', 'Case', 'Pulse', 'RigSpec', 'Shot', 'draw_spec',
+           'project_rms', 'rate_band', 'ratio', 'shot_windows', 'simulate', 'write_csv']
+
+#: How a rig digitises (:func:`simulate`'s ``variant``): ways of recording the same shots
+#: that are all valid data.
+VARIANTS = {
+    'plain': 'as drawn: white noise on every channel, baselines at zero',
+    'noise-free-accel': 'an acceleration without noise (simulated or heavily smoothed)',
+    'adc12': 'both channels through a 12-bit converter whose range holds them with 10 %',
+    'dc-coupled': 'a DC-coupled accelerometer (1 g on z at rest) and an absolute pressure '
+                  '(101.325 kPa at rest)',
+}
+#: Levels of the ``adc12`` converter.
+ADC_LEVELS = 2 ** 12
+#: The ``dc-coupled`` variant's pressure at rest, Pa.
+ATMOSPHERE_PA = 101325.0
 
 #: Catalogue effects (ids of sensor_comp.core.effects) the generator can hide.
 CATALOGUE = ('nonlinear_sensitivity', 'second_resonance', 'amplifier_highpass',
@@ -659,21 +675,25 @@ def _strength(effect: str, built: _Effect, R: float, sigma: float, induced: np.n
     return x, rms(x) / R
 
 
-def simulate(spec: RigSpec) -> Case:
+def simulate(spec: RigSpec, *, variant: str = 'plain') -> Case:
     """
     Simulate a rig: the recording a user would make and the truth behind it.
 
     Args:
         spec: The rig (:func:`draw_spec`).
+        variant: How the rig digitises (:data:`VARIANTS`); every variant draws the same
+            noise, so that a rig's variants differ by that alone.
 
     Returns:
         The case; with an effect, its strength is the one that gives ``spec.R``.
 
     Raises:
-        ValueError: On an unknown effect, or one that leaves nothing after the gain and
-            baseline are removed.
+        ValueError: On an unknown effect or variant, or an effect that leaves nothing after
+            the gain and baseline are removed.
 
     """
+    if variant not in VARIANTS:
+        raise ValueError(f'unknown variant {variant!r}: one of {", ".join(VARIANTS)}')
     grid = _Grid(spec)
     raw = spec.sensitivity * grid.mech(grid.acceleration[2])
     filtered = grid.antialias(raw)
@@ -695,8 +715,13 @@ def simulate(spec: RigSpec) -> Case:
     rng = np.random.default_rng([spec.seed, 22])
     pressure = clean + sigma * rng.standard_normal(grid.n)
     accel_noise = spec.accel_noise * rng.standard_normal(acceleration.shape)
-    measured = acceleration + accel_noise
-    through = _noise_through(spec, parameters, acceleration, accel_noise)
+    measured = acceleration + (0.0 if variant == 'noise-free-accel' else accel_noise)
+    if variant == 'adc12':
+        pressure, measured = _quantised(pressure), _quantised(measured)
+    # The ceiling's accelerometer term holds what the digitiser did to the acceleration.
+    through = _noise_through(spec, parameters, acceleration, measured - acceleration)
+    if variant == 'dc-coupled':
+        pressure, measured[2] = pressure + ATMOSPHERE_PA, measured[2] + G0
     recording = Recording(fs=spec.fs, t0_ns=spec.t0_ns, pressure=pressure,
                           acceleration=measured, metadata={
                               'charge_sensitivity_pC_per_MPa':
@@ -705,8 +730,19 @@ def simulate(spec: RigSpec) -> Case:
              'parameters': parameters, 'R': spec.R if spec.effect != CLEAN else 0.0,
              'noise_sigma_pa': sigma, 'accel_noise_sigma': spec.accel_noise,
              'windows': [list(w) for w in windows], 'rate_band': rate_band(spec.fs),
-             'rig': _rig_summary(spec)}
+             'rig': _rig_summary(spec), 'variant': variant}
     return Case(recording, truth, clean, base.sampled, effect_pressure, through)
+
+
+def _quantised(x: np.ndarray) -> np.ndarray:
+    """Return each row of ``x`` through a 12-bit converter whose range holds it with 10 %."""
+    x = np.array(x, dtype=np.float64)
+    for row in np.atleast_2d(x):
+        middle, half = (row.max() + row.min()) / 2, 0.55 * (row.max() - row.min())
+        if half > 0:
+            step = 2 * half / ADC_LEVELS
+            row[:] = middle + step * np.round((row - middle) / step)
+    return x
 
 
 def _noise_through(spec: RigSpec, parameters: dict, acceleration: np.ndarray,

@@ -126,3 +126,31 @@ def test_the_accelerometer_noise_through_the_sensor_is_what_a_perfect_model_adds
     # The measured axial acceleration holds the noise the pressure path was given.
     assert np.std(case.recording.acceleration[2] - quiet.recording.acceleration[2]) == \
         pytest.approx(50.0, rel=0.05)
+
+
+def test_variants_differ_from_the_plain_rig_by_their_digitiser_alone():
+    spec = draw_spec(5, effect='strain_sensitivity', R=1.5, fs=3e5)
+    plain = simulate(spec)
+    quiet = simulate(spec, variant='noise-free-accel')
+    adc = simulate(spec, variant='adc12')
+    dc = simulate(spec, variant='dc-coupled')
+    noise = plain.recording.acceleration - quiet.recording.acceleration
+    # The same noise drawn: without it the acceleration is the plain one's less its noise,
+    # the pressure is the same and a perfect model adds nothing through the acceleration.
+    assert np.std(noise) == pytest.approx(spec.accel_noise, rel=0.05)
+    np.testing.assert_array_equal(quiet.recording.pressure, plain.recording.pressure)
+    assert not np.any(quiet.accel_noise_pressure)
+    # 12 bits over 1.1x the range: errors within half a step, and its levels only.
+    for got, was in ((adc.recording.pressure, plain.recording.pressure),
+                     *zip(adc.recording.acceleration, plain.recording.acceleration)):
+        step = 1.1 * np.ptp(was) / 4096
+        assert np.max(np.abs(got - was)) <= 0.5 * step * (1 + 1e-9)
+        assert len(np.unique(got)) <= 4096
+    # DC-coupled: 1 g on the axial channel and one atmosphere on the pressure, at rest too.
+    np.testing.assert_allclose(dc.recording.pressure - plain.recording.pressure, 101325.0)
+    np.testing.assert_allclose(dc.recording.acceleration[2] - plain.recording.acceleration[2],
+                               G0)
+    np.testing.assert_array_equal(dc.accel_noise_pressure, plain.accel_noise_pressure)
+    assert dc.truth['variant'] == 'dc-coupled' and plain.truth['variant'] == 'plain'
+    with pytest.raises(ValueError, match="unknown variant 'ac'"):
+        simulate(spec, variant='ac')
