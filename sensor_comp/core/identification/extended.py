@@ -1265,7 +1265,7 @@ def _lag_follower(fit: ExtendedFit, values: Mapping[str, float]
 
     Least squares damp the mode against the accelerometer noise, and a damped mode lags
     more (``2ζ/ω``): the searched delay gives that lag back (a 21.42 µs delay at 1.55 MS/s
-    read 20.89 µs beside a mode damped from ζ 0.017 to 0.035, whose lag grew by 0.54 µs).
+    read 20.89 µs beside a mode damped from ζ 0.082 to 0.166, whose lag grew by 0.54 µs).
     Moving the mode alone, or the delay alone, then raises the noise ratio; the two
     together lower it. The first searched lag (None without one) moves by the change of
     the poles' lag (``mechanics_delay_s``), within its range.
