@@ -59,8 +59,8 @@ from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import (continuous_poles, least_damping, max_root_radius,
                                       resonances)
 from ..shots.inputs import input_channels, mode_pair, parse_channel
-from .input_noise import (MIN_CHECK_GAIN, MIN_ZETA, NoiseLevels, noise_levels, refine_mode,
-                          Refinement, subtracted_noise)
+from .input_noise import (MIN_CHECK_GAIN, MIN_GAIN, MIN_ZETA, NoiseLevels, noise_levels,
+                          refine_mode, Refinement, subtracted_noise)
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
@@ -1194,7 +1194,7 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     choices = () if fit.disturbance is None else fit.disturbance.choices
     fitter = _Fitter(windows, fit.spec, fit.fs, disturbances, choices)
     values = dict(fit.values)
-    refined, moved = _moved_mode(fit, fitter, values, levels, list(check))
+    refined, moved, unresolved = _moved_mode(fit, fitter, values, levels, list(check))
     a = fit.estimate.a if refined is None else refined.a
     estimate, coef, cov = fitter.at(values, a, method=(
         f'{fit.estimate.method}; corrected for the accelerometer noise'))
@@ -1221,24 +1221,44 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     note = (f'corrected for the accelerometer\'s noise (errors in variables): {moved}'
             f'numerators bias-compensated (the noise makes up to {100 * share:.1f} % of a '
             f'regressor direction{held})')
-    return replace(robust_uncertainty(new, windows), _base=fit._base), note
+    return replace(_owning(robust_uncertainty(new, windows), unresolved), _base=fit._base), note
+
+
+def _owning(fit: ExtendedFit, unresolved: Mapping[str, float]) -> ExtendedFit:
+    """Return ``fit`` with each unresolved lag added to its value's deviation."""
+    if not any(unresolved.values()):
+        return fit
+    value_std = dict(fit.value_std)
+    for key, shift in unresolved.items():
+        if value_std.get(key) is not None:
+            value_std[key] = math.hypot(value_std[key], shift)
+    again = _finish([get_effect(e) for e in fit.effects], fit.spec, fit.inputs, fit.estimate,
+                    fit.values, value_std, fit.disturbance, fit.fs, fit.denominators)
+    return replace(fit, value_std=value_std, entries=again.entries)
 
 
 def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLevels,
-                check: list[Window]) -> tuple[Refinement | None, str]:
+                check: list[Window]) -> tuple[Refinement | None, str, dict[str, float]]:
     """
-    Return the refined mode of ``fit`` (None: it stays) and words for the note.
+    Return the refined mode of ``fit`` (None: it stays), words for the note, unresolved lags.
 
     A searched lag (a channel delay) follows the mode, holding the path's total lag
-    (:func:`_lag_follower`); ``values`` is updated to it when the mode moves.
+    (:func:`_lag_follower`); ``values`` is updated to it when the mode moves. When the mode
+    the noise ratio prefers is not resolved (the ratio falls by less than :data:`MIN_GAIN`,
+    or not on the held-out shots), the data do not choose between it and the fitted one:
+    the lag it would move by is returned (``{key: shift}``) for the lag's deviation to own.
     """
     if fit.spec.nf < 2:
-        return None, ''
-    follow = _lag_follower(fit, values)
+        return None, '', {}
+    follower = _lag_follower(fit, values)
+    key, follow = follower if follower is not None else (None, None)
     refined = refine_mode(fit.estimate.a, _ratio(fitter, values, follow, levels), fs=fit.fs,
-                          feasible=fitter.feasible)
+                          feasible=fitter.feasible, least_gain=0.0 if follow else MIN_GAIN)
     if refined is None:
-        return None, ''
+        return None, '', {}
+    unresolved = {} if follow is None else {key: abs(follow(refined.a)[key] - values[key])}
+    if not refined.gain > MIN_GAIN:
+        return None, _unresolved_words(unresolved, refined.gain), unresolved
     held_out = ''
     check_levels = noise_levels(check) if check else None
     if check_levels is not None:
@@ -1247,7 +1267,7 @@ def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLe
         before = ratio(fit.estimate.a)
         gain = (before - ratio(refined.a)) / before
         if not gain > MIN_CHECK_GAIN:
-            return None, ''
+            return None, _unresolved_words(unresolved, refined.gain), unresolved
         held_out = f', on the held-out shots by {100 * gain:.2f} %'
     if follow is not None:
         values.update(follow(refined.a))
@@ -1255,13 +1275,21 @@ def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLe
     return refined, (f'sensor mode {hz0 / 1e3:.1f} kHz, ζ {zeta0:.3f} → {hz / 1e3:.1f} kHz, '
                      f'ζ {zeta:.3f} (least squares damp a mode to keep that noise out of '
                      f'the prediction; the loss over the noise it should leave fell by '
-                     f'{100 * refined.gain:.2f} %{held_out}); ')
+                     f'{100 * refined.gain:.2f} %{held_out}); '), {}
+
+
+def _unresolved_words(unresolved: Mapping[str, float], gain: float) -> str:
+    """Return the note's words on lags the preferred mode would move but does not."""
+    return ''.join(f'{key.partition(".")[2]} ± {shift:.3g} unresolved (the mode the noise '
+                   f'ratio prefers, {100 * gain:.3f} % lower, not resolved by the shots, '
+                   f'would move it so: its deviation owns that); '
+                   for key, shift in unresolved.items() if shift > 0)
 
 
 def _lag_follower(fit: ExtendedFit, values: Mapping[str, float]
-                  ) -> Callable[[np.ndarray], dict] | None:
+                  ) -> tuple[str, Callable[[np.ndarray], dict]] | None:
     """
-    Return the values at a denominator with the searched lag holding the total lag, or None.
+    Return the searched lag's key and the values at a denominator with it holding the lag.
 
     Least squares damp the mode against the accelerometer noise, and a damped mode lags
     more (``2ζ/ω``): the searched delay gives that lag back (a 21.42 µs delay at 1.55 MS/s
@@ -1278,7 +1306,7 @@ def _lag_follower(fit: ExtendedFit, values: Mapping[str, float]
     def at(a: np.ndarray) -> dict:
         shift = (fitted - mechanics_delay_s(a, fit.fs)) / lag.lag_unit_s
         return {**values, lag.key: min(max(values[lag.key] + shift, lag.low), lag.high)}
-    return at
+    return lag.key, at
 
 
 def _ratio(fitter: _Fitter, values: Mapping[str, float],

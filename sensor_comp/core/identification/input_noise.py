@@ -185,7 +185,8 @@ def _denominator(s: np.ndarray, index: int, reals: Sequence[int], x: np.ndarray,
 
 
 def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: float,
-                feasible: Callable[[np.ndarray], bool]) -> Refinement | None:
+                feasible: Callable[[np.ndarray], bool],
+                least_gain: float = MIN_GAIN) -> Refinement | None:
     """
     Return the least damped pair of ``a`` moved to the least ``ratio``, or None.
 
@@ -194,13 +195,15 @@ def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: floa
     frequency (within :data:`MAX_SHIFT`) and damping, and the rates of the fast real poles
     (:data:`FAST_SHARE`: least squares add low-pass poles against the noise too). Slower
     poles and other pairs stay. None when ``a`` has no oscillating pair, the ratio falls
-    by less than :data:`MIN_GAIN` or the damping ends at its bound (:data:`BOUND_FACTOR`).
+    by less than ``least_gain`` or the damping ends at its bound (:data:`BOUND_FACTOR`).
 
     Args:
         a: Fitted denominator ``[1, a1, ...]``.
         ratio: The criterion at a denominator (e.g. loss over expected noise).
         fs: Sample rate, Hz.
         feasible: Whether a denominator is allowed (stable, the spec's bounds).
+        least_gain: Least relative fall of the ratio that moves the mode
+            (:data:`MIN_GAIN`).
 
     """
     s, origin = continuous_poles(a, fs)
@@ -239,7 +242,7 @@ def refine_mode(a: np.ndarray, ratio: Callable[[np.ndarray], float], *, fs: floa
         'maxfev': MAX_EVALUATIONS * (1 + len(reals))})
     x, value = (result.x, result.fun) if result.fun < best else (x0, best)
     hz, zeta = math.exp(x[0]), math.exp(x[1])
-    if not value < start * (1 - MIN_GAIN) or zeta < MIN_ZETA * BOUND_FACTOR:
+    if not value < start * (1 - least_gain) or zeta < MIN_ZETA * BOUND_FACTOR:
         return None
     return Refinement(_denominator(s, index, reals, x, fs, origin), (hz0, zeta0), (hz, zeta),
                       (start - value) / start)
