@@ -1194,8 +1194,31 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     choices = () if fit.disturbance is None else fit.disturbance.choices
     fitter = _Fitter(windows, fit.spec, fit.fs, disturbances, choices)
     values = dict(fit.values)
-    refined, moved, unresolved = _moved_mode(fit, fitter, values, levels, list(check))
+    refined, moved, preferred = _moved_mode(fit, fitter, values, levels, list(check))
     a = fit.estimate.a if refined is None else refined.a
+    new, share = _solved_at(fit, fitter, values, a, levels)
+    held = (f', held at {100 * levels.largest_share:.0f} %'
+            if share > levels.largest_share else '')
+    note = (f'corrected for the accelerometer\'s noise (errors in variables): {moved}'
+            f'numerators bias-compensated (the noise makes up to {100 * share:.1f} % of a '
+            f'regressor direction{held})')
+    corrected = robust_uncertainty(new, windows)
+    if preferred is not None:
+        other, _ = _solved_at(fit, fitter, preferred[1], preferred[0], levels,
+                              value_std=corrected.value_std)
+        corrected = _owning(corrected, other)
+    return replace(corrected, _base=fit._base), note
+
+
+def _solved_at(fit: ExtendedFit, fitter: _Fitter, values: Mapping[str, float], a: np.ndarray,
+               levels: NoiseLevels, *, value_std: Mapping[str, float | None] | None = None
+               ) -> tuple[ExtendedFit, float]:
+    """
+    Return ``fit`` at the denominator ``a`` and ``values``, its numerators bias-compensated.
+
+    With the noise's largest share of a regressor direction. ``value_std`` None: the
+    searched values' deviations from the loss's curvature there.
+    """
     estimate, coef, cov = fitter.at(values, a, method=(
         f'{fit.estimate.method}; corrected for the accelerometer noise'))
     theta, share = fitter.compensated(values, a, levels)
@@ -1203,62 +1226,72 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     estimate = replace(estimate, b=theta[nf:nf + q].reshape(estimate.b.shape))
     if coef is not None:
         coef = theta[nf + q:]
-    value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
-                 for s in fit.spec.searches}
-    for key, std in value_std.items():
-        # A lag moved with the mode lies off the loss's minimum over the denominator that
-        # the curvature descends: it keeps the fitted deviation, and the sandwich below
-        # states its own from the Jacobian.
-        if std is None and values[key] != fit.values[key]:
-            value_std[key] = fit.value_std.get(key)
+    if value_std is None:
+        value_std = {s.key: fitter.value_std(s, values, estimate.a, estimate.noise_variance)
+                     for s in fit.spec.searches}
+        for key, std in value_std.items():
+            # A lag moved with the mode lies off the loss's minimum over the denominator
+            # that the curvature descends: it keeps the fitted deviation, and the sandwich
+            # states its own from the Jacobian.
+            if std is None and values[key] != fit.values[key]:
+                value_std[key] = fit.value_std.get(key)
     disturbance = None if coef is None else DisturbanceFit(
         fitter.disturbances, fitter.choices, fitter.sources, coef, cov)
-    chosen = [get_effect(e) for e in fit.effects]
-    new = _finish(chosen, fit.spec, fit.spec.channels(values), estimate, values, value_std,
-                  disturbance, fit.fs, fit.denominators)
-    held = (f', held at {100 * levels.largest_share:.0f} %'
-            if share > levels.largest_share else '')
-    note = (f'corrected for the accelerometer\'s noise (errors in variables): {moved}'
-            f'numerators bias-compensated (the noise makes up to {100 * share:.1f} % of a '
-            f'regressor direction{held})')
-    return replace(_owning(robust_uncertainty(new, windows), unresolved), _base=fit._base), note
+    return _finish([get_effect(e) for e in fit.effects], fit.spec, fit.spec.channels(values),
+                   estimate, values, dict(value_std), disturbance, fit.fs,
+                   fit.denominators), share
 
 
-def _owning(fit: ExtendedFit, unresolved: Mapping[str, float]) -> ExtendedFit:
-    """Return ``fit`` with each unresolved lag added to its value's deviation."""
-    if not any(unresolved.values()):
-        return fit
-    value_std = dict(fit.value_std)
-    for key, shift in unresolved.items():
-        if value_std.get(key) is not None:
-            value_std[key] = math.hypot(value_std[key], shift)
-    again = _finish([get_effect(e) for e in fit.effects], fit.spec, fit.inputs, fit.estimate,
-                    fit.values, value_std, fit.disturbance, fit.fs, fit.denominators)
-    return replace(fit, value_std=value_std, entries=again.entries)
+def _owning(fit: ExtendedFit, other: ExtendedFit) -> ExtendedFit:
+    """
+    Return ``fit`` with every parameter's deviation owning its change in ``other``.
+
+    ``other`` is the fit at the mode the noise ratio prefers but the shots do not resolve:
+    the data do not choose between the two readings, so each deviation covers both (the
+    difference added in quadrature; angles by their shortest way round).
+    """
+    entries = []
+    for entry, alternative in zip(fit.entries, other.entries):
+        std = dict(entry['std'])
+        for name, value in entry['parameters'].items():
+            there = alternative['parameters'].get(name)
+            if std.get(name) is None or there is None:
+                continue
+            change = there - value
+            if name.endswith('_deg'):
+                change = (change + 180.0) % 360.0 - 180.0
+            std[name] = math.hypot(std[name], change)
+        entries.append({**entry, 'std': std})
+    return replace(fit, entries=tuple(entries))
 
 
 def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLevels,
-                check: list[Window]) -> tuple[Refinement | None, str, dict[str, float]]:
+                check: list[Window]
+                ) -> tuple[Refinement | None, str, tuple[np.ndarray, dict] | None]:
     """
-    Return the refined mode of ``fit`` (None: it stays), words for the note, unresolved lags.
+    Return the refined mode of ``fit`` (None: it stays), words for the note, and the mode
+    the noise ratio prefers but the shots do not resolve ``(a, values)`` (None: no such).
 
     A searched lag (a channel delay) follows the mode, holding the path's total lag
-    (:func:`_lag_follower`); ``values`` is updated to it when the mode moves. When the mode
-    the noise ratio prefers is not resolved (the ratio falls by less than :data:`MIN_GAIN`,
-    or not on the held-out shots), the data do not choose between it and the fitted one:
-    the lag it would move by is returned (``{key: shift}``) for the lag's deviation to own.
+    (:func:`_lag_follower`); ``values`` is updated to it when the mode moves. A preferred
+    mode is not resolved when the ratio falls by less than :data:`MIN_GAIN`, or not on the
+    held-out shots: the data do not choose between it and the fitted one.
     """
     if fit.spec.nf < 2:
-        return None, '', {}
-    follower = _lag_follower(fit, values)
-    key, follow = follower if follower is not None else (None, None)
+        return None, '', None
+    follow = _lag_follower(fit, values)
     refined = refine_mode(fit.estimate.a, _ratio(fitter, values, follow, levels), fs=fit.fs,
-                          feasible=fitter.feasible, least_gain=0.0 if follow else MIN_GAIN)
+                          feasible=fitter.feasible, least_gain=0.0)
     if refined is None:
-        return None, '', {}
-    unresolved = {} if follow is None else {key: abs(follow(refined.a)[key] - values[key])}
+        return None, '', None
+    preferred = refined.a, (dict(values) if follow is None else follow(refined.a))
+    (hz0, zeta0), (hz, zeta) = refined.before, refined.after
+    mode = f'{hz0 / 1e3:.1f} kHz, ζ {zeta0:.3f} → {hz / 1e3:.1f} kHz, ζ {zeta:.3f}'
+    unresolved = (f'the sensor mode the noise ratio prefers ({mode}, {100 * refined.gain:.3f} '
+                  f'% lower) is not resolved by the shots: every deviation owns what it '
+                  f'would change; ')
     if not refined.gain > MIN_GAIN:
-        return None, _unresolved_words(unresolved, refined.gain), unresolved
+        return None, unresolved, preferred
     held_out = ''
     check_levels = noise_levels(check) if check else None
     if check_levels is not None:
@@ -1267,29 +1300,18 @@ def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLe
         before = ratio(fit.estimate.a)
         gain = (before - ratio(refined.a)) / before
         if not gain > MIN_CHECK_GAIN:
-            return None, _unresolved_words(unresolved, refined.gain), unresolved
+            return None, unresolved, preferred
         held_out = f', on the held-out shots by {100 * gain:.2f} %'
-    if follow is not None:
-        values.update(follow(refined.a))
-    (hz0, zeta0), (hz, zeta) = refined.before, refined.after
-    return refined, (f'sensor mode {hz0 / 1e3:.1f} kHz, ζ {zeta0:.3f} → {hz / 1e3:.1f} kHz, '
-                     f'ζ {zeta:.3f} (least squares damp a mode to keep that noise out of '
-                     f'the prediction; the loss over the noise it should leave fell by '
-                     f'{100 * refined.gain:.2f} %{held_out}); '), {}
-
-
-def _unresolved_words(unresolved: Mapping[str, float], gain: float) -> str:
-    """Return the note's words on lags the preferred mode would move but does not."""
-    return ''.join(f'{key.partition(".")[2]} ± {shift:.3g} unresolved (the mode the noise '
-                   f'ratio prefers, {100 * gain:.3f} % lower, not resolved by the shots, '
-                   f'would move it so: its deviation owns that); '
-                   for key, shift in unresolved.items() if shift > 0)
+    values.update(preferred[1])
+    return refined, (f'sensor mode {mode} (least squares damp a mode to keep that noise out '
+                     f'of the prediction; the loss over the noise it should leave fell by '
+                     f'{100 * refined.gain:.2f} %{held_out}); '), None
 
 
 def _lag_follower(fit: ExtendedFit, values: Mapping[str, float]
-                  ) -> tuple[str, Callable[[np.ndarray], dict]] | None:
+                  ) -> Callable[[np.ndarray], dict] | None:
     """
-    Return the searched lag's key and the values at a denominator with it holding the lag.
+    Return the values at a denominator with the searched lag holding the total lag, or None.
 
     Least squares damp the mode against the accelerometer noise, and a damped mode lags
     more (``2ζ/ω``): the searched delay gives that lag back (a 21.42 µs delay at 1.55 MS/s
@@ -1306,7 +1328,7 @@ def _lag_follower(fit: ExtendedFit, values: Mapping[str, float]
     def at(a: np.ndarray) -> dict:
         shift = (fitted - mechanics_delay_s(a, fit.fs)) / lag.lag_unit_s
         return {**values, lag.key: min(max(values[lag.key] + shift, lag.low), lag.high)}
-    return lag.key, at
+    return at
 
 
 def _ratio(fitter: _Fitter, values: Mapping[str, float],

@@ -255,7 +255,7 @@ def test_a_delay_whose_mode_the_shots_do_not_resolve_owns_the_lag_it_would_take(
     # Independent rig (seed 19's case 12: 1.64 MS/s, a 39.1 kHz mode with ζ 0.039, a
     # 33.40 µs delay at R = 1.5): the mode fitted at ζ 0.13 holds 0.83 µs of the delay, and
     # the mode the noise ratio prefers lies only 0.02 % lower, too little to move to.
-    # The delay read 32.55 ± 0.06 µs; its deviation now owns the lag that mode would move.
+    # The delay read 32.55 ± 0.06 µs; its deviation now owns what that mode would change.
     spec = draw_spec(1242578875, effect='channel_delay', R=1.5, rate_range=(1e6, 2e6))
     case = simulate_rig(spec)
     _, (calibration, validation) = case.halves()
@@ -267,4 +267,4 @@ def test_a_delay_whose_mode_the_shots_do_not_resolve_owns_the_lag_it_would_take(
     assert abs(value - truth) <= 2 * std, (value, std, truth)
     # ... and no more than that lag: a few per cent of the delay.
     assert std < 0.05 * truth, (std, truth)
-    assert any('unresolved' in note for note in result.notes), result.notes
+    assert any('is not resolved by the shots' in note for note in result.notes), result.notes
