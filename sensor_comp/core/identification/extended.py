@@ -1183,7 +1183,9 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     :data:`~.input_noise.MIN_CHECK_GAIN` too: a narrow mode can fit the calibration noise.
     At that denominator (moved or not) the numerators and disturbance coefficients are
     solved bias-compensated (:meth:`_Fitter.compensated`), the uncertainties recomputed and
-    the searched values kept. Returns ``(fit, None)`` unchanged when the windows have no
+    the searched values kept, but a lag, which follows the mode (:func:`_lag_follower`). A
+    preferred mode the shots do not resolve widens every parameter's deviation by its
+    change there (:func:`_owning`). Returns ``(fit, None)`` unchanged when the windows have no
     pre-trigger to measure the noise on.
     """
     windows = list(windows)

@@ -232,23 +232,28 @@ def test_refine_mode_leaves_a_pole_at_the_origin():
     assert refined.after == pytest.approx((42e3, 0.05), rel=1e-2)
 
 
-def test_a_channel_delay_follows_the_mode_it_traded_its_lag_with():
-    # Independent rig (seed 27's case 55: 1.55 MS/s, a 51.7 kHz mode with ζ 0.082, a
-    # 21.42 µs delay at R = 5): least squares damped the mode to ζ 0.17 against the
-    # accelerometer noise, and the searched delay gave back the lag that adds (0.54 µs):
-    # 20.89 ± 0.03 µs. Moving the mode alone, or the delay alone, raised the noise ratio.
-    spec = draw_spec(1306203871, effect='channel_delay', R=5.0, rate_range=(1e6, 2e6))
+def delay_fit(seed: int, ratio: float):
+    """Return ``(delay, deviation, truth, notes, fs)`` of a 1-2 MS/s independent delay rig."""
+    spec = draw_spec(seed, effect='channel_delay', R=ratio, rate_range=(1e6, 2e6))
     case = simulate_rig(spec)
     _, (calibration, validation) = case.halves()
     result = identify([ShotSource.detect(calibration)],
                       validation=[ShotSource.detect(validation)], effects=['channel_delay'])
     [entry] = [e for e in result.model.effects if e['id'] == 'channel_delay']
-    value, std = entry['parameters']['delay_us'], entry['std']['delay_us']
-    truth = case.truth['parameters']['delay_us']
+    return (entry['parameters']['delay_us'], entry['std']['delay_us'],
+            case.truth['parameters']['delay_us'], result.notes, spec.fs)
+
+
+def test_a_channel_delay_follows_the_mode_it_traded_its_lag_with():
+    # Independent rig (seed 27's case 55: 1.55 MS/s, a 51.7 kHz mode with ζ 0.082, a
+    # 21.42 µs delay at R = 5): least squares damped the mode to ζ 0.17 against the
+    # accelerometer noise, and the searched delay gave back the lag that adds (0.54 µs):
+    # 20.89 ± 0.03 µs. Moving the mode alone, or the delay alone, raised the noise ratio.
+    value, std, truth, notes, fs = delay_fit(1306203871, 5.0)
     assert abs(value - truth) <= 2 * std, (value, std, truth)
     # Within a tenth of a sample: the lag the damping took is back in the delay.
-    assert abs(value - truth) < 0.1e6 / spec.fs, (value, truth)
-    assert any('sensor mode' in note and 'ζ' in note for note in result.notes), result.notes
+    assert abs(value - truth) < 0.1e6 / fs, (value, truth)
+    assert any('sensor mode' in note and 'ζ' in note for note in notes), notes
 
 
 def test_a_delay_whose_mode_the_shots_do_not_resolve_owns_the_lag_it_would_take():
@@ -256,15 +261,8 @@ def test_a_delay_whose_mode_the_shots_do_not_resolve_owns_the_lag_it_would_take(
     # 33.40 µs delay at R = 1.5): the mode fitted at ζ 0.13 holds 0.83 µs of the delay, and
     # the mode the noise ratio prefers lies only 0.02 % lower, too little to move to.
     # The delay read 32.55 ± 0.06 µs; its deviation now owns what that mode would change.
-    spec = draw_spec(1242578875, effect='channel_delay', R=1.5, rate_range=(1e6, 2e6))
-    case = simulate_rig(spec)
-    _, (calibration, validation) = case.halves()
-    result = identify([ShotSource.detect(calibration)],
-                      validation=[ShotSource.detect(validation)], effects=['channel_delay'])
-    [entry] = [e for e in result.model.effects if e['id'] == 'channel_delay']
-    value, std = entry['parameters']['delay_us'], entry['std']['delay_us']
-    truth = case.truth['parameters']['delay_us']
+    value, std, truth, notes, _ = delay_fit(1242578875, 1.5)
     assert abs(value - truth) <= 2 * std, (value, std, truth)
     # ... and no more than that lag: a few per cent of the delay.
     assert std < 0.05 * truth, (std, truth)
-    assert any('is not resolved by the shots' in note for note in result.notes), result.notes
+    assert any('is not resolved by the shots' in note for note in notes), notes
