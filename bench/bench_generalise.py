@@ -520,9 +520,9 @@ def _outside_table(rows: list[dict]) -> tuple[str, dict]:
             honest = sum(r.get('verdict') in HONEST for r in group)
             adequate = [r for r in group if r.get('verdict') == 'adequate']
             absorbed = sum(map(_absorbed, adequate))
-            confident = [r for r in group if _named(r) and r.get('verdict') == 'missing_effect']
+            confident = [r for r in group if _confident(r)]
             partial = [r for r in group if _named(r) and r.get('verdict') != 'missing_effect']
-            rates[effect, R] = (honest + absorbed, len(group), len(confident))
+            rates[effect, R] = (sum(map(_honest, group)), len(group), len(confident))
             out.append([effect, f'{R:g}', len(group), _rate(honest, len(group)),
                         _rate(len(confident), len(group)),
                         f'{len(adequate)} ({absorbed} absorbed)', _names(confident),
@@ -540,6 +540,22 @@ def _absorbed(row: dict) -> bool:
     return bool(before is not None and ceiling and before <= ABSORBED_CEILING * ceiling)
 
 
+def _honest(row: dict) -> bool:
+    """Return whether an out-of-catalogue rig's verdict is honest (absorbed: adequate)."""
+    verdict = row.get('verdict')
+    return verdict in HONEST or (verdict == 'adequate' and _absorbed(row))
+
+
+def _confident(row: dict) -> bool:
+    """Return whether a catalogue name is given as the answer (``missing_effect``)."""
+    return bool(_named(row)) and row.get('verdict') == 'missing_effect'
+
+
+def _variant(row: dict) -> str:
+    """Return the digitiser variant ``row``'s rig was recorded with."""
+    return (row.get('truth') or {}).get('variant', row.get('variant', 'plain'))
+
+
 def _names(rows: list[dict]) -> str:
     """Return the catalogue names given in ``rows`` with their counts."""
     return ', '.join(f'{k} {v}' for k, v in Counter(_named(r) for r in rows).most_common(3)) \
@@ -548,14 +564,11 @@ def _names(rows: list[dict]) -> str:
 
 def _variant_table(rows: list[dict]) -> str | None:
     """Return the main rates per digitiser variant (None when every rig is plain)."""
-    variants = Counter((r.get('truth') or {}).get('variant', r.get('variant', 'plain'))
-                       for r in rows)
-    if set(variants) <= {'plain'}:
+    if {_variant(r) for r in rows} <= {'plain'}:
         return None
     out = []
     for name in VARIANTS:
-        group = [r for r in rows
-                 if (r.get('truth') or {}).get('variant', r.get('variant')) == name]
+        group = [r for r in rows if _variant(r) == name]
         if not group:
             continue
         clean = [r for r in group if r['effect'] == CLEAN]
@@ -565,11 +578,8 @@ def _variant_table(rows: list[dict]) -> str | None:
                     _rate(sum(r.get('verdict') == 'adequate' for r in clean), len(clean)),
                     _rate(sum(map(_detected, strong)), len(strong)),
                     _rate(sum(map(_params_ok, strong)), len(strong)),
-                    _rate(sum(r.get('verdict') in HONEST or (r.get('verdict') == 'adequate'
-                                                             and _absorbed(r))
-                              for r in outside), len(outside)),
-                    _rate(sum(bool(_named(r)) and r.get('verdict') == 'missing_effect'
-                              for r in outside), len(outside))])
+                    _rate(sum(map(_honest, outside)), len(outside)),
+                    _rate(sum(map(_confident, outside)), len(outside))])
     return _table(['variant', 'n', 'crash', 'clean adequate', 'found (R >= 1.5)',
                    'params ok', 'outside honest', 'outside confident'], out)
 
