@@ -1271,13 +1271,13 @@ def _moved_mode(fit: ExtendedFit, fitter: _Fitter, values: dict, levels: NoiseLe
                 check: list[Window]
                 ) -> tuple[Refinement | None, str, tuple[np.ndarray, dict] | None]:
     """
-    Return the refined mode of ``fit`` (None: it stays), words for the note, and the mode
-    the noise ratio prefers but the shots do not resolve ``(a, values)`` (None: no such).
+    Return the refined mode (None: it stays), words for the note, and an unresolved one.
 
-    A searched lag (a channel delay) follows the mode, holding the path's total lag
-    (:func:`_lag_follower`); ``values`` is updated to it when the mode moves. A preferred
-    mode is not resolved when the ratio falls by less than :data:`MIN_GAIN`, or not on the
-    held-out shots: the data do not choose between it and the fitted one.
+    The unresolved mode is ``(a, values)``: the one the noise ratio prefers but the shots
+    do not resolve (None: no such), when the ratio falls by less than :data:`MIN_GAIN`, or
+    not on the held-out shots: the data do not choose between it and the fitted one. A
+    searched lag (a channel delay) follows the mode, holding the path's total lag
+    (:func:`_lag_follower`); ``values`` is updated to it when the mode moves.
     """
     if fit.spec.nf < 2:
         return None, '', None
