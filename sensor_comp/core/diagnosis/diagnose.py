@@ -101,7 +101,8 @@ from ..effects import Effect, EFFECTS, get_effect, Outcome, Physical
 from ..effects.mains_hum import line_columns
 from ..identification.extended import (BASE_DELAY, BASE_ORDERS, ExtendedFit, Prediction,
                                        search_effort, shot_windows, Window)
-from ..identification.held_base import fit_on_base, free_base, held_base, modes_khz
+from ..identification.held_base import (base_starts, fit_on_base, free_base, held_base,
+                                        modes_khz)
 from ..estimators import estimate_delay, fit_percent
 from ..identification.identify import prepare_sources, ShotSource
 from ..identification.model import Model
@@ -412,6 +413,10 @@ class _Context:
         return self.free is not self.base
 
     @property
+    def starts(self) -> tuple[np.ndarray, ...]:
+        return base_starts(self.free, self.base if self.lag_free else None)
+
+    @property
     def free_sse(self) -> float:
         return sum(float(r @ r) for r in self.free_residual)
 
@@ -451,6 +456,10 @@ class _Context:
             return math.inf
         return max(self.sse / (self.samples * self.noise.variance) - 1.0, 0.0)
 
+    def allowance(self) -> float:
+        """Return the excess a model with the right effect may leave, in noise energies."""
+        return PRACTICAL_SHARE + min(FORM_SHARE * self.excess, FORM_CAP)
+
     def leftover(self, residual: Sequence[np.ndarray], *, named: bool = True) -> Leftover:
         """
         Return what ``residual`` (over the validation windows) holds beyond the noise.
@@ -460,8 +469,7 @@ class _Context:
         may miss :data:`FORM_SHARE` of the base residual's excess besides the practical
         allowance (see the module docs).
         """
-        allowance = PRACTICAL_SHARE + (min(FORM_SHARE * self.excess, FORM_CAP)
-                                       if named else 0.0)
+        allowance = self.allowance() if named else PRACTICAL_SHARE
         noise = self.noise
         if named:  # its own noise floor: the accelerometer noise through this model
             quiet = _quiet(residual, self.validation, self.fs)
@@ -629,7 +637,7 @@ def _candidates(ids: Sequence[str], ctx: _Context, progress,
         ctx.base_effects + (e,), fs=ctx.fs, lag_free=ctx.lag_free))
     nf, nb, nk = ctx.orders
     jobs = [(ctx.calibration, ctx.base_effects + (effect_id,), ctx.fs, (nf, nb, nk),
-             ctx.base.denominators, ctx.lag_free, context) for effect_id in costliest]
+             ctx.starts, ctx.lag_free, context) for effect_id in costliest]
     processes = pool_size(len(jobs) * sum(w.y.size for w in ctx.calibration),
                           MIN_SHARED_COST)
     with progress('effects', len(ids)) as bar:
@@ -831,9 +839,13 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
     best = significant[0]
     if best.leftover.consistent:
         # Alike: another effect leaves only noise too, and the best's advantage over it is
-        # below the yardstick an effect must meet to matter at all (PRACTICAL_SHARE).
+        # below the yardstick an effect must meet to matter at all (PRACTICAL_SHARE) plus
+        # what the best's own form misses beyond the noise (up to the leftover's allowance):
+        # an advantage the size of its own misfit does not tell the forms apart.
+        margin = PRACTICAL_SHARE + min(max(best.leftover.excess, 0.0),
+                                       ctx.allowance() - PRACTICAL_SHARE)
         alike = [r for r in significant[1:] if r.leftover.consistent
-                 and best.explained - r.explained < PRACTICAL_SHARE]
+                 and best.explained - r.explained < margin]
         found = (f'{best.title} ({best.effect}) removes {100 * best.score:.1f} % of the '
                  f'validation residual energy (p = {best.p_value:.2g}); it leaves '
                  f'{best.leftover.describe()}, consistent with the noise')

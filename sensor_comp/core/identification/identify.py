@@ -20,7 +20,7 @@ from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
 from .extended import (BASE_DELAY, BASE_ORDERS, corrected_for_input_noise, fit_extended,
                        robust_uncertainty)
-from .held_base import base_fits, fit_on_base, modes_khz
+from .held_base import base_fits, base_starts, fit_on_base, modes_khz
 from ..shots.windows import EARLY_S, shot_channels, shot_windows, Window
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
                           fit_arx, fit_oe, fit_percent, IdentError, select_structure,
@@ -651,7 +651,7 @@ def _lag_free(windows, effects: Sequence[str], fs: float):
         free, held = base_fits(windows, effects=(), fs=fs, orders=(nf, nb, nk), notes=[])
         base = held or free
         fit = fit_on_base(windows, effects=tuple(effects), fs=fs, orders=(nf, nb, nk),
-                          starts=base.denominators, lag_free=held is not None,
+                          starts=base_starts(free, held), lag_free=held is not None,
                           context={'modes_khz': modes_khz(base.estimate.a, fs)})
     except (IdentError, EffectError):
         return None
