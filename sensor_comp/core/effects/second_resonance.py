@@ -14,10 +14,10 @@ import math
 import numpy as np
 from scipy import signal, stats
 
-from .base import (BASE_CONTEXT, delta_std, Effect, EffectError, FitView, FittedModel,
-                   ModelSpec, modifier_value, Outcome, parameters_text, Physical,
-                   ResidualView, row_of, Search, segment_of, sentence, static_gain,
-                   stored_std, unfollowed)
+from .base import (BASE_CONTEXT, BOUND_SHARE, delta_std, Effect, EffectError, FitView,
+                   FittedModel, ModelSpec, modifier_value, Outcome, parameters_text,
+                   Physical, ResidualView, row_of, Search, segment_of, sentence,
+                   static_gain, stored_std, unfollowed)
 from ..estimators.least_squares import delayed_numerator
 from ..estimators.polynomials import resonances
 from ..shots.inputs import mode_pair
@@ -168,12 +168,19 @@ class SecondResonance(Effect):
         sensor's mode (behind the anti-alias filter often damped to its bound) and the
         second mode is the base's pair: its own values must be resolved instead (a
         3.97 kHz, ζ 0.043 mode read to 0.04 % and 1 % at 213 kS/s was refused because the
-        searched sensor pair sat at ζ 0.2).
+        searched sensor pair sat at ζ 0.2). A pair held at the damping a sensor's mode may
+        take (``spec.max_zeta``) is the bound's reading, not the data's: the fit wanted it
+        damped further, as no ringing mode is (a 4.4 Pa/(g/ms) base strain read as a 34 kHz
+        second mode there).
         """
         model = fit.model()
         if not _reading(model, model.a, model.b)[3]:
             return super().unread_search(fit)
         parameters = fit.parameters(self.id)
+        bound = fit.spec.max_zeta
+        if bound is not None and parameters['zeta'][0] >= BOUND_SHARE * bound:
+            return (f'zeta = {parameters["zeta"][0]:.3g} of the base\'s pair, which the second '
+                    f'mode is read from, sits at the most damping a sensor\'s mode is held to')
         for name in ('freq_khz', 'zeta'):
             value, std = parameters[name]
             if std is None or not math.isfinite(std) or std > value:
