@@ -62,10 +62,14 @@ The verdict:
 - ``'missing_effect'``: the best significant effect (significant ones ranked first, each
   group by score) leaves a residual consistent with the noise, or it and a second one do
   together (their changes added, as fitted on the calibration shots; the second is
-  significant when it removes :data:`NAME_SHARE` of what the first leaves);
+  significant when it removes :data:`NAME_SHARE` of what the first leaves); or, where the
+  base alone leaves only noise, an effect the base's own structure holds
+  (:meth:`~sensor_comp.core.effects.Effect.held_by_base`: a mount mode in a two-pole base
+  with its anti-resonance in the free numerator), read as itself and beyond noise;
 - ``'ambiguous'``: the best significant effect leaves a residual consistent with the noise,
   but so does another significant one that removes less than :data:`PRACTICAL_SHARE` noise
-  energies less: these shots cannot tell them apart (a cause outside the catalogue often
+  energies less (plus what the best itself leaves beyond the noise, up to the form
+  allowance): these shots cannot tell them apart (a cause outside the catalogue often
   passes for two catalogue effects at once), so neither is named as the answer; ``named``
   lists them, best first. So does a best effect whose form a rival outside the catalogue
   passes for on the base residual (:func:`~.rival_forms.untold_form`: ``a|a|`` against a
@@ -207,6 +211,8 @@ class Ranked:
             significant), or None (:meth:`~sensor_comp.core.effects.Effect.implausible`).
         untold: A form outside the catalogue the base residual does not tell from this
             effect's, in words (:func:`~.rival_forms.untold_form`), or None.
+        held: How the base's own structure already holds the effect, in words
+            (:meth:`~sensor_comp.core.effects.Effect.held_by_base`), or None.
         fit: The extended fit (not in :meth:`to_dict`).
 
     """
@@ -229,6 +235,7 @@ class Ranked:
     leftover: Leftover | None = field(default=None, repr=False, compare=False)
     doubt: str | None = None
     untold: str | None = None
+    held: str | None = None
     fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -243,7 +250,7 @@ class Ranked:
                 'peak_residual_percent': json_number(self.peak_residual_percent),
                 'explained_noise_energy': json_number(self.explained),
                 'excess_share': json_number(self.excess_share), 'relevant': self.relevant,
-                'doubt': self.doubt, 'untold': self.untold,
+                'doubt': self.doubt, 'untold': self.untold, 'held': self.held,
                 'leftover': None if self.leftover is None else self.leftover.to_dict()}
 
 
@@ -757,7 +764,8 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
                   peak_residual_percent=_peak_percent(ctx.validation, residual), units=units,
                   explained=float(explained), excess_share=float(share),
                   relevant=bool(relevant), leftover=left, doubt=doubt,
-                  untold=None if untold is None else untold.words, fit=fit)
+                  untold=None if untold is None else untold.words,
+                  held=None if doubt is not None else effect.held_by_base(fit), fit=fit)
 
 
 def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
@@ -834,6 +842,10 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
     """Return the verdict, its explanation, the named effects, their leftover and share."""
     ranked = list(ranked)
     significant = [r for r in ranked if r.significant]
+    if not significant and base_left.consistent:
+        held = _held(ranked, ctx)
+        if held is not None:
+            return held
     if not significant:
         return (*_no_effect(ctx, base_left, ranked), ranked)
     best = significant[0]
@@ -875,6 +887,27 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
             f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
             f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
             f'outside the catalogue remains', (best.effect,), best.leftover, share, ranked)
+
+
+def _held(ranked: Sequence[Ranked], ctx: _Context):
+    """
+    Return :func:`_verdict`'s answer when the base fits because it holds an effect, or None.
+
+    The effect must be beyond noise (its own small improvement), read as itself and leave
+    only noise; it is then named first, significant, with how the base held it.
+    """
+    held = next((r for r in ranked if r.held is not None and r.doubt is None
+                 and r.p_value < ctx.alpha and r.leftover.consistent), None)
+    if held is None:
+        return None
+    best = replace(held, significant=True, relevant=True,
+                   evidence=f'{held.evidence} {held.held[0].upper()}{held.held[1:]}.')
+    ranked = [best] + [r for r in ranked if r is not held]
+    return ('missing_effect',
+            f'missing effect: {best.title} ({best.effect}): {best.held}; with it the model '
+            f'leaves {best.leftover.describe()}, consistent with the noise'
+            f'{_local(best.leftover)}', (best.effect,), best.leftover,
+            _share(ctx, best.leftover), ranked)
 
 
 def _local(left: Leftover) -> str:

@@ -430,6 +430,16 @@ class Effect:
                 return f'{name} = {value:.4g} ± {std:.2g} is not resolved by these data'
         return None
 
+    def held_by_base(self, fit: FitView) -> str | None:
+        """
+        Return how the base's own structure already holds this effect, in words, or None.
+
+        Then the effect explains little beyond a base that fits the shots, yet the base's
+        reading is not a sensor's (:meth:`SecondResonance.held_by_base`); most effects
+        cannot be held so.
+        """
+        return None
+
     def rival(self, analysis: ResidualView | None) -> str | None:
         """
         Return why the residual follows another form than this effect's, or None.

@@ -189,6 +189,25 @@ class SecondResonance(Effect):
                         f'the second mode is read from, is not resolved by these data')
         return None
 
+    def held_by_base(self, fit: FitView) -> str | None:
+        """
+        Return how the base's pair is this mode, not the sensor's, or None.
+
+        When the sensor's mode lies where the shots barely reach (beyond the anti-alias
+        filter), a two-pole base with a free numerator fits a mount mode in parallel exactly:
+        its pair rings at the mount mode and its numerator holds the anti-resonance that no
+        single-mode sensor has. The fit with the effect then puts the sensor in the
+        searched pair and reads the base's pair as the second mode (:meth:`physical`).
+        """
+        model = fit.model()
+        freq, zeta, _, swapped = _reading(model, model.a, model.b)
+        if not swapped:
+            return None
+        return (f'the base\'s own pair ({freq:.4g} kHz, ζ {zeta:.2g}) is this mode, not the '
+                f'sensor\'s: its free numerator held the anti-resonance of a mode in '
+                f'parallel, which no single-mode sensor has, so the base fitted the shots '
+                f'without naming it')
+
     def implausible(self, fit: FitView) -> str | None:
         """
         Return why the fit is no second mode: its base, the generic checks or its gain.
