@@ -59,6 +59,7 @@ from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import (continuous_poles, least_damping, max_root_radius,
                                       resonances)
 from ..shots.inputs import input_channels, mode_pair, parse_channel
+from .coverage import coverage_factor, widened
 from .input_noise import (MIN_CHECK_GAIN, MIN_GAIN, MIN_ZETA, NoiseLevels, noise_levels,
                           refine_mode, Refinement, subtracted_noise)
 from .lag_free import LagFree
@@ -1371,7 +1372,8 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
     scores ``J_t e_t`` summed over Bartlett windows of :func:`_lag_window` samples, per
     shot window) and the between-window estimate ``M_shot`` (``G/(G−1) Σ g_w g_wᵀ``, ``g_w``
     a window's summed score; ``(·)₊`` keeps the positive eigenvalues). So every parameter's
-    variance is at least either. The physical parameters are read again with it. When
+    variance is at least either. The physical parameters are read again with it, each
+    deviation widened where the scatter of few windows decides it (:mod:`.coverage`). When
     ``A`` is singular only because of a searched value (one the polynomials imitate), that
     value gets no deviation and a note, and the others are given with it held fixed; an
     over-parameterised fit otherwise keeps infinite deviations.
@@ -1383,30 +1385,56 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
     # Lag-free numerators: the sandwich over the free coefficients, mapped back.
     lag = (LagFree(fit.inputs, fit.estimate.a, fit.spec.nb, fit.spec.nk, fit.fs)
            if fit.spec.lag_free else None)
-    nf = fit.estimate.a.size - 1
     if lag is not None:
-        jac = lag.project(jac, nf)
-    kept = jac.shape[1] - len(keys)
+        jac = lag.project(jac, fit.estimate.a.size - 1)
     baselines = ([w.baseline for w in windows]
                  if np.array_equal(np.diff(offsets), [w.y.size for w in windows]) else [])
-    covariance = _sandwich(e, jac, offsets, baselines)
-    notes, held = [], not np.all(np.isfinite(covariance)) and bool(keys)
+    variance = float(e @ e) / max(e.size - jac.shape[1], 1)
+    readings = [_covariance(e, jac, baselines, offsets, keys, lag, fit.estimate.a, io + nd,
+                            shots_only=shots_only) for shots_only in (False, True)]
+    held = readings[0][1]
+    (estimate, disturbance, value_std, again), (*_, shots) = (
+        _read_with(fit, covariance, variance, keys, io, nd) for covariance, _ in readings)
+    entries = widened(again.entries, shots.entries, len(windows))
+    value_std = {key: (None if std is None else std * coverage_factor(
+        std, shots.value_std.get(key), len(windows))) for key, std in value_std.items()}
+    notes = [f'{key} = {fit.values[key]:.4g} cannot be told apart from the base '
+             f'polynomials by these data (their joint covariance is singular): no '
+             f'deviation stated; the others are given with it held fixed'
+             for key in keys] if held else []
+    return replace(fit, estimate=estimate, value_std=value_std, disturbance=disturbance,
+                   entries=entries, notes=again.notes + tuple(notes))
+
+
+def _covariance(e: np.ndarray, jac: np.ndarray, baselines: Sequence[int],
+                offsets: np.ndarray, keys: Sequence[str], lag: LagFree | None,
+                a: np.ndarray, size: int, *, shots_only: bool) -> tuple[np.ndarray, bool]:
+    """
+    Return :func:`robust_uncertainty`'s covariance over polynomials, coefficients and values.
+
+    And whether a searched value was held: when ``A`` is singular only because of one
+    (a value the polynomials imitate), the others' covariance with it fixed, its own
+    infinite.
+    """
+    covariance = _sandwich(e, jac, offsets, baselines, shots_only=shots_only)
+    held = not np.all(np.isfinite(covariance)) and bool(keys)
     if held:
-        # A searched value the polynomials can imitate: the others with it held fixed.
-        covariance = _sandwich(e, jac[:, :kept], offsets, baselines)
-        notes = [f'{key} = {fit.values[key]:.4g} cannot be told apart from the base '
-                 f'polynomials by these data (their joint covariance is singular): no '
-                 f'deviation stated; the others are given with it held fixed' for key in keys]
+        covariance = _sandwich(e, jac[:, :jac.shape[1] - len(keys)], offsets, baselines,
+                               shots_only=shots_only)
     if lag is not None and np.all(np.isfinite(covariance)):
-        covariance = lag.covariance(covariance, nf)
+        covariance = lag.covariance(covariance, a.size - 1)
     elif lag is not None:
-        size = io + nd + (0 if held else len(keys))
-        covariance = np.full((size, size), np.inf)
+        width = size + (0 if held else len(keys))
+        covariance = np.full((width, width), np.inf)
     if held:
         covariance = np.pad(covariance, (0, len(keys)), constant_values=np.inf)
-    variance = float(e @ e) / max(e.size - jac.shape[1], 1)
-    estimate = replace(fit.estimate, covariance=covariance[:io, :io],
-                       noise_variance=variance)
+    return covariance, held
+
+
+def _read_with(fit: ExtendedFit, covariance: np.ndarray, variance: float,
+               keys: Sequence[str], io: int, nd: int):
+    """Return the estimate, disturbance, searched deviations and fit read with ``covariance``."""
+    estimate = replace(fit.estimate, covariance=covariance[:io, :io], noise_variance=variance)
     disturbance = (None if fit.disturbance is None else replace(
         fit.disturbance, covariance=covariance[io:io + nd, io:io + nd]))
     value_std = dict(fit.value_std)
@@ -1418,8 +1446,7 @@ def robust_uncertainty(fit: ExtendedFit, windows: Sequence[Window]) -> ExtendedF
             fit.estimate.a)
     again = _finish([get_effect(e) for e in fit.effects], fit.spec, fit.inputs, estimate,
                     fit.values, value_std, disturbance, fit.fs, fit.denominators)
-    return replace(fit, estimate=estimate, value_std=value_std, disturbance=disturbance,
-                   entries=again.entries, notes=again.notes + tuple(notes))
+    return estimate, disturbance, value_std, again
 
 
 def _joint_jacobian(fit: ExtendedFit, windows: Sequence[Window]
@@ -1503,12 +1530,13 @@ def _baseline_meat(e: np.ndarray, unit: np.ndarray, baseline: int, lags: int) ->
 
 
 def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray,
-              baselines: Sequence[int] = ()) -> np.ndarray:
+              baselines: Sequence[int] = (), *, shots_only: bool = False) -> np.ndarray:
     """
     Return the robust covariance of :func:`robust_uncertainty` (columns of ``jac``).
 
     ``baselines``: each window's pre-trigger samples its pressure baseline was the mean of
-    (:func:`_baseline_meat`); empty: none counted.
+    (:func:`_baseline_meat`); empty: none counted. ``shots_only``: the between-window
+    scatter's covariance alone (what :mod:`.coverage` weighs).
     """
     p = jac.shape[1]
     scale = np.linalg.norm(jac, axis=0)
@@ -1539,7 +1567,8 @@ def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray,
     between *= count / max(count - 1, 1)
     excess = (between - within + (between - within).T) / 2
     eigenvalues, vectors = np.linalg.eigh(excess)
-    meat = within + (vectors * np.maximum(eigenvalues, 0.0)) @ vectors.T
+    meat = (between if shots_only
+            else within + (vectors * np.maximum(eigenvalues, 0.0)) @ vectors.T)
     # As K Kᵀ with K = A⁻¹ M^½: symmetric and positive semi-definite whatever A's condition
     # (the product A⁻¹ M A⁻¹ loses both when A is poorly conditioned).
     eigenvalues, vectors = np.linalg.eigh((meat + meat.T) / 2)

@@ -275,9 +275,9 @@ def test_a_searched_value_the_polynomials_imitate_gets_no_deviation_and_a_note(m
     windows = shot_windows([_coloured_rig('zero_shift:pa_per_g=4', 0)])
     fit = fit_extended(windows, effects=['zero_shift'], fs=FS, nf=2, nb=3, nk=0)
     columns = fit.estimate.covariance.shape[0]
-    monkeypatch.setattr(module, '_sandwich', lambda e, jac, offsets, *rest: (
+    monkeypatch.setattr(module, '_sandwich', lambda e, jac, offsets, *rest, **options: (
         np.full((jac.shape[1],) * 2, np.inf) if jac.shape[1] > columns
-        else real(e, jac, offsets, *rest)))
+        else real(e, jac, offsets, *rest, **options)))
     again = module.robust_uncertainty(fit, windows)
     assert again.parameters('zero_shift')['tau_ms'][1] is None
     assert 0 < again.parameters('zero_shift')['pa_per_g'][1] < math.inf
