@@ -24,8 +24,10 @@ from ..shots.inputs import mode_pair
 from ..shots.windows import Window
 
 __all__ = ['base_fits', 'base_starts', 'fit_on_base', 'free_base', 'held_base', 'MODE_ZETA',
-           'modes_khz']
+           'modes_khz', 'MOVED']
 
+#: A held mode further than this factor from the free base's paid a lag with its frequency.
+MOVED = 1.5
 #: A base model's pole pair damped less than this is a mode (the sensor's, as a rule) that
 #: a searched second mode keeps away from.
 MODE_ZETA = 0.2
@@ -107,24 +109,28 @@ def base_starts(free: ExtendedFit, held: ExtendedFit | None) -> tuple[np.ndarray
     Held lag-free without the effect, the mode may have moved far to pay a lag the effect
     holds (a base strain of -15 Pa/(g/ms) put a 31 kHz mode at 1.6 kHz, ζ at its bound);
     a candidate started only there stays in that basin. The free base's mode, whose
-    numerators took the lag, starts it where the sensor rings too, damped as a sensor is.
+    numerators took the lag, starts it where the sensor rings too, damped as a sensor is,
+    when the held mode lies more than :data:`MOVED` away from it (else the basin is one).
     """
     if held is None:
         return free.denominators
-    mode = _lightly_damped(free.estimate.a, free.fs)
-    return held.denominators if mode is None else (*held.denominators, mode)
+    wn, zeta = _natural(free.estimate.a, free.fs)
+    moved, _ = _natural(held.estimate.a, held.fs)
+    if wn is None or (moved is not None and 1 / MOVED < moved / wn < MOVED):
+        return held.denominators
+    return (*held.denominators, mode_pair(wn / (2e3 * math.pi),
+                                          min(max(zeta, 0.01), SENSOR_ZETA / 2.0), free.fs))
 
 
-def _lightly_damped(a: np.ndarray, fs: float) -> np.ndarray | None:
-    """Return two poles' natural frequency as a pair damped at most half a sensor's bound."""
+def _natural(a: np.ndarray, fs: float) -> tuple[float | None, float]:
+    """Return two poles' natural frequency (rad/s, None without two poles in band) and ζ."""
     s = continuous_poles(a, fs)[0]
     if s.size != 2:
-        return None
+        return None, 0.0
     wn = math.sqrt(abs(s[0] * s[1]))
     if not 0.0 < wn < math.pi * fs:
-        return None
-    zeta = min(max(-(s[0] + s[1]).real / (2.0 * wn), 0.01), SENSOR_ZETA / 2.0)
-    return mode_pair(wn / (2e3 * math.pi), zeta, fs)
+        return None, 0.0
+    return wn, float(-(s[0] + s[1]).real / (2.0 * wn))
 
 
 def modes_khz(a: np.ndarray, fs: float) -> tuple[float, ...]:
