@@ -63,7 +63,7 @@ The verdict:
   group by score) leaves a residual consistent with the noise, or it and a second one do
   together (their changes added, as fitted on the calibration shots; the second is
   significant when it removes :data:`NAME_SHARE` of what the first leaves); or, where the
-  base alone leaves only noise, an effect the base's own structure holds
+  verdict would otherwise be ``'adequate'``, an effect the base's own structure holds
   (:meth:`~sensor_comp.core.effects.Effect.held_by_base`: a mount mode in a two-pole base
   with its anti-resonance in the free numerator), read as itself and beyond noise;
 - ``'ambiguous'``: the best significant effect leaves a residual consistent with the noise,
@@ -842,12 +842,8 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
     """Return the verdict, its explanation, the named effects, their leftover and share."""
     ranked = list(ranked)
     significant = [r for r in ranked if r.significant]
-    if not significant and base_left.consistent:
-        held = _held(ranked, ctx)
-        if held is not None:
-            return held
     if not significant:
-        return (*_no_effect(ctx, base_left, ranked), ranked)
+        return _no_effect(ctx, base_left, ranked)
     best = significant[0]
     if best.leftover.consistent:
         # Alike: another effect leaves only noise too, and the best's advantage over it is
@@ -937,9 +933,14 @@ def _untold(best: Ranked) -> str:
             f'{best.effect}\'s')
 
 
-def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
-               ) -> tuple[str, str, tuple[str, ...], Leftover, None]:
-    """Return the verdict when no effect is significant: adequate or unexplained."""
+def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]):
+    """
+    Return :func:`_verdict`'s answer when no effect is significant: adequate or unexplained.
+
+    Where the base would be adequate but holds an effect of its own, that effect
+    (:func:`_held`).
+    """
+    ranked = list(ranked)
     failing = [a for a in ctx.analyses if not a.consistent_with_noise]
     if base_left.consistent and not failing:
         ignored = ignored_ring(ctx.validation, ctx.base.model())
@@ -948,11 +949,14 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
                     f'unexplained: the base residual is consistent with noise ('
                     f'{base_left.describe()}), but {ignored.words()}; no catalogued effect '
                     f'explains it: check the accelerometer and its mounting', (), base_left,
-                    None)
+                    None, ranked)
+        held = _held(ranked, ctx)
+        if held is not None:
+            return held
         return ('adequate',
                 f'adequate: the base residual is consistent with noise ('
                 f'{base_left.describe()}, tolerance {base_left.tolerance:.3f}) and no effect '
-                f'improves it beyond noise', (), base_left, None)
+                f'improves it beyond noise', (), base_left, None, ranked)
     why = (base_left.describe() if not base_left.consistent else
            f'the residual analysis finds structure: {failing[0].summary()[0]}')
     aside = ''
@@ -968,7 +972,7 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]
                  f'{100 * doubted[0].score:.1f} % but is not counted: {doubted[0].doubt}')
     return ('unexplained',
             f'unexplained: the base residual is not noise ({why}) but no catalogued effect '
-            f'explains a relevant part of it beyond noise{aside}', (), base_left, None)
+            f'explains a relevant part of it beyond noise{aside}', (), base_left, None, ranked)
 
 
 def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | None = None,
