@@ -99,9 +99,12 @@ def _reading(model: FittedModel, a: np.ndarray, b: np.ndarray
     main = max((m for m in found if m is not searched), key=lambda m: abs(m[2]), default=None)
     if main is None:
         raise EffectError('the fitted model has no main mode beside the second one')
-    swapped = abs(searched[2]) > abs(main[2])
-    second, first = (main, searched) if swapped else (searched, main)
-    share = second[2] + (direct if second[0] > first[0] else 0.0)
+    # The direct term (what acts within a sample) goes to the faster mode, in the gain and
+    # in which mode is the sensor's: a sensor behind the anti-alias filter is mostly that.
+    faster = max(searched, main, key=lambda m: m[0])
+    shares = [m[2] + (direct if m is faster else 0.0) for m in (searched, main)]
+    swapped = abs(shares[0]) > abs(shares[1])
+    second, share = (main, shares[1]) if swapped else (searched, shares[0])
     sensor = float(numerator.sum() / full.sum()) - share
     return second[0] / 1e3, second[1], share / sensor if sensor else math.nan, swapped
 
@@ -205,7 +208,7 @@ class SecondResonance(Effect):
             return None
         return (f'the base\'s own pair ({freq:.4g} kHz, ζ {zeta:.2g}) is this mode, not the '
                 f'sensor\'s: its free numerator held the anti-resonance of a mode in '
-                f'parallel, which no single-mode sensor has, so the base fitted the shots '
+                f'parallel, which no single-mode sensor has, so the base followed the shots '
                 f'without naming it')
 
     def implausible(self, fit: FitView) -> str | None:
