@@ -318,6 +318,8 @@ class _Base:
     delay: DelayEstimate | None
     explanation: str
     notes: list[str]
+    #: The numerator order was chosen (by the structure selection), not asked for.
+    chosen_nb: bool = False
 
 
 def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
@@ -377,7 +379,8 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
                                           na, nb, delay, fitted=reuse)
     if data.denoiser is not None and not any('measured pressure' in n for n in notes):
         explanation += '; fitted to the EMD-denoised pressure'
-    return _Base(estimate, na, nb, delay, selection, search, explanation, notes)
+    return _Base(estimate, na, nb, delay, selection, search, explanation, notes,
+                 chosen_nb=orders is None and selection is not None)
 
 
 def _search_delay(data: _Data, start: Estimate | None) -> DelayEstimate:
@@ -514,8 +517,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
     poles can hold what the effect is for and leave it to fit something else. The fit the
     diagnosis makes (:func:`_lag_free`, on the measured pressure) competes too (with
     ``compare``; by BIC on the measured shots): a 4.1 kHz mount mode near the noise, which
-    the diagnosis named, was lost in the EMD-denoised pressure. Every base gets at least the
-    numerator of an ``nf``-th order sensor (:func:`_sensor_nb`). Raises EffectError when
+    the diagnosis named, was lost in the EMD-denoised pressure. A chosen numerator order is
+    raised to an ``nf``-th order sensor's (:func:`_sensor_nb`). Raises EffectError when
     nothing fits or an effect does not apply.
     """
     measured = shot_windows([s for s in sources.calibration if s.shots])
@@ -619,16 +622,17 @@ def _undenoised(fit, doubt: str | None, measured: Sequence[Window], effects: Seq
 
 def _sensor_nb(base: _Base, nf: int) -> int:
     """
-    Return the numerator length an effect's fit on ``nf`` base poles gets: ``nf + 1`` or more.
+    Return the numerator length an effect's fit on ``nf`` base poles gets.
 
     An ``nf``-th order sensor sampled with its input interpolated linearly has numerator
-    lags ``0 … nf``. The base's own orders were chosen by BIC before the effect was in,
-    when the effect's misfit outweighed what a shorter numerator misses; with the effect
-    in, at a high pressure-to-noise ratio, the shorter one shows (a 0.2 transverse ratio at
-    185 kS/s on four poles with one numerator coefficient left 1.9 noise ceilings at the
-    worst peak, with five 1.2).
+    lags ``0 … nf``: a numerator order the structure selection chose is raised to that. It
+    was chosen before the effect was in, when the effect's misfit outweighed what a shorter
+    numerator misses; with the effect in, at a high pressure-to-noise ratio, the shorter
+    one shows (a 0.2 transverse ratio at 185 kS/s on four poles with one numerator
+    coefficient left 1.9 noise ceilings at the worst peak, with five 1.2). Orders a user
+    asked for stay.
     """
-    return max(base.nb, nf + 1)
+    return max(base.nb, nf + 1) if base.chosen_nb else base.nb
 
 
 def _base_notes(names: str, asked: int, chosen: int, fits: dict, failed: dict,
