@@ -14,10 +14,14 @@ import math
 import numpy as np
 from scipy import signal
 
-from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
-                   parameters_text, Physical, probe_of, ResidualView, row_of, sentence,
-                   static_gain, stored_std, traded_lag_s, unfollowed)
+from .base import (BOUND_SHARE, delta_std, Effect, EffectError, excess_delay_s, FittedModel,
+                   FitView, ModelSpec, Outcome, parameters_text, Physical, probe_of,
+                   ResidualView, row_of, SENSOR_ZETA, sentence, static_gain, stored_std,
+                   traded_lag_s, unfollowed)
 from .probe import ProbeSpec
+from ..estimators.least_squares import delayed_numerator
+from ..estimators.polynomials import resonances
+from ..shots.inputs import mode_pair, parse_channel
 from ..shots.windows import ringings, Window
 from ...streams import G0, G_PER_MS
 
@@ -30,6 +34,11 @@ SMOOTHING_ZETA = 0.7
 #: Largest plausible strain coefficient as a time, ``|c/S|`` in ms: the strain term then
 #: equals the axial response shifted by that time at low frequencies.
 MAX_LEAD_MS = 1.0
+#: Lowest frequency of a zero pair read as an anti-resonance, Hz (below, a slow tail's).
+ANTI_LOW_HZ = 1e3
+#: An anti-resonance's zeros decay as fast as its mode, within this factor (the sensor's
+#: own response bends them: 1.9 for a 14 kHz mount mode beside a 44 kHz sensor).
+DECAY_FACTOR = 2.0
 #: The jerk probe is low-passed at this multiple of the model's highest resonance ...
 JERK_CUTOFF_FACTOR = 2.0
 #: ... or at this frequency (Hz) for a model without resonance.
@@ -117,7 +126,7 @@ class StrainSensitivity(Effect):
         if not abs(lead_ms) <= MAX_LEAD_MS:
             return (f'the strain term equals the axial response {abs(lead_ms):.3g} ms ahead or '
                     f'behind: no strain of a sensor mount, the paths imitate something else')
-        return None
+        return _anti_resonance(model, fit.spec.max_zeta or SENSOR_ZETA)
 
     def confounded(self, fit: FitView, windows: Sequence[Window]) -> str | None:
         """
@@ -149,3 +158,47 @@ class StrainSensitivity(Effect):
         parts.append(f'a da/dt path removes {100 * outcome.score:.1f} % of the validation '
                      f'residual energy{parameters_text(self, outcome.parameters)}')
         return sentence(parts)
+
+
+def _anti_resonance(model: FittedModel, bound: float) -> str | None:
+    """
+    Return the anti-resonance the fit's whole ``a_z`` path holds beside a ringing mode, or None.
+
+    A strain lead adds one real zero to a sensor's path (``S·H(s)·(1 + s c/S)``); a mode in
+    parallel adds a lightly damped zero pair beside its pole pair (``1 + g·M`` vanishes at
+    ``ω√(1 + g)``). With its own free numerator on the sensor's poles the derivative path
+    can make that pair, and the strain term then fits a mount mode the base holds as well
+    as the second resonance does (a 14.0 kHz mode at 285 kS/s: zeros at 16.7 kHz, ζ 0.041,
+    beside the base's pair at ζ 0.026; truth gain 0.5, √1.5 = 1.22). A pole pair damped to
+    ``bound`` is no ringing mode, and a zero pair within its half-power width cancels it.
+    An anti-resonance's zeros decay as its poles do (``s² + 2ζωs + (1 + g)ω²``: the same
+    ``ζω``, within :data:`DECAY_FACTOR` where the sensor's own response bends them), so
+    zeros outside the unit circle, or a pair damped far more (a delay's imitation: 89.5
+    kHz, ζ 0.18, beside a 57.9 kHz mode at ζ 0.049, 5.7 times the decay), are none.
+    """
+    try:
+        axial, derivative = row_of(model, 'a'), row_of(model, 'da')
+    except EffectError:
+        return None
+    smoothing = dict(parse_channel(model.inputs[derivative]).modifiers).get('mode')
+    if smoothing is None:
+        return None
+    pair = mode_pair(*smoothing, model.fs)
+    b = delayed_numerator(model.b, model.nk)
+    whole = np.convolve(b[axial], pair)
+    lead = np.convolve(b[derivative], [1.0, -1.0]) * model.fs * pair.sum()
+    size = max(whole.size, lead.size)
+    numerator = np.pad(whole, (0, size - whole.size)) + np.pad(lead, (0, size - lead.size))
+    modes = [(hz, zeta) for hz, zeta in resonances(model.a, model.fs)
+             if zeta < BOUND_SHARE * bound]
+    for hz, zeta in resonances(numerator, model.fs):
+        if not (ANTI_LOW_HZ < hz < 0.45 * model.fs and zeta < bound):
+            continue
+        for mode_hz, mode_zeta in modes:
+            decay = zeta * hz / (mode_zeta * mode_hz)
+            if abs(hz / mode_hz - 1) > 2 * mode_zeta and 1 / DECAY_FACTOR < decay < DECAY_FACTOR:
+                return (f'its a_z path holds an anti-resonance: a zero pair at {hz / 1e3:.3g} '
+                        f'kHz (ζ {zeta:.2g}) beside the mode at {mode_hz / 1e3:.3g} kHz (ζ '
+                        f'{mode_zeta:.2g}), as a mode in parallel (a second resonance) makes '
+                        f'and no strain lead does')
+    return None
