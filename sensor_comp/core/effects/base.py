@@ -440,6 +440,17 @@ class Effect:
         """
         return None
 
+    def imitates_held(self, fit: FitView) -> str | None:
+        """
+        Return how the fit imitates a mode the base holds for another effect, or None.
+
+        Where another effect reads the base's own pair as its mode (:meth:`held_by_base`),
+        an effect with free numerators over that pair can shape what the mode in parallel
+        makes (:meth:`StrainSensitivity.imitates_held`: its anti-resonance) and leave as
+        little; most effects cannot.
+        """
+        return None
+
     def rival(self, analysis: ResidualView | None) -> str | None:
         """
         Return why the residual follows another form than this effect's, or None.
