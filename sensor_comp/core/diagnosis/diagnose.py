@@ -659,36 +659,40 @@ def _candidates(ids: Sequence[str], ctx: _Context, progress,
             notes.append(f'{effect_id}: not fitted: {fit}')
         else:
             ranked.append(_score(effect_id, fit, ctx))
-    ranked = _beside_held(ranked, ctx)
     ranked.sort(key=lambda r: (not r.significant, -r.score))
-    return ranked, skipped
+    return _beside_held(ranked, ctx), skipped
 
 
 def _beside_held(ranked: list[Ranked], ctx: _Context) -> list[Ranked]:
     """
-    Return ``ranked`` with the effects that imitate a mode the base holds set aside.
+    Return ``ranked`` with the effects that imitate a mode the base holds after it.
 
-    Where an effect reads the base's own pair as its mode (:attr:`Ranked.held`, as
-    :func:`_held` takes it), another whose fit shapes what that mode makes
+    Where a significant effect reads the base's own pair as its mode (:attr:`Ranked.held`)
+    and leaves only noise, another whose fit shapes what that mode makes
     (:meth:`~sensor_comp.core.effects.Effect.imitates_held`: base strain's derivative
-    numerator making the anti-resonance) leaves as little without being the cause: three
-    benchmark rigs were ``ambiguous`` between the two.
+    numerator making the anti-resonance) leaves as little by imitating it: it ranks after
+    the mode, its evidence says why, and where it leaves as little the verdict stays
+    ``ambiguous`` (an accelerometer resonance passes for that mode too, the same map from
+    the measured acceleration, where an anvil ringing beside it hides its own ringing).
     """
     held = next((r for r in ranked if r.held is not None and r.doubt is None
-                 and r.p_value < ctx.alpha and r.leftover.consistent), None)
+                 and r.significant and r.leftover.consistent), None)
     if held is None:
         return ranked
-    out = []
+    imitating = []
     for r in ranked:
         why = (None if r is held or r.doubt is not None
                else get_effect(r.effect).imitates_held(r.fit))
-        if why is None:
-            out.append(r)
-            continue
-        doubt = f'{why}; {held.effect} reads the base\'s pair as its mode'
-        out.append(replace(r, significant=False, relevant=False, doubt=doubt,
-                           evidence=f'{r.evidence} Not counted: {doubt}.'))
-    return out
+        if why is not None:
+            imitating.append(replace(r, evidence=f'{r.evidence} It imitates: {why}; '
+                                                 f'{held.effect} reads the base\'s pair as '
+                                                 f'its mode.'))
+    if not imitating:
+        return ranked
+    names = {r.effect for r in imitating}
+    rest = [r for r in ranked if r.effect not in names]
+    at = rest.index(held) + 1
+    return rest[:at] + imitating + rest[at:]
 
 
 def _fit_candidate(calibration: Sequence[Window], effects: tuple[str, ...], fs: float,

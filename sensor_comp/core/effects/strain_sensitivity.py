@@ -174,8 +174,8 @@ def _anti_resonance(model: FittedModel, bound: float) -> str | None:
     term fits it as well as the second resonance does (a 14.0 kHz mode at 285 kS/s: zeros
     at 16.7 kHz, ζ 0.041, beside the base's pair at ζ 0.026; truth gain 0.5, √1.5 = 1.22).
     Beside the sensor's own mode a true strain can make one too (at 457 kS/s a 0.51
-    Pa/(g/ms) strain put a pair at 1.48 times the 38.8 kHz mode), so this only sets strain
-    aside where another effect reads that pair as its mode. A pole pair damped to
+    Pa/(g/ms) strain put a pair at 1.48 times the 38.8 kHz mode), so this only ranks strain
+    after another effect that reads that pair as its mode. A pole pair damped to
     ``bound`` is no ringing mode, and a zero pair within its half-power width cancels it.
     An anti-resonance's zeros decay as its poles do (``s² + 2ζωs + (1 + g)ω²``: the same
     ``ζω``, within :data:`DECAY_FACTOR` where the sensor's own response bends them), so
