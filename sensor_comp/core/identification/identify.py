@@ -517,8 +517,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
     poles can hold what the effect is for and leave it to fit something else. The fit the
     diagnosis makes (:func:`_lag_free`, on the measured pressure) competes too (with
     ``compare``; by BIC on the measured shots): a 4.1 kHz mount mode near the noise, which
-    the diagnosis named, was lost in the EMD-denoised pressure. A chosen numerator order is
-    raised to an ``nf``-th order sensor's (:func:`_sensor_nb`). Raises EffectError when
+    the diagnosis named, was lost in the EMD-denoised pressure. A chosen numerator order
+    competes with an ``nf``-th order sensor's (:func:`_on_bases`). Raises EffectError when
     nothing fits or an effect does not apply.
     """
     measured = shot_windows([s for s in sources.calibration if s.shots])
@@ -649,10 +649,10 @@ def _on_bases(windows: Sequence[Window], effects: Sequence[str], fs: float, base
 
 def _sensor_nb(base: _Base, nf: int) -> int:
     """
-    Return the numerator length an effect's fit on ``nf`` base poles gets.
+    Return the numerator length an effect's fit on ``nf`` base poles may take.
 
     An ``nf``-th order sensor sampled with its input interpolated linearly has numerator
-    lags ``0 … nf``: a numerator order the structure selection chose is raised to that. It
+    lags ``0 … nf``: a numerator order the structure selection chose may rise to that. It
     was chosen before the effect was in, when the effect's misfit outweighed what a shorter
     numerator misses; with the effect in, at a high pressure-to-noise ratio, the shorter
     one shows (a 0.2 transverse ratio at 185 kS/s on four poles with one numerator
