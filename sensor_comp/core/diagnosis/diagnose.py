@@ -940,12 +940,12 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
             _share(ctx, best.leftover), ranked)
 
 
-def _local(left: Leftover) -> str:
+def _local(left: Leftover, *, answer: str = 'the name') -> str:
     """Return a sentence on a local misfit the energy does not show, or ''."""
     if not left.peak_above:
         return ''
     return (f'. Locally it does not: {left.peak_words()}; check that part of the shots '
-            f'before taking the name for the whole answer')
+            f'before taking {answer} for the whole answer')
 
 
 def _alike(best: Ranked, alike: Sequence[Ranked]) -> str:
@@ -992,7 +992,8 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]):
         return ('adequate',
                 f'adequate: the base residual is consistent with noise ('
                 f'{base_left.describe()}, tolerance {base_left.tolerance:.3f}) and no effect '
-                f'improves it beyond noise', (), base_left, None, ranked)
+                f'improves it beyond noise{_local(base_left, answer="the base model")}', (),
+                base_left, None, ranked)
     if not base_left.consistent:  # what lies beyond the noise may be the held effect's
         held = _held(ranked, ctx)
         if held is not None:

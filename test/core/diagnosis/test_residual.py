@@ -535,6 +535,7 @@ def test_leftover_reports_a_misfit_confined_to_the_pulse_by_its_peak():
     assert 'largest value is 12' in found.peak_words() and 'during the pulse' in found.peak_words()
     from sensor_comp.core.diagnosis.diagnose import _local
     assert _local(clean) == '' and 'Locally it does not: its largest value is 12' in _local(found)
+    assert 'before taking the base model for' in _local(found, answer='the base model')
     doc = json.loads(json.dumps(found.to_dict()))
     assert doc['peak_segment'] == 'pulse' and doc['peak_ratio'] > doc['peak_limit']
 
