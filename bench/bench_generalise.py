@@ -650,6 +650,7 @@ def _criteria(clean: dict, catalogue: dict, outside: dict, rows: list[dict],
                      f'{_rate(total[0], total[1])}, parameters {_rate(total[2], total[1])} '
                      f'(calibrated: {100 * _calibrated(rows):.0f} %); '
                      f'below 90 %: {", ".join(failing) or "none"}')
+        lines.append(_visible_line(rows))
     n = sum(v[1] for v in outside.values())
     if n:
         confident = sum(v[2] for v in outside.values())
@@ -677,6 +678,23 @@ def _criteria(clean: dict, catalogue: dict, outside: dict, rows: list[dict],
                      f'(speed rigs, wall on 2 cores): {_rate(within, len(walls))}, median '
                      f'{statistics.median(walls):.1f} s, max {max(walls):.1f} s')
     return lines
+
+
+def _visible_line(rows: list[dict]) -> str:
+    """
+    Return, as information beside the criterion, detection where the base leaves the effect.
+
+    A rig whose base model alone leaves <= :data:`ABSORBED_CEILING` x the noise ceiling
+    (:func:`_absorbed`) shows no effect beyond the noise to name; the line splits the
+    catalogue rigs at R >= 1.5 into those and the rest.
+    """
+    strong = [r for r in rows if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+    shown = [r for r in strong if not _absorbed(r)]
+    hidden = [r for r in strong if _absorbed(r)]
+    return (f'[info] where the base alone leaves > {ABSORBED_CEILING:g}x the noise ceiling '
+            f'(the effect stands above the noise before it is added): found '
+            f'{_rate(sum(map(_detected, shown)), len(shown))}; where it does not: found '
+            f'{_rate(sum(map(_detected, hidden)), len(hidden))}')
 
 
 def summarise(rows: list[dict]) -> str:
