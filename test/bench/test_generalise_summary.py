@@ -1,6 +1,11 @@
 """The generalisation benchmark's summary splits detection by what the base leaves."""
 
-from bench.bench_generalise import _visible_line
+import math
+
+import pytest
+
+from bench.bench_generalise import (_params_each, _params_ok, _visible_line, joint_z,
+                                    PARAMETER_Z)
 
 
 def _row(effect, R, found, before, ceiling=2.0):
@@ -20,3 +25,19 @@ def test_detection_is_split_at_the_absorbed_ceiling():
     assert 'leaves > 1.5x' in line
     shown, hidden = line.split('; where it does not: ')
     assert shown.endswith('found 1/2 (50 %)') and hidden == 'found 1/2 (50 %)'
+
+
+def test_an_effects_parameters_are_checked_jointly_at_one_parameters_coverage():
+    one = math.erf(PARAMETER_Z / math.sqrt(2))
+    for k in (1, 2, 3):
+        assert math.erf(joint_z(k) / math.sqrt(2)) ** k == pytest.approx(one, rel=1e-9)
+    assert joint_z(1) == pytest.approx(PARAMETER_Z) and 2.4 < joint_z(3) < 2.45
+    check = {'freq_khz': {'z': 2.3, 'ok': False}, 'zeta': {'z': 0.4, 'ok': True},
+             'gain': {'z': 1.0, 'ok': True}}
+    row = {'true': {'check': check}}
+    assert _params_ok(row) and not _params_each(row)
+    check['freq_khz']['z'] = 2.5
+    assert not _params_ok(row)
+    del check['gain']  # two parameters: 2.27 std each
+    check['freq_khz']['z'] = 2.3
+    assert not _params_ok(row)
