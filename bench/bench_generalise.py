@@ -421,6 +421,11 @@ def _detected(row: dict) -> bool:
         ranking[0]['significant']
 
 
+def _strong(rows: list[dict]) -> list[dict]:
+    """Return the catalogue rigs at R >= 1.5, the ones the criteria count."""
+    return [r for r in rows if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+
+
 def joint_z(k: int) -> float:
     """
     Return the error (in std) each of ``k`` parameters may reach in a joint check.
@@ -458,8 +463,7 @@ def _calibrated(rows: list[dict]) -> float:
     check (:func:`_params_ok`) with 95.4 % whatever k.
     """
     within = math.erf(PARAMETER_Z / math.sqrt(2))
-    counts = [len(r['truth']['parameters']) for r in rows
-              if r['effect'] in CATALOGUE and r['R'] >= 1.5 and r.get('truth')]
+    counts = [len(r['truth']['parameters']) for r in _strong(rows) if r.get('truth')]
     return statistics.fmean(within ** k for k in counts) if counts else math.nan
 
 
@@ -595,7 +599,7 @@ def _variant_table(rows: list[dict]) -> str | None:
         if not group:
             continue
         clean = [r for r in group if r['effect'] == CLEAN]
-        strong = [r for r in group if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+        strong = _strong(group)
         outside = [r for r in group if r['effect'] in OUT_OF_CATALOGUE]
         out.append([name, len(group), _crashes(group),
                     _rate(sum(r.get('verdict') == 'adequate' for r in clean), len(clean)),
@@ -681,13 +685,12 @@ def _criteria(clean: dict, catalogue: dict, outside: dict, rows: list[dict],
         honest = sum(v[0] for v in outside.values())
         lines.append(f'[{"PASS" if confident == 0 and honest == n else "FAIL"}] {CRITERIA[2]}: '
                      f'honest {_rate(honest, n)}, confident name {_rate(confident, n)}')
-    ratios = [_ratio(r, 'top', 'ceiling_percent') for r in rows
-              if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+    ratios = [_ratio(r, 'top', 'ceiling_percent') for r in _strong(rows)]
     ratios = [x for x in ratios if x is not None]
     if ratios:
         within = sum(x <= 1.5 for x in ratios)
-        bare = [x for x in (_ratio(r, 'top', 'pressure_ceiling_percent') for r in rows
-                            if r['effect'] in CATALOGUE and r['R'] >= 1.5) if x is not None]
+        bare = [x for x in (_ratio(r, 'top', 'pressure_ceiling_percent')
+                            for r in _strong(rows)) if x is not None]
         aside = ''
         if bare:
             aside = (f'; against the pressure noise alone '
@@ -706,7 +709,7 @@ def _criteria(clean: dict, catalogue: dict, outside: dict, rows: list[dict],
 
 def _each_rate(rows: list[dict]) -> str:
     """Return how many catalogue rigs at R >= 1.5 pass :func:`_params_each`."""
-    strong = [r for r in rows if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+    strong = _strong(rows)
     return _rate(sum(map(_params_each, strong)), len(strong))
 
 
@@ -718,7 +721,7 @@ def _visible_line(rows: list[dict]) -> str:
     (:func:`_absorbed`) shows no effect beyond the noise to name; the line splits the
     catalogue rigs at R >= 1.5 into those and the rest.
     """
-    strong = [r for r in rows if r['effect'] in CATALOGUE and r['R'] >= 1.5]
+    strong = _strong(rows)
     shown = [r for r in strong if not _absorbed(r)]
     hidden = [r for r in strong if _absorbed(r)]
     return (f'[info] where the base alone leaves > {ABSORBED_CEILING:g}x the noise ceiling '

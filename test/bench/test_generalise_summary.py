@@ -1,4 +1,4 @@
-"""The generalisation benchmark's summary splits detection by what the base leaves."""
+"""The generalisation summary: detection split by what the base leaves; joint parameters."""
 
 import math
 
