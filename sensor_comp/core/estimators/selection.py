@@ -25,8 +25,8 @@ from .polynomials import max_root_radius
 from .simulate import simulate_output
 from ...sharing import pool_size, share, warm
 
-__all__ = ['GRID_ORDERS', 'METHODS', 'Candidate', 'DelayEstimate', 'Selection', 'estimate_delay',
-           'lag_gram', 'profile_losses', 'select_structure', 'warm_grid_helpers']
+__all__ = ['EARLIER', 'GRID_ORDERS', 'METHODS', 'Candidate', 'DelayEstimate', 'Selection',
+           'estimate_delay', 'lag_gram', 'profile_losses', 'select_structure', 'warm_grid_helpers']
 
 
 def _fit_oe(segs, na, nb, nk):
@@ -55,6 +55,12 @@ MIN_SHARED_COST = 1_000_000
 #: and a descent in an over-parameterised valley would crawl on for dozens of steps. The
 #: chosen structure is refined to :func:`fit_oe`'s own tolerance.
 GRID_GAIN = 0.05
+#: Delays below the one :func:`estimate_delay` reads (one numerator coefficient) that the
+#: structure grid tries. A response that leads its input (base strain's derivative) pulls
+#: that reading late by up to the grid's longest numerator: a strain rig at 186 kS/s read
+#: nk = 3 and fitted best at nk = 0 (validation peak residual 2.0 noise ceilings, 11.9 at
+#: the nk = 2 chosen from ±1; ``doc/identification.md``).
+EARLIER = 3
 #: Estimators :func:`select_structure` can use, called as ``f(segments, na, nb, nk)``.
 METHODS: dict[str, Callable[[Sequence[Segment], int, int, int], Estimate]] = {
     'oe': _fit_oe, 'arx': _fit_arx, 'gls': _fit_gls, 'els': _fit_els}
@@ -90,8 +96,13 @@ class DelayEstimate:
                                               compare=False)
 
     def neighbourhood(self) -> range:
-        """Return the delays a structure grid tries around this one: ``nk`` ±1, none below 0."""
-        return range(max(self.nk - 1, 0), self.nk + 2)
+        """
+        Return the delays a structure grid tries around this one, none below 0.
+
+        From ``nk −`` :data:`EARLIER` to ``nk + 1``: a response that leads its input pulls
+        a delay read with one numerator coefficient late (see :data:`EARLIER`).
+        """
+        return range(max(self.nk - EARLIER, 0), self.nk + 2)
 
 
 def profile_losses(segments: Sequence[Segment], f: np.ndarray, delays: Sequence[int],
@@ -414,7 +425,8 @@ def select_structure(calib_segments: Segment | Iterable[Segment], *,
     ``fit_tolerance`` points below the best validation fit; of candidates within
     ``criterion_margin`` of the lowest ``criterion`` (``'bic'``, ``'aic'``, ``'aicc'``,
     ``'fpe'``) the fewest parameters win. ``orders`` default to :data:`GRID_ORDERS`,
-    ``delays`` to :func:`estimate_delay` ±1; ``method`` is a key of :data:`METHODS`.
+    ``delays`` to :meth:`DelayEstimate.neighbourhood` of :func:`estimate_delay`;
+    ``method`` is a key of :data:`METHODS`.
 
     Raises:
         IdentError: On an unknown criterion or method, an empty grid, or no stable fit.
