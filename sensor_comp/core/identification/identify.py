@@ -352,8 +352,9 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
                        f'ringing; the model is fitted to whole windows): '
                        f'{selection.explanation}')
         if search is not None:
-            explanation += (f'; delays tried around the one read on whole windows '
-                            f'({search.explanation})')
+            tried = search.neighbourhood()
+            explanation += (f'; delays nk={tried[0]}..{tried[-1]} tried around the one read '
+                            f'on whole windows ({search.explanation})')
             if data.denoiser is None:
                 provisional = search.estimates.get(delay)
     else:

@@ -334,5 +334,7 @@ def test_the_grid_reaches_back_to_a_response_that_leads_its_input():
     (calib, valid), cut = _split(case, via_csv=False, folder=None)
     ident = identify([calib], validation=[valid])
     assert ident.delay.nk - ident.model.nk >= 2
+    low = max(ident.delay.nk - EARLIER, 0)
+    assert f'delays nk={low}..{ident.delay.nk + 1} tried' in ident.model.fit['selection']
     ceiling = _ceiling(case, cut, ident.validation)
     assert ident.model.fit['validation_peak_residual_percent'] < 3.0 * ceiling
