@@ -78,7 +78,8 @@ The verdict:
 - ``'partly_explained'``: the best significant effect removes part of the residual but
   leaves one the noise does not account for (a second effect, or one outside the
   catalogue): the explanation gives the explained share, the leftover in noise units and
-  where it lies;
+  where it lies, and names the other significant effects that remove less than
+  :data:`PRACTICAL_SHARE` noise energies less (the energy does not tell them from it);
 - ``'adequate'``: no effect is significant and the base residual is consistent with the
   noise (and the residual analysis of :mod:`sensor_comp.core.diagnosis.residual` agrees when it
   runs);
@@ -911,11 +912,16 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
                     left, _share(ctx, left), ranked)
     share = _share(ctx, best.leftover)
     part = '' if share is None else f' ({100 * share:.0f} % of what lies beyond the noise)'
+    # Effects that remove as much within the yardstick an effect must meet to matter at all
+    # are told apart by nothing the energy shows: the user is to try each.
+    rivals = [r for r in ranked if r.significant and r is not best
+              and best.explained - r.explained < PRACTICAL_SHARE]
     return ('partly_explained',
             f'partly explained: {best.title} ({best.effect}) removes {100 * best.score:.1f} % '
             f'of the validation residual energy{part} (p = {best.p_value:.2g}), but what it '
             f'leaves is not noise: {best.leftover.describe()}; a second effect or one '
-            f'outside the catalogue remains', (best.effect,), best.leftover, share, ranked)
+            f'outside the catalogue remains{_rivals(best, rivals)}', (best.effect,),
+            best.leftover, share, ranked)
 
 
 def _held(ranked: Sequence[Ranked], ctx: _Context):
@@ -956,6 +962,19 @@ def _alike(best: Ranked, alike: Sequence[Ranked]) -> str:
     return (f'; {names} also leave{"s" if len(alike) == 1 else ""} only noise: these shots '
             f'cannot tell {"it" if len(alike) == 1 else "them"} from {best.effect}, so no '
             f'name is the answer (a cause outside the catalogue can pass for both)')
+
+
+def _rivals(best: Ranked, rivals: Sequence[Ranked]) -> str:
+    """Return the clause naming significant effects that remove as much as ``best``, or ''."""
+    if not rivals:
+        return ''
+    names = ', '.join(f'{r.title} ({r.effect}, {100 * r.score:.1f} %, leaving '
+                      f'{r.leftover.energy_ratio:.2f}× the noise energy)' for r in rivals)
+    one = len(rivals) == 1
+    return (f'. {names[0].upper()}{names[1:]} remove{"s" if one else ""} as much within '
+            f'the practical share of the noise: these shots do not tell '
+            f'{"it" if one else "them"} from {best.effect} by the energy; add each with '
+            f'identify --effect and compare what it leaves')
 
 
 def _untold(best: Ranked) -> str:

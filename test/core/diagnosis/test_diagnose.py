@@ -533,3 +533,23 @@ def test_a_channel_delay_beside_a_mode_above_the_pulses_band_is_told_from_none_b
     assert result.entry('channel_delay').significant
     delay, std = result.entry('channel_delay').parameters['delay_us']
     assert abs(delay - 40.0) <= 2 * std and std < 10.0
+
+
+def test_a_partly_explained_verdict_names_what_removes_as_much(monkeypatch):
+    # Seed 25's rig 88 (a 20.4 kHz second mode) was partly explained by strain, which
+    # removed 0.674 noise energies against the mode's 0.645, and the mode was not mentioned.
+    from dataclasses import replace
+    from types import SimpleNamespace
+    from sensor_comp.core.diagnosis import diagnose as module
+    monkeypatch.setattr(module, '_second', lambda best, others, ctx: None)
+    best = replace(_ranked('strain_sensitivity', 0.423, consistent=False), explained=0.674)
+    rival = replace(_ranked('second_resonance', 0.404, consistent=False), explained=0.645)
+    far = replace(_ranked('zero_shift', 0.30, consistent=False), explained=0.674 - 0.051)
+    ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
+    found, explanation, named, *_ = module._verdict([best, rival, far], ctx, best.leftover)
+    assert found == 'partly_explained' and named == ('strain_sensitivity',)
+    assert ('. Second resonance (second_resonance, 40.4 %, leaving 3.00× the noise energy) '
+            'removes as much') in explanation
+    assert 'zero_shift' not in explanation
+    found, explanation, *_ = module._verdict([best, far], ctx, best.leftover)
+    assert found == 'partly_explained' and 'as much' not in explanation
