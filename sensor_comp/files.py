@@ -7,7 +7,7 @@ a file appears under its name only complete. See ``doc/outputs-and-workers.md``.
 
 from __future__ import annotations
 
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 import errno
 import json
 import os
@@ -240,7 +240,11 @@ def open_temporary(path: str | os.PathLike, *, text: bool = False) -> tuple[IO, 
         try:
             return (os.fdopen(fd, 'w', encoding='utf-8') if text else os.fdopen(fd, 'wb')), tmp
         except BaseException:
-            os.close(fd)
+            # An interrupt inside fdopen may come after its file object took the descriptor
+            # and closed it on the way out: closing it again must not replace the interrupt
+            # (a SIGTERM once ended `simulate` as "cannot create bag: Bad file descriptor").
+            with suppress(OSError):
+                os.close(fd)
             tmp.unlink(missing_ok=True)
             raise
     raise FileExistsError(f'no free temporary name beside {path}')

@@ -174,3 +174,20 @@ def test_a_figure_is_saved_atomically_in_the_format_of_its_suffix(tmp_path):
     with pytest.raises(OutputError, match='cannot write plot'):
         save_figure(figure, tmp_path / 'missing' / 'plot.png')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['plot.png', 'plot.svg']
+
+
+def test_an_interrupt_inside_fdopen_stays_the_interrupt(tmp_path, monkeypatch):
+    # A SIGTERM that came after fdopen's file object took the descriptor (and closed it on
+    # the way out) made the cleanup's own close fail: `simulate` ended "cannot create bag:
+    # Bad file descriptor" with exit 1 instead of 143.
+    real = os.fdopen
+
+    def interrupted(fd, *args, **kwargs):
+        real(fd, *args, **kwargs).close()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, 'fdopen', interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        open_temporary(tmp_path / 'out.mcap')
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []
