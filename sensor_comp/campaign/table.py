@@ -11,12 +11,13 @@ from collections.abc import Iterable, Mapping, Sequence
 import math
 import os
 from pathlib import Path
-import tempfile
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
+
+from ..files import open_temporary, publish
 
 __all__ = ['COLUMNS', 'SCHEMA', 'TABLE_VERSION', 'TableWriter', 'failure_row', 'read_columns',
            'rows_table',
@@ -74,7 +75,7 @@ def write_records(path: str | os.PathLike, records: Sequence[Mapping]) -> None:
     temp = _temporary(path)
     try:
         pa_csv.write_csv(table, temp)
-        _publish(temp, path)
+        publish(temp, path)
     except BaseException:
         temp.unlink(missing_ok=True)
         raise
@@ -89,9 +90,20 @@ class TableWriter:
 
     def __init__(self, parquet: str | os.PathLike, csv: str | os.PathLike):
         self._targets = (Path(parquet), Path(csv))
-        self._temps = [_temporary(p) for p in self._targets]
-        self._parquet = pq.ParquetWriter(self._temps[0], SCHEMA, compression='zstd')
-        self._csv = pa_csv.CSVWriter(self._temps[1], SCHEMA)
+        self._temps: list[Path] = []
+        writers = []
+        try:
+            for target in self._targets:
+                self._temps.append(_temporary(target))
+            writers.append(pq.ParquetWriter(self._temps[0], SCHEMA, compression='zstd'))
+            writers.append(pa_csv.CSVWriter(self._temps[1], SCHEMA))
+        except BaseException:  # no temporary file outlives a writer that did not start
+            for writer in writers:
+                writer.close()
+            for temp in self._temps:
+                temp.unlink(missing_ok=True)
+            raise
+        self._parquet, self._csv = writers
         self.rows = 0
 
     def __enter__(self) -> TableWriter:
@@ -102,7 +114,7 @@ class TableWriter:
         self._csv.close()
         if kind is None:
             for temp, target in zip(self._temps, self._targets):
-                _publish(temp, target)
+                publish(temp, target)
         else:
             for temp in self._temps:
                 temp.unlink(missing_ok=True)
@@ -115,19 +127,11 @@ class TableWriter:
         self.rows += table.num_rows
 
 
-def _publish(temp: Path, path: Path) -> None:
-    """Rename a finished temporary file to ``path``, with the permissions ``open`` gives."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(temp, 0o666 & ~umask)  # not the temporary file's 0600
-    os.replace(temp, path)
-
-
 def _temporary(path: Path) -> Path:
-    """Return a fresh temporary file name next to ``path``."""
-    fd, name = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=path.parent)
-    os.close(fd)
-    return Path(name)
+    """Create a fresh empty temporary file next to ``path`` (the writers reopen it by name)."""
+    file, temp = open_temporary(path)
+    file.close()
+    return temp
 
 
 def read_columns(path: str | os.PathLike, names: Sequence[str]) -> dict[str, np.ndarray]:

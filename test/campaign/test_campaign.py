@@ -306,3 +306,17 @@ def test_every_bad_bag_of_the_corpus_is_one_row_with_its_reason(tmp_path):
     assert len(failed) == summary.failed >= 20
     for bag in failed:  # a clear reason naming the file, never an internal error
         assert Path(bag['bag']).name in bag['reason'] and 'analysis failed' not in bag['reason']
+
+
+def test_a_table_writer_that_cannot_start_leaves_no_temporary_file(tmp_path, monkeypatch):
+    # The Parquet file's temporary stayed behind when the CSV writer failed to start.
+    import pyarrow.csv as pa_csv
+    from sensor_comp.campaign.table import TableWriter
+
+    def refused(*args, **kwargs):
+        raise OSError('refused')
+
+    monkeypatch.setattr(pa_csv, 'CSVWriter', refused)
+    with pytest.raises(OSError, match='refused'):
+        TableWriter(tmp_path / 'shots.parquet', tmp_path / 'shots.csv')
+    assert list(tmp_path.iterdir()) == []
