@@ -148,16 +148,27 @@ def test_temporary_files_are_unique_and_removed_on_interruption(tmp_path):
     assert path.read_text() == 'old' and [p.name for p in tmp_path.iterdir()] == ['out.json']
 
 
-def test_an_interrupt_as_the_temporary_file_is_created_removes_it(tmp_path, monkeypatch):
-    # The CLI's interruption test signalled as soon as the file appeared and, on a loaded
-    # machine, found it left: the interrupt came as the file was made, before its name
-    # reached the cleanup (mkstemp returns the name only after it has made the file).
-    made = os.open
+@pytest.mark.parametrize('step', ['open', 'fdopen'])
+def test_an_interrupt_as_the_temporary_file_is_made_removes_it_and_stays_the_interrupt(
+        step, tmp_path, monkeypatch):
+    """
+    An interrupt right after ``os.open`` or inside ``os.fdopen`` leaves no file behind.
+
+    ``open``: the CLI's interruption test signalled as soon as the file appeared and, on a
+    loaded machine, found it left: the interrupt came as the file was made, before its name
+    reached the cleanup (mkstemp returns the name only after it has made the file).
+    ``fdopen``: a SIGTERM that came after fdopen's file object took the descriptor (and
+    closed it on the way out) made the cleanup's own close fail: `simulate` ended "cannot
+    create bag: Bad file descriptor" with exit 1 instead of 143.
+    """
+    real = getattr(os, step)
 
     def interrupted(*args, **kwargs):
-        made(*args, **kwargs)
+        made = real(*args, **kwargs)
+        if step == 'fdopen':
+            made.close()
         raise KeyboardInterrupt
-    monkeypatch.setattr(os, 'open', interrupted)
+    monkeypatch.setattr(os, step, interrupted)
     with pytest.raises(KeyboardInterrupt):
         open_temporary(tmp_path / 'out.mcap')
     monkeypatch.undo()
@@ -174,20 +185,3 @@ def test_a_figure_is_saved_atomically_in_the_format_of_its_suffix(tmp_path):
     with pytest.raises(OutputError, match='cannot write plot'):
         save_figure(figure, tmp_path / 'missing' / 'plot.png')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['plot.png', 'plot.svg']
-
-
-def test_an_interrupt_inside_fdopen_stays_the_interrupt(tmp_path, monkeypatch):
-    # A SIGTERM that came after fdopen's file object took the descriptor (and closed it on
-    # the way out) made the cleanup's own close fail: `simulate` ended "cannot create bag:
-    # Bad file descriptor" with exit 1 instead of 143.
-    real = os.fdopen
-
-    def interrupted(fd, *args, **kwargs):
-        real(fd, *args, **kwargs).close()
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(os, 'fdopen', interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        open_temporary(tmp_path / 'out.mcap')
-    monkeypatch.undo()
-    assert list(tmp_path.iterdir()) == []
