@@ -591,8 +591,10 @@ def mechanics_delay_s(a: np.ndarray, fs: float) -> float:
 #: Most damping of a sensor's mode: a piezoelectric sensor rings (ζ of a few %); a pair
 #: damped further can trade its damping for a delay or a lag.
 SENSOR_ZETA = 0.2
-#: A pair damped at least this share of its bound sits at the bound.
-BOUND_SHARE = 0.999
+#: A pair damped at least this share of its bound sits at the bound: a descent stops short
+#: of the wall it may not cross (a strain fit's pair at ζ 0.19979 for a bound of 0.2 read
+#: -3.38 ± 0.16 Pa/(g/ms) for -3.77, its traded lag not owned).
+BOUND_SHARE = 0.99
 
 
 def traded_lag_s(a: np.ndarray, fs: float, *, bound: float = SENSOR_ZETA) -> float | None:
