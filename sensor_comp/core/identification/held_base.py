@@ -32,9 +32,9 @@ MOVED = 1.5
 #: a searched second mode keeps away from.
 MODE_ZETA = 0.2
 #: Sensor modes every candidate on the lag-free base starts from as well (octaves down
-#: from 0.3·fs, as fractions of the sample rate) and their damping: where
-#: the data barely resolve the mode, a held fit settles on a slow, damped pair whose lag
-#: stands in for a base strain, and its own poles start no candidate in the sensor's basin.
+#: from 0.3·fs, as fractions of the sample rate) and their damping: where the data barely
+#: resolve the mode, a held fit settles on a slow, damped pair whose lag stands in for a
+#: base strain, and its own poles start no candidate in the sensor's basin.
 LADDER_SHARES, LADDER_ZETA = (0.3, 0.15, 0.075, 0.0375), SENSOR_ZETA / 2.0
 
 
@@ -109,7 +109,7 @@ def held_base(windows: Sequence[Window], free: ExtendedFit, *, bound: float | No
 
 def base_starts(free: ExtendedFit, held: ExtendedFit | None) -> tuple[np.ndarray, ...]:
     """
-    Return the denominators a candidate on the base starts from: the held base's and the free.
+    Return the denominators a candidate on the base starts from: the held base's and more.
 
     Held lag-free without the effect, the mode may have moved far to pay a lag the effect
     holds (a base strain of -15 Pa/(g/ms) put a 31 kHz mode at 1.6 kHz, ζ at its bound);
@@ -124,15 +124,14 @@ def base_starts(free: ExtendedFit, held: ExtendedFit | None) -> tuple[np.ndarray
     """
     if held is None:
         return free.denominators
-    ladder = tuple(mode_pair(share * free.fs / 1e3, LADDER_ZETA, free.fs)
-                   for share in LADDER_SHARES)
+    starts = list(held.denominators)
     wn, zeta = _natural(free.estimate.a, free.fs)
     moved, _ = _natural(held.estimate.a, held.fs)
-    if wn is None or (moved is not None and 1 / MOVED < moved / wn < MOVED):
-        return (*held.denominators, *ladder)
-    return (*held.denominators, mode_pair(wn / (2e3 * math.pi),
-                                          min(max(zeta, 0.01), SENSOR_ZETA / 2.0), free.fs),
-            *ladder)
+    if wn is not None and not (moved is not None and 1 / MOVED < moved / wn < MOVED):
+        starts.append(mode_pair(wn / (2e3 * math.pi), min(max(zeta, 0.01), SENSOR_ZETA / 2.0),
+                                free.fs))
+    return (*starts, *(mode_pair(share * free.fs / 1e3, LADDER_ZETA, free.fs)
+                       for share in LADDER_SHARES))
 
 
 def _natural(a: np.ndarray, fs: float) -> tuple[float | None, float]:

@@ -43,7 +43,7 @@ def leading():
 
 
 def _assert_named_and_read(truth, result, *, resolved):
-    """Strain named, leaving noise, read within two deviations of ``resolved``·|truth|."""
+    """Strain named, leaving noise, its deviation below ``resolved``·|truth|, truth within 2."""
     top = result.ranking[0]
     assert result.verdict == 'missing_effect' and top.effect == 'strain_sensitivity'
     value, std = top.parameters['pa_per_g_per_ms']
