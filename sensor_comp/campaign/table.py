@@ -17,7 +17,7 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-from ..files import open_temporary, publish
+from ..files import atomic_file, open_temporary, publish
 
 __all__ = ['COLUMNS', 'SCHEMA', 'TABLE_VERSION', 'TableWriter', 'failure_row', 'read_columns',
            'rows_table',
@@ -70,15 +70,9 @@ def rows_table(rows: Iterable[Mapping]) -> pa.Table:
 
 def write_records(path: str | os.PathLike, records: Sequence[Mapping]) -> None:
     """Write a small table (one dict per row, columns from the keys) as CSV, atomically."""
-    path = Path(path)
     table = pa.Table.from_pylist(list(records)) if records else pa.table({})
-    temp = _temporary(path)
-    try:
-        pa_csv.write_csv(table, temp)
-        publish(temp, path)
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as file:
+        pa_csv.write_csv(table, file)
 
 
 class TableWriter:
