@@ -30,7 +30,7 @@ __all__ = ['ACCEL_RING', 'BASE_CONTEXT', 'EDGE_FACTOR', 'FOLLOWS', 'Effect', 'Ef
            'entry_of', 'excess_delay_s', 'mechanics_delay_s', 'modifier_value',
            'parameters_text', 'probe_of', 'registry', 'row_of', 'segment_of', 'sentence',
            'SENSOR_ZETA', 'static_gain', 'stored_std', 'tail_share', 'traded_lag_s',
-           'unfollowed']
+           'unfollowed', 'UNIFORM_STD']
 
 _PLACEHOLDER = re.compile(r'\{([^{}]+)\}')
 
@@ -595,6 +595,9 @@ SENSOR_ZETA = 0.2
 #: of the wall it may not cross (a strain fit's pair at ζ 0.19979 for a bound of 0.2 read
 #: -3.38 ± 0.16 Pa/(g/ms) for -3.77, its traded lag not owned).
 BOUND_SHARE = 0.99
+#: A reading that traded with such poles lies anywhere in a range their lag long: read at
+#: its middle, it has the deviation of a uniform spread over that range, ``1/√12`` of it.
+UNIFORM_STD = 1.0 / math.sqrt(12.0)
 
 
 def traded_lag_s(a: np.ndarray, fs: float, *, bound: float = SENSOR_ZETA) -> float | None:
@@ -602,8 +605,8 @@ def traded_lag_s(a: np.ndarray, fs: float, *, bound: float = SENSOR_ZETA) -> flo
     Return the lag ``a``'s poles hold when damped as no sensor is, s, else None.
 
     Its least damped pair at ``bound`` or beyond, or no pair among two poles or more: the
-    data do not pin the sensor's mode, and its lag ``2ζ/ω`` may be a delay's or a
-    derivative term's (``doc/effects.md``).
+    data do not pin the sensor's mode, whose own lag lies between none and the poles'
+    ``2ζ/ω``; the rest is a delay's or a derivative term's (``doc/effects.md``).
     """
     a = np.asarray(a, dtype=np.float64)
     if a.size < 3:

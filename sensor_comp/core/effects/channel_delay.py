@@ -14,7 +14,7 @@ import numpy as np
 
 from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
                    parameters_text, Physical, probe_of, ResidualView, row_of, Search, sentence,
-                   stored_std)
+                   stored_std, traded_lag_s)
 from .probe import ProbeData, ProbeSpec
 
 __all__ = ['ChannelDelay', 'RATE_PROBE']
@@ -80,7 +80,11 @@ class ChannelDelay(Effect):
         if covariance is not None and searched is not None:
             path = delta_std(delay, model.a, model.b, covariance)
             std = None if path is None else math.hypot(path, searched)
-        return {'delay_us': (delay(model.a, model.b), std)}
+        # Poles damped as no sensor is lag by up to 2ζ/ω more than the sensor's mode: the
+        # delay lies between the one read and that much more (its deviation holds it).
+        traded = traded_lag_s(model.a, model.fs)
+        return {'delay_us': (delay(model.a, model.b) + (0.0 if traded is None else
+                                                        0.5e6 * traded), std)}
 
     def implausible(self, fit: FitView) -> str | None:
         """Return why the fit is no delay: the generic checks, a lead, or an absurd lag."""

@@ -17,7 +17,7 @@ from scipy import signal
 from .base import (BOUND_SHARE, delta_std, Effect, EffectError, excess_delay_s, FittedModel,
                    FitView, ModelSpec, Outcome, parameters_text, Physical, probe_of,
                    ResidualView, row_of, SENSOR_ZETA, sentence, static_gain, stored_std,
-                   traded_lag_s, unfollowed)
+                   traded_lag_s, unfollowed, UNIFORM_STD)
 from .probe import ProbeSpec
 from ..estimators.least_squares import delayed_numerator
 from ..estimators.polynomials import resonances
@@ -105,13 +105,15 @@ class StrainSensitivity(Effect):
 
         std = (delta_std(coefficient, model.a, model.b, covariance) if covariance is not None
                else stored_std(model, self.id, 'pa_per_g_per_ms'))
-        traded = (traded_lag_s(model.a, model.fs)
-                  if covariance is not None and std is not None else None)
+        value, traded = coefficient(model.a, model.b), traded_lag_s(model.a, model.fs)
         if traded is not None:
-            # Poles damped beyond a sensor's lag by 2ζ/ω; a lead c/S may have paid that back.
-            lead = abs(static_gain(model.a, model.b, axial)) * traded * G_PER_MS
-            std = math.hypot(std, lead)
-        return {'pa_per_g_per_ms': (coefficient(model.a, model.b), std)}
+            # Poles damped as no sensor is lag by up to 2ζ/ω more than the sensor's mode,
+            # which a lead c/S paid back: c lies between c − S·2ζ/ω and c.
+            lead = static_gain(model.a, model.b, axial) * traded * G_PER_MS
+            value -= lead / 2.0
+            if covariance is not None and std is not None:
+                std = math.hypot(std, abs(lead) * UNIFORM_STD)
+        return {'pa_per_g_per_ms': (value, std)}
 
     def implausible(self, fit: FitView) -> str | None:
         """Return why the fit is no base strain: the generic checks or an absurd lead."""

@@ -51,7 +51,7 @@ from scipy import optimize
 from ..compensation.initial_state import InitialState, simulate_from_state
 from ..effects import EffectError, get_effect, ordered
 from ..effects.base import (effect_entry, Effect, mechanics_delay_s, ModelSpec, Physical, Search,
-                            SENSOR_ZETA, traded_lag_s)
+                            SENSOR_ZETA, traded_lag_s, UNIFORM_STD)
 from ..estimators import Estimate, fit_oe, IdentError
 from ..estimators.least_squares import scaled_qr
 from ..estimators.oe import OutputErrorProblem
@@ -896,18 +896,20 @@ def _with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: flo
 
     Behind the anti-alias filter the data do not pin the sensor's mode: it damps itself to
     the bound and holds part of a delay (a 47.5 kHz, ζ 0.1 mode read as 20.5 kHz, ζ 0.2
-    took 3.1 µs of a 60 µs delay), which the delay's deviation must own. There the loss's
-    curvature is often not resolved (descents stop on the bound, ``std`` None): the traded
-    lag is then the deviation stated. A fit with free numerators has no bound, but a pair
-    damped beyond :data:`SENSOR_ZETA` (or real poles) is no sensor's mode either: a
-    56 kHz, ζ 0.07 mode read as 25.8 kHz, ζ 0.67 took 8 µs of a 60 µs delay.
+    took 3.1 µs of a 60 µs delay): the delay lies between the one searched and that lag
+    more, read at the middle (``ChannelDelay.physical``) with a uniform spread's deviation
+    over it. There the loss's curvature is often not resolved (descents stop on the bound,
+    ``std`` None): the whole traded lag is then the deviation stated. A fit with free
+    numerators has no bound, but a pair damped beyond :data:`SENSOR_ZETA` (or real poles)
+    is no sensor's mode either: a 56 kHz, ζ 0.07 mode read as 25.8 kHz, ζ 0.67 took 8 µs
+    of a 60 µs delay.
     """
     traded = (traded_lag_s(f, fs, bound=SENSOR_ZETA if spec.max_zeta is None
                            else spec.max_zeta) if search.lag_unit_s else None)
     if traded is None:
         return std
     traded /= search.lag_unit_s
-    return traded if std is None else math.hypot(std, traded)
+    return traded if std is None else math.hypot(std, traded * UNIFORM_STD)
 
 
 def _grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:

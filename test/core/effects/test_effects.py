@@ -20,9 +20,9 @@ from scipy import signal
 from sensor_comp.core.compensation.filter import CompensationFilter
 from sensor_comp.core.effects import (describe_effects, disturbance_trackers, EFFECTS,
                                       EffectError, get_effect, ordered, Outcome)
-from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, mechanics_delay_s,
-                                           ModelSpec, ResidualView, SENSOR_ZETA,
-                                           traded_lag_s)
+from sensor_comp.core.effects.base import (dc_delay_s, effect_entry, excess_delay_s,
+                                           mechanics_delay_s, ModelSpec, ResidualView,
+                                           SENSOR_ZETA, static_gain, traded_lag_s)
 from sensor_comp.core.effects.mains_hum import line_columns, LineTracker
 from sensor_comp.core.effects.second_resonance import gain_threshold, SEARCH_ALPHA
 from sensor_comp.core.shots.inputs import (carried_state, fractional_delay, input_channels,
@@ -295,6 +295,13 @@ def test_delays_are_read_from_the_dc_group_delay():
             effect_entry(get_effect('channel_delay'), {'delay_us': (25.0, searched)})])
         assert get_effect('channel_delay').physical(
             stored, covariance=covariance)['delay_us'][1] == stated
+    # Poles damped as no sensor is lag by up to 2ζ/ω more than the sensor's mode: the delay
+    # lies between the one the path shows and that much more, read at the middle.
+    damped = mode_pair(5.0, 0.6, FS)
+    slow = _model(['a_z@delay_us=25.0'], num * np.sum(damped) / np.sum(num), a=damped, nk=0)
+    shown = 25.0 + 1e6 * (dc_delay_s(damped, slow.b[0], FS) - mechanics_delay_s(damped, FS))
+    assert get_effect('channel_delay').physical(slow)['delay_us'][0] == pytest.approx(
+        shown + 0.5e6 * traded_lag_s(damped, FS), rel=1e-6)
     entry = effect_entry(get_effect('zero_shift'), {'pa_per_g': (3.0, 0.1),
                                                     'tau_ms': (40.0, None)})
     zero = _model(['a_z', 'peak_a_z(tau_ms=40.0)'], [[1.0, 1.0], [2.0, 3.0]],
@@ -317,8 +324,9 @@ def test_poles_damped_as_no_sensor_is_trade_their_lag():
 
 
 def test_a_strain_reading_owns_the_lead_that_pays_back_an_overdamped_lag():
-    # c/S is a lead: a pair damped as no sensor is lags by 2ζ/ω more than the sensor's, and
-    # the derivative term can pay it back, so its deviation holds S·2ζ/ω.
+    # c/S is a lead: a pair damped as no sensor is lags by up to 2ζ/ω more than the
+    # sensor's, which the derivative term paid back, so c lies between c − S·2ζ/ω and c:
+    # read at the middle, its deviation holds a uniform spread over that range.
     inputs = ['a_z', 'da_z@mode=20.0,0.7']
     b = np.array([[0.006, 0.004, 0.0], [1e-6, 1e-6, 0.0]])
     covariance = np.diag(np.full(2 + b.size, 1e-16))
@@ -328,11 +336,19 @@ def test_a_strain_reading_owns_the_lead_that_pays_back_an_overdamped_lag():
         model = _model(inputs, b * np.sum(a) / np.sum(light), a=a, nk=0)
         value, std = strain.physical(model, covariance=covariance)['pa_per_g_per_ms']
         gain = 0.01 / np.sum(light)  # the a_z path's static gain, Pa per m/s²
+        paths = (static_gain(model.a, model.b, 1) - gain * excess_delay_s(
+            model, model.a, model.b, 0)) * G0 * 1e3
         if a is light:
+            assert value == pytest.approx(paths, rel=1e-9)
             assert 0 < std < 0.02 * abs(value)
         else:
             lead = gain * traded_lag_s(heavy, FS) * G0 * 1e3
-            assert lead <= std < lead + 0.02 * abs(value) and lead > 0.1 * abs(value)
+            assert lead > 0.1 * abs(paths)
+            assert value == pytest.approx(paths - lead / 2, rel=1e-9)
+            assert lead / math.sqrt(12) <= std < lead / math.sqrt(12) + 0.02 * abs(paths)
+            stored = replace(model, effects=[effect_entry(strain, {
+                'pa_per_g_per_ms': (value, std)})])
+            assert strain.physical(stored)['pa_per_g_per_ms'] == (pytest.approx(value), std)
 
 
 @pytest.mark.parametrize('searched', ['mount', 'sensor'])

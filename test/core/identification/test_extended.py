@@ -405,7 +405,7 @@ def test_a_mode_at_its_damping_bound_owns_the_lag_it_took_even_unresolved():
     assert traded > 1.0
     assert _with_traded_lag(None, search, spec, fs, bound) == pytest.approx(traded)
     assert _with_traded_lag(0.5, search, spec, fs, bound) == pytest.approx(
-        math.hypot(0.5, traded))
+        math.hypot(0.5, traded / math.sqrt(12)))
     assert _with_traded_lag(None, search, spec, fs, free) is None  # a resolved mode: as is
 
 
@@ -419,7 +419,7 @@ def test_free_numerators_own_the_lag_of_a_pair_damped_as_no_sensor_is():
     traded = 1e6 * mechanics_delay_s(damped, fs)
     assert traded == pytest.approx(1e6 * 2 * 0.67 / (2 * math.pi * 25.8e3), rel=0.05)
     assert _with_traded_lag(2.0, search, spec, fs, damped) == pytest.approx(
-        math.hypot(2.0, traded))
+        math.hypot(2.0, traded / math.sqrt(12)))
     real = np.poly([0.9, 0.8])
     assert _with_traded_lag(2.0, search, spec, fs, real) > 2.0
     sensor = mode_pair(56.4, 0.07, fs)  # a sensor's mode: the curvature's deviation alone
