@@ -120,6 +120,12 @@ class Acquisition(Node):
         self.blocks_published = 0
         self.samples_published = 0
 
+    @property
+    def blocks_out(self) -> dict[str, int]:
+        """Return the block messages published so far, by full topic name."""
+        return {publisher.topic_name: self.blocks_published
+                for publisher in self._blocks.values()}
+
     def _parse_pacing(self, pacing) -> float | None:
         if isinstance(pacing, str) and pacing in _PACINGS:
             return _PACINGS[pacing]

@@ -91,6 +91,7 @@ class Compensation(Node):
         malformed: Messages skipped because they could not be decoded or paired.
         refused: Models refused.
         unpublished: Output block pairs not published (a subscriber stuck for 30 s).
+        published: Output block pairs published.
 
     Raises:
         NodeError: On a bad parameter or an unreadable model file.
@@ -124,6 +125,7 @@ class Compensation(Node):
         self.malformed = 0
         self.refused = 0
         self.unpublished = 0
+        self.published = 0
         self.received = 0
         self._infos: dict[str, StreamInfo] = {}
         self._fs: float | None = None
@@ -208,9 +210,15 @@ class Compensation(Node):
                 publish_raw(self._outputs[topic],
                             encode_block(values[np.newaxis], stamp_ns=block.stamp_ns,
                                          frame_id=self._frame), self._stop)
+            self.published += 1
         except NodeError as exc:  # a subscriber took nothing for a long time
             self.unpublished += 1
             self.get_logger().error(str(exc))
+
+    @property
+    def blocks_out(self) -> dict[str, int]:
+        """Return the output block messages published so far, by full topic name."""
+        return {publisher.topic_name: self.published for publisher in self._outputs.values()}
 
     def _hold(self, topic: str, data: bytes) -> None:
         self._held.append((topic, data))

@@ -187,9 +187,24 @@ class Pipeline:
             counts.append(sum(self.identification.samples_received.values()))
         return tuple(counts)
 
+    def _recorded_all(self) -> bool:
+        """Return whether the recorder took every block the nodes here published."""
+        counts = self.recorder.counts if self.recorder is not None else {}
+        return all(counts.get(topic, 0) >= published
+                   for node in (self.acquisition, self.compensation) if node is not None
+                   for topic, published in node.blocks_out.items() if topic in counts)
+
     def drain(self, *, quiet: float = _QUIET_S, limit: float = _DRAIN_LIMIT_S) -> None:
-        """Wait until the consumers took nothing for ``quiet`` s (at most ``limit`` s)."""
+        """
+        Wait until the consumers took nothing for ``quiet`` s (at most ``limit`` s).
+
+        The recorder must first have taken every block published here: on a loaded machine
+        its callbacks may wait longer than ``quiet`` for a thread while a burst (the blocks
+        held until a model came) is still queued for it.
+        """
         deadline = time.monotonic() + limit
+        while time.monotonic() < deadline and not self._recorded_all():
+            time.sleep(0.02)
         last, since = self._progress(), time.monotonic()
         while time.monotonic() < deadline and time.monotonic() - since < quiet:
             time.sleep(0.02)

@@ -6,6 +6,7 @@ from pathlib import Path
 import re
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -76,6 +77,36 @@ def test_pipeline_identifies_compensates_and_records_everything(context, tmp_pat
         assert got.n_samples == recording.n_samples
         np.testing.assert_allclose(got.data[0], expected, rtol=0,
                                    atol=1e-9 * np.max(np.abs(expected)))
+
+
+def test_stopping_waits_for_the_recorder_to_take_every_block(context, tmp_path, monkeypatch):
+    # The compensated blocks held until the model came go out in one burst; a recorder
+    # whose callbacks wait longer than the drain's quiet time for a thread (a loaded
+    # machine: CI once recorded 3 of 42) must still take them all before the nodes stop.
+    from sensor_comp.nodes.recorder import Recorder
+    write, stalled = Recorder._write, []
+
+    def slow_write(self, topic, data, info):
+        if topic.endswith('pressure/compensated') and not stalled:
+            stalled.append(topic)
+            time.sleep(1.0)   # five quiet times with nothing taken
+        write(self, topic, data, info)
+
+    monkeypatch.setattr(Recorder, '_write', slow_write)
+    out = tmp_path / 'run.mcap'
+    with sensor_comp.pipeline(context=context, parameters={
+            'acquisition': ACQUISITION, 'identification': IDENTIFICATION,
+            'recorder': {'output': str(out), 'discovery_period': 0.1}}) as p:
+        p.wait_for_acquisition(timeout=30)
+        n = p.acquisition.samples_published
+        p.wait_until(lambda p: p.compensation.compensator is not None and
+                     p.compensation.compensator.counters.output_samples == n, timeout=30,
+                     what='every sample compensated')
+    assert stalled
+    streams = read_streams(out)
+    topics = ('pressure/compensated', 'pressure/induced')
+    assert {t: streams[t].n_samples if t in streams else 0 for t in topics} == dict.fromkeys(
+        topics, n)
 
 
 def test_a_compensation_started_late_gets_the_latched_model(context, other_context):
