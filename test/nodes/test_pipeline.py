@@ -1,6 +1,7 @@
 """Launch-free composition: acquisition, identification, compensation and recorder."""
 
 import ast
+import contextlib
 import os
 from pathlib import Path
 import re
@@ -34,17 +35,24 @@ IDENTIFICATION = {'structure': 'oe', 'orders': [2, 2], 'delay': 1, 'emd': False,
                   'min_shots': 4}
 
 
-def test_pipeline_identifies_compensates_and_records_everything(context, tmp_path):
-    out, model_file = tmp_path / 'run.mcap', tmp_path / 'model.json'
+@contextlib.contextmanager
+def _compensated(context, out, identification=IDENTIFICATION):
+    """Run the four nodes until every sample is compensated; yield the pipeline, samples."""
     with sensor_comp.pipeline(context=context, parameters={
-            'acquisition': ACQUISITION,
-            'identification': {**IDENTIFICATION, 'model_file': str(model_file)},
+            'acquisition': ACQUISITION, 'identification': identification,
             'recorder': {'output': str(out), 'discovery_period': 0.1}}) as p:
         p.wait_for_acquisition(timeout=30)
         n = p.acquisition.samples_published
         p.wait_until(lambda p: p.compensation.compensator is not None and
                      p.compensation.compensator.counters.output_samples == n, timeout=30,
                      what='every sample compensated')
+        yield p, n
+
+
+def test_pipeline_identifies_compensates_and_records_everything(context, tmp_path):
+    out, model_file = tmp_path / 'run.mcap', tmp_path / 'model.json'
+    with _compensated(context, out, {**IDENTIFICATION, 'model_file': str(model_file)}) as (
+            p, n):
         model = p.identification.model
         assert p.compensation.model.created == model.created
     truth = simulate(RigConfig(fs=FS, shots=random_shots(5, seed=3), seed=3)).recording
@@ -94,14 +102,8 @@ def test_stopping_waits_for_the_recorder_to_take_every_block(context, tmp_path, 
 
     monkeypatch.setattr(Recorder, '_write', slow_write)
     out = tmp_path / 'run.mcap'
-    with sensor_comp.pipeline(context=context, parameters={
-            'acquisition': ACQUISITION, 'identification': IDENTIFICATION,
-            'recorder': {'output': str(out), 'discovery_period': 0.1}}) as p:
-        p.wait_for_acquisition(timeout=30)
-        n = p.acquisition.samples_published
-        p.wait_until(lambda p: p.compensation.compensator is not None and
-                     p.compensation.compensator.counters.output_samples == n, timeout=30,
-                     what='every sample compensated')
+    with _compensated(context, out) as (_, n):
+        pass
     assert stalled
     streams = read_streams(out)
     topics = ('pressure/compensated', 'pressure/induced')
