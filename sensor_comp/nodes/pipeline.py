@@ -190,7 +190,7 @@ class Pipeline:
     def _recorded_all(self) -> bool:
         """Return whether the recorder took every block the nodes here published."""
         counts = self.recorder.counts if self.recorder is not None else {}
-        return all(counts.get(topic, 0) >= published
+        return all(counts[topic] >= published
                    for node in (self.acquisition, self.compensation) if node is not None
                    for topic, published in node.blocks_out.items() if topic in counts)
 
