@@ -110,6 +110,8 @@ class CompensationFilter:
         channels = [parse_channel(name) for name in inputs]
         self._axes = (tuple(c.axis for c in channels)
                       if all(c.kind == 'a' and not c.modifiers for c in channels) else None)
+        # A derivative input is central: its last sample in a block waits for the next one.
+        self._looks_ahead = any(c.kind == 'da' for c in channels)
         self.disturbances = tuple(disturbances)
         self.reset()
 
@@ -164,6 +166,8 @@ class CompensationFilter:
         """Return the filter to rest (zero state), as at the start of a stream."""
         self._zi = np.zeros((len(self.inputs), self._order))
         self._input_state: dict[str, object] = {}
+        # States before the latest block's last sample, and that sample (``_induced_ahead``).
+        self._provisional: tuple[np.ndarray, dict, np.ndarray] | None = None
         for tracker in self.disturbances:
             tracker.reset()
 
@@ -261,10 +265,38 @@ class CompensationFilter:
         Raises InputError when the block is not ``(3, w)``.
         """
         acceleration = np.asarray(acceleration, dtype=np.float64)
-        if self._axes is None or acceleration.ndim != 2 or acceleration.shape[0] != 3:
-            u = input_channels(self.inputs, acceleration, self._input_state, fs=self.fs)
-            return self._filter_rows(u)
-        return self._filter_rows([acceleration[axis] for axis in self._axes])
+        if acceleration.ndim != 2 or acceleration.shape[0] != 3:
+            input_channels(self.inputs, acceleration, {}, fs=self.fs)  # raises InputError
+        if self._axes is not None:
+            return self._filter_rows([acceleration[axis] for axis in self._axes])
+        if not self._looks_ahead or not acceleration.shape[1]:
+            return self._filter_rows(input_channels(self.inputs, acceleration,
+                                                    self._input_state, fs=self.fs))
+        return self._induced_ahead(acceleration)
+
+    def _induced_ahead(self, acceleration: np.ndarray) -> np.ndarray:
+        """
+        Return :meth:`induced` for a model with a derivative input, replaying one sample.
+
+        A derivative's last sample in a block waits for the next sample (central
+        difference): it is published from a backward difference, and the next block first
+        replays it from the states saved before it, so that the filter goes on exactly as
+        on the whole signal (only that one published sample differs).
+        """
+        replay = self._provisional is not None
+        if replay:
+            zi, state, last = self._provisional
+            self._zi, self._input_state = zi.copy(), dict(state)
+            acceleration = np.concatenate([last, acceleration], axis=1)
+        head = input_channels(self.inputs, acceleration[:, :-1], self._input_state,
+                              fs=self.fs, ahead=acceleration[:, -1])
+        out = [self._filter_rows(head)] if head.shape[1] else []
+        self._provisional = (self._zi.copy(), dict(self._input_state),
+                             acceleration[:, -1:].copy())
+        out.append(self._filter_rows(input_channels(self.inputs, acceleration[:, -1:],
+                                                    self._input_state, fs=self.fs)))
+        joined = np.concatenate(out)
+        return joined[1:] if replay else joined
 
     def process(self, acceleration: np.ndarray,
                 pressure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -28,7 +28,7 @@ from ...streams import G0, G_PER_MS
 __all__ = ['JERK_PROBE', 'StrainSensitivity', 'jerk']
 
 #: Corner of the derivative's smoothing low pass, fraction of the sample rate.
-SMOOTHING_CORNER = 0.1
+SMOOTHING_CORNER = 0.2
 #: Damping of the derivative's smoothing low pass (a Butterworth-like corner).
 SMOOTHING_ZETA = 0.7
 #: Largest plausible strain coefficient as a time, ``|c/S|`` in ms: the strain term then

@@ -20,7 +20,8 @@ from ...errors import SensorCompError
 from ...streams import G0
 
 __all__ = ['AXES', 'LAGRANGE_ORDER', 'PEAK_GATE_G', 'Channel', 'InputError', 'carried_state',
-           'fractional_delay', 'input_channels', 'mode_pair', 'needs_rate', 'parse_channel']
+           'central_derivative', 'fractional_delay', 'input_channels', 'mode_pair',
+           'needs_rate', 'parse_channel']
 
 #: Row of each axis in an acceleration block.
 AXES = {'x': 0, 'y': 1, 'z': 2}
@@ -164,6 +165,24 @@ def fractional_delay(delay: float) -> np.ndarray:
     return np.concatenate([np.zeros(start), taps])
 
 
+def central_derivative(a: np.ndarray, previous: float, fs: float, *,
+                       ahead: float | None = None) -> np.ndarray:
+    """
+    Return da/dt of one block by central differences, which have no lag.
+
+    A jerk that jumps at a pulse corner is placed where it happens; a backward difference
+    puts it half a sample late, which no causal numerator undoes. ``previous`` is the sample
+    before the block and ``ahead`` the one after it; without ``ahead`` (not yet known) the
+    last sample's difference is backward.
+    """
+    extended = np.concatenate(([previous], a))
+    x = np.empty(a.size)
+    x[:-1] = 0.5 * (extended[2:] - extended[:-2]) * fs
+    x[-1] = ((extended[-1] - extended[-2]) * fs if ahead is None
+             else 0.5 * (ahead - extended[-2]) * fs)
+    return x
+
+
 def _runs(x: np.ndarray, state: MutableMapping[str, object], key: str, stage) -> np.ndarray:
     """Apply ``stage(x, previous_state) -> (y, new_state)`` to the finite runs of ``x``."""
     finite = np.isfinite(x)
@@ -289,12 +308,15 @@ def carried_state(state: Mapping[str, object], names: Sequence[str], samples: in
 
 
 def input_channels(names: Sequence[str], acceleration: np.ndarray,
-                   state: MutableMapping[str, object], *, fs: float | None = None) -> np.ndarray:
+                   state: MutableMapping[str, object], *, fs: float | None = None,
+                   ahead: np.ndarray | None = None) -> np.ndarray:
     """
     Return the ``(len(names), w)`` model input rows for one ``(3, w)`` acceleration block.
 
     ``state`` is carried across the blocks of one stream and updated in place (a fresh dict
-    per stream or window); ``fs`` is needed by derivatives, time constants and delays.
+    per stream or window); ``fs`` is needed by derivatives, time constants and delays;
+    ``ahead`` is the ``(3,)`` sample after the block where known (a derivative's last
+    sample is central with it, backward without).
 
     Raises:
         InputError: On an unknown name, a block that is not ``(3, w)``, or an input that
@@ -320,8 +342,8 @@ def input_channels(names: Sequence[str], acceleration: np.ndarray,
             key = f'previous {name}'
             x = np.empty(a.size)
             if a.size:
-                previous = state.get(key, a[0])
-                x = np.diff(a, prepend=previous) * fs
+                after = None if ahead is None else float(ahead[channel.axis])
+                x = central_derivative(a, state.get(key, a[0]), fs, ahead=after)
                 state[key] = a[-1]
         else:
             x = _runs(a, state, f'{name}|peak', _leaky_peak(channel.tau_ms, fs))

@@ -56,6 +56,27 @@ def test_blocks_of_any_size_give_the_whole_signal_output():
     assert np.max(np.abs(blocks - whole)) <= 1e-9 * np.max(np.abs(whole))
 
 
+def test_a_derivative_input_differs_from_the_whole_signal_only_at_block_ends():
+    # A central derivative's last sample in a block waits for the next block: published from
+    # a backward difference, then replayed, so every other sample is the whole signal's.
+    rng = np.random.default_rng(2)
+    acc = rng.standard_normal((3, 5000)).cumsum(axis=1)
+    b = np.vstack([B, 0.1 * B[::-1]])
+    whole = CompensationFilter(b, A, inputs=('a_z', 'da_x'), fs=FS).induced(acc)
+    streaming = CompensationFilter(b, A, inputs=('a_z', 'da_x'), fs=FS)
+    edges = [0, 2, 3, 5, 64, 65, 1000, 3000, 5000]
+    blocks = np.concatenate([streaming.induced(acc[:, i:j])
+                             for i, j in zip(edges[:-1], edges[1:])])
+    ends = np.array(edges[1:-1]) - 1
+    inner = np.setdiff1d(np.arange(acc.shape[1]), ends)
+    assert np.allclose(blocks[inner], whole[inner], rtol=0, atol=1e-9 * np.max(np.abs(whole)))
+    # At a block end the derivative is backward: the output moves by b0 times the change.
+    step = 0.1 * B[-1] * FS * (0.5 * (acc[0, ends] - acc[0, ends - 1])
+                               - 0.5 * (acc[0, ends + 1] - acc[0, ends]))
+    assert np.allclose(blocks[ends] - whole[ends], step, rtol=1e-6,
+                       atol=1e-9 * np.max(np.abs(whole)))
+
+
 def test_gap_gives_nan_and_restarts_from_rest_in_any_blocks():
     acc = acceleration(5000)
     acc[:, 1200:1300] = np.nan
@@ -142,11 +163,12 @@ def test_input_channels_derivative_carries_state():
     ramp = np.zeros((3, 10))
     ramp[0] = 5.0 * np.arange(10) / FS  # 5 m/s³
     state = {}
-    first = input_channels(('a_x', 'da_x'), ramp[:, :4], state, fs=FS)
+    first = input_channels(('a_x', 'da_x'), ramp[:, :4], state, fs=FS, ahead=ramp[:, 4])
     second = input_channels(('a_x', 'da_x'), ramp[:, 4:], state, fs=FS)
     rows = np.concatenate([first, second], axis=1)
     assert np.array_equal(rows[0], ramp[0])
-    assert rows[1, 0] == 0.0 and np.allclose(rows[1, 1:], 5.0)
+    # At rest before the first sample: half the slope there, then the slope throughout.
+    assert rows[1, 0] == pytest.approx(2.5) and np.allclose(rows[1, 1:], 5.0)
     with pytest.raises(InputError, match='sample rate'):
         input_channels(('da_z',), ramp, {})
 

@@ -54,9 +54,11 @@ def shocks(n: int, seed: int = 0) -> np.ndarray:
 
 
 def in_blocks(names, acc, sizes):
+    # Each block but the last is given the sample after it, as a derivative needs.
     state, out, start = {}, [], 0
     for size in sizes:
-        out.append(input_channels(names, acc[:, start:start + size], state, fs=FS))
+        out.append(input_channels(names, acc[:, start:start + size], state, fs=FS,
+                                  ahead=acc[:, start + size]))
         start += size
     out.append(input_channels(names, acc[:, start:], state, fs=FS))
     return np.concatenate(out, axis=1)
@@ -117,7 +119,7 @@ def test_extensions_change_the_structure_as_documented():
     assert get_effect('mains_hum').extend(base).disturbances == ('mains_hum',)
     spec = get_effect('strain_sensitivity').extend(base)
     assert (spec.nk, spec.nb) == (0, 3)
-    assert spec.channels(values) == ('a_z', 'da_z@mode=20.0,0.7')
+    assert spec.channels(values) == ('a_z', 'da_z@mode=40.0,0.7')
     with pytest.raises(EffectError, match='needs the value'):
         get_effect('zero_shift').extend(base).channels({})
 
