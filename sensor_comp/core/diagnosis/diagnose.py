@@ -98,6 +98,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+import functools
 import math
 
 import numpy as np
@@ -121,11 +122,15 @@ from .rival_forms import rival_remains, untold_form
 from ...errors import SensorCompError
 from ...sharing import pool_size, share, warm
 
-__all__ = ['ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis', 'DiagnosisError',
-           'Ranked', 'Skipped', 'diagnose']
+__all__ = ['ALPHA', 'AMPLITUDE_ALPHA', 'ATTENTION', 'NEXT_STEP', 'VERDICTS', 'Diagnosis',
+           'DiagnosisError', 'Ranked', 'Skipped', 'diagnose']
 
 #: Family-wise false-alarm probability over all candidates.
 ALPHA = 1e-3
+#: Family-wise false-alarm probability of the amplitudes (two-sided, over all candidates)
+#: where the base already leaves only noise: the conventional 5 %, which one amplitude
+#: within 2 std of zero met alone (:data:`~sensor_comp.core.effects.base.AMPLITUDE_Z`).
+AMPLITUDE_ALPHA = 0.05
 #: Possible verdicts.
 VERDICTS = ('missing_effect', 'ambiguous', 'partly_explained', 'adequate', 'unexplained')
 #: What each verdict asks of the user next, by verdict: every consumer (command line, demo,
@@ -416,6 +421,8 @@ class _Context:
     alpha: float
     free: ExtendedFit
     free_residual: list[np.ndarray]
+    #: An amplitude's two-sided false-alarm probability where the base leaves only noise.
+    amplitude_alpha: float = AMPLITUDE_ALPHA
 
     @property
     def lag_free(self) -> bool:
@@ -445,6 +452,11 @@ class _Context:
         gap = self.sse - self.free_sse
         return (gap > FREE_GAP * energy
                 and sse - self.free_sse <= max(PRACTICAL_SHARE * energy, FREE_SHARE * gap))
+
+    @functools.cached_property
+    def base_leaves_noise(self) -> bool:
+        """Return whether the free-numerator base already leaves a residual like noise."""
+        return self.leftover(self.free_residual, named=False).consistent
 
     @property
     def samples(self) -> int:
@@ -733,6 +745,29 @@ def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.nda
     return statistic, 'chi2', float(stats.chi2.sf(statistic, extra))
 
 
+def _unresolved_beside_noise(effect: Effect, parameters: Physical,
+                             ctx: _Context) -> str | None:
+    """
+    Return why an amplitude is no evidence where the base already leaves only noise, or None.
+
+    There the energy the extension removes is no evidence of a missing effect (its changed
+    structure removes some as well): its amplitude is, and it must then be told from zero
+    at its share of a family-wise false-alarm level (:data:`AMPLITUDE_ALPHA`), as the energy
+    tests are at theirs.
+    """
+    if effect.amplitude is None or not ctx.base_leaves_noise:
+        return None
+    value, std = parameters.get(effect.amplitude, (None, None))
+    if value is None or std is None or not std > 0:
+        return None
+    level = float(stats.norm.isf(ctx.amplitude_alpha / 2.0))
+    if abs(value) > level * std:
+        return None
+    return (f'the base already leaves only noise, and its {effect.amplitude} ({value:.3g} ± '
+            f'{std:.2g}, |z| {abs(value) / std:.2f}) is not told apart from zero beside the '
+            f'other candidates (|z| {level:.2f})')
+
+
 def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     """Score one extended fit on the validation windows."""
     effect = get_effect(effect_id)
@@ -762,6 +797,8 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     doubt, rival = effect.implausible(fit), effect.rival(analysis)
     if doubt is None:
         doubt = effect.confounded(fit, ctx.calibration + ctx.validation)
+    if doubt is None:
+        doubt = _unresolved_beside_noise(effect, parameters, ctx)
     if rival is not None:
         # The base's misfit sways the probes: the rival must remain in what the fit leaves.
         remains = rival_remains(effect, fit.model(), prediction.total, ctx.validation,
@@ -1084,8 +1121,9 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     # The candidates' helper starts now, beside the base fits, which then share it too.
     warm(len(ids) * sum(w.y.size for w in windows), MIN_SHARED_COST, modules=(__name__,),
          name='diagnosis helper')
-    ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
-                   residual_analysis, progress, notes)
+    ctx = replace(_context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
+                           residual_analysis, progress, notes),
+                  amplitude_alpha=AMPLITUDE_ALPHA / max(len(ids), 1))
     ranked, skipped = _candidates(ids, ctx, progress, notes)
     base_left = ctx.leftover(ctx.free_residual, named=False)
     verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)

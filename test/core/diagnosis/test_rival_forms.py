@@ -180,3 +180,21 @@ def test_an_accelerometer_resonance_above_the_pulses_is_not_named_strain():
     assert ('accelerometer' in entry.evidence
             or 'not told apart from zero' in entry.evidence), entry.evidence
     assert not result.significant, result.explanation
+
+
+@pytest.mark.slow
+def test_a_small_lead_beside_a_base_that_leaves_noise_is_not_named():
+    # A 58 kHz mode in the accelerometer channel only, far above a 20.1 kHz anti-alias
+    # corner (R = 1.5, 201 kS/s; seed-21 case 97): the base leaves only noise, and a strain
+    # term of 0.071 ± 0.034 Pa/(g/ms) (|z| 2.1) removed 18 % of it with p = 0 and was named
+    # with confidence. Its size is the only evidence there, tested beside the seven other
+    # candidates (|z| above 2.73 for a family-wise 5 %).
+    _, (calibration, validation) = _halves('accel_resonance', 2882586782,
+                                           rate_range=(1e5, 3e5))
+    result = diagnose([calibration], [validation])
+    entry = result.entry('strain_sensitivity')
+    assert result.base_leftover.consistent
+    value, std = entry.parameters['pa_per_g_per_ms']
+    assert 2.0 < abs(value) / std < 2.73
+    assert not entry.significant and 'beside the other candidates' in entry.evidence
+    assert result.verdict == 'adequate', result.explanation
