@@ -454,9 +454,9 @@ class _Context:
                 and sse - self.free_sse <= max(PRACTICAL_SHARE * energy, FREE_SHARE * gap))
 
     @functools.cached_property
-    def base_leaves_noise(self) -> bool:
-        """Return whether the free-numerator base already leaves a residual like noise."""
-        return self.leftover(self.free_residual, named=False).consistent
+    def base_leftover(self) -> Leftover:
+        """Return what the free-numerator base leaves beyond the noise (the verdict's too)."""
+        return self.leftover(self.free_residual, named=False)
 
     @property
     def samples(self) -> int:
@@ -755,7 +755,7 @@ def _unresolved_beside_noise(effect: Effect, parameters: Physical,
     at its share of a family-wise false-alarm level (:data:`AMPLITUDE_ALPHA`), as the energy
     tests are at theirs.
     """
-    if effect.amplitude is None or not ctx.base_leaves_noise:
+    if effect.amplitude is None or not ctx.base_leftover.consistent:
         return None
     value, std = parameters.get(effect.amplitude, (None, None))
     if value is None or std is None or not std > 0:
@@ -1125,7 +1125,7 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
                            residual_analysis, progress, notes),
                   amplitude_alpha=AMPLITUDE_ALPHA / max(len(ids), 1))
     ranked, skipped = _candidates(ids, ctx, progress, notes)
-    base_left = ctx.leftover(ctx.free_residual, named=False)
+    base_left = ctx.base_leftover
     verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
     return Diagnosis(
