@@ -422,7 +422,7 @@ class _Context:
     free: ExtendedFit
     free_residual: list[np.ndarray]
     #: An amplitude's two-sided false-alarm probability where the base leaves only noise.
-    amplitude_alpha: float = AMPLITUDE_ALPHA
+    amplitude_alpha: float
 
     @property
     def lag_free(self) -> bool:
@@ -560,7 +560,7 @@ def _base_structure(base: Model | None, orders, delay, calibration: Sequence[Win
 
 def _context(calib, valid, fs: float, orders: tuple[int, int, int],
              base_effects: tuple[str, ...], alpha: float, residual_analysis: bool,
-             progress, notes: list[str]) -> _Context:
+             progress, notes: list[str], *, amplitude_alpha: float) -> _Context:
     """Fit the base models (the lag-free one beside the residual analysis), measure the noise."""
     cw, vw = shot_windows([s for s in calib if s.shots]), shot_windows(
         [s for s in valid if s.shots])
@@ -594,7 +594,7 @@ def _context(calib, valid, fs: float, orders: tuple[int, int, int],
     shots = [shot for s in valid if s.shots for shot in s.shots]
     bounds = [segment_bounds(shot, w.y.size, ringing) for shot, w in zip(shots, vw)]
     return _Context(fs, cw, vw, orders, base_effects, base, prediction, residual, noise,
-                    bounds, analyses, alpha, free, free_residual)
+                    bounds, analyses, alpha, free, free_residual, amplitude_alpha)
 
 
 def _quiet(residual: Sequence[np.ndarray], windows: Sequence[Window],
@@ -1121,9 +1121,9 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     # The candidates' helper starts now, beside the base fits, which then share it too.
     warm(len(ids) * sum(w.y.size for w in windows), MIN_SHARED_COST, modules=(__name__,),
          name='diagnosis helper')
-    ctx = replace(_context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
-                           residual_analysis, progress, notes),
-                  amplitude_alpha=AMPLITUDE_ALPHA / max(len(ids), 1))
+    ctx = _context(calib, valid, fs, orders3, base_effects, alpha / max(len(ids), 1),
+                   residual_analysis, progress, notes,
+                   amplitude_alpha=AMPLITUDE_ALPHA / max(len(ids), 1))
     ranked, skipped = _candidates(ids, ctx, progress, notes)
     base_left = ctx.base_leftover
     verdict, explanation, named, left, share, ranked = _verdict(ranked, ctx, base_left)
