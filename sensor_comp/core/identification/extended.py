@@ -68,7 +68,8 @@ from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_c
 
 __all__ = ['BASE_DELAY', 'BASE_ORDERS', 'SLOWEST_POLE_S', 'DisturbanceFit',
            'ExtendedFit', 'Prediction', 'Window', 'corrected_for_input_noise', 'fit_extended',
-           'ringing_khz', 'robust_uncertainty', 'search_effort', 'shot_windows']
+           'input_noise_corrected', 'ringing_khz', 'robust_uncertainty', 'search_effort',
+           'shot_windows']
 
 #: The diagnosis's base structure ``(nf, nb)`` and delay (and a lag-free fit's): a sampled
 #: 2nd-order sensor, exactly.
@@ -1213,6 +1214,21 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
                               value_std=corrected.value_std)
         corrected = _owning(corrected, other)
     return replace(corrected, _base=fit._base), note
+
+
+def input_noise_corrected(fit: ExtendedFit, windows: Sequence[Window], *,
+                          check: Sequence[Window] = ()) -> tuple[ExtendedFit | None, str | None]:
+    """
+    Return :func:`corrected_for_input_noise`, or ``(None, why)`` when it cannot be applied.
+
+    A correction that fails leaves the least-squares fit standing, which the caller keeps;
+    the note says why (``(fit, None)``: no pre-trigger to measure the noise on).
+    """
+    try:
+        return corrected_for_input_noise(fit, windows, check=check)
+    except (IdentError, EffectError, ArithmeticError, ValueError,
+            np.linalg.LinAlgError) as exc:
+        return None, f'the fit was not corrected for the accelerometer noise: {exc}'
 
 
 def _solved_at(fit: ExtendedFit, fitter: _Fitter, values: Mapping[str, float], a: np.ndarray,

@@ -18,7 +18,7 @@ import numpy as np
 from ..compensation.compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
-from .extended import (BASE_DELAY, BASE_ORDERS, corrected_for_input_noise, fit_extended,
+from .extended import (BASE_DELAY, BASE_ORDERS, fit_extended, input_noise_corrected,
                        robust_uncertainty)
 from .held_base import base_fits, base_starts, fit_on_base, modes_khz
 from ..shots.windows import EARLY_S, shot_channels, shot_windows, Window
@@ -566,13 +566,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                                          replace(base, nb=numerators[chosen]))
             denoised = not denoising
             notes += denoising
-    try:
-        corrected, correction = corrected_for_input_noise(
-            fit, measured, check=shot_windows([s for s in sources.validation if s.shots]))
-    except (IdentError, EffectError, ArithmeticError, ValueError,
-            np.linalg.LinAlgError) as exc:  # the fit stands as it was
-        corrected = None
-        correction = f'the fit was not corrected for the accelerometer noise: {exc}'
+    corrected, correction = input_noise_corrected(
+        fit, measured, check=shot_windows([s for s in sources.validation if s.shots]))
     if corrected is not None and correction is not None:  # its uncertainty is the measured's
         fit = corrected
     elif denoised:  # the uncertainty is the measured data's, not the EMD's

@@ -194,7 +194,7 @@ def test_refine_mode_keeps_a_slow_pole_and_moves_a_fast_one():
 
 
 def test_identify_keeps_its_fit_when_the_correction_fails(monkeypatch):
-    from sensor_comp.core.identification import identify as module
+    from sensor_comp.core.identification import extended as module
     from sensor_comp.core.identification.identify import identify, ShotSource
     from sensor_comp.sim import RigConfig, simulate, TABLE2
 
