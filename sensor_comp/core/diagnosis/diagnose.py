@@ -63,7 +63,7 @@ and scored on the VALIDATION shots, which it has never seen:
 The verdict:
 
 - ``'missing_effect'``: the best significant effect (significant ones ranked first, each
-  group by what it leaves beyond its own noise floor, :func:`_rank`) leaves a residual
+  group by what it leaves beyond its own noise floor, :func:`_ordered`) leaves a residual
   consistent with the noise, or it and a second one do together (their changes added, as
   fitted on the calibration shots; the second is
   significant when it removes :data:`NAME_SHARE` of what the first leaves); or, where no
@@ -710,21 +710,35 @@ def _candidates(ids: Sequence[str], ctx: _Context, progress,
             notes.append(f'{effect_id}: not fitted: {fit}')
         else:
             ranked.append(_score(effect_id, fit, ctx))
-    ranked.sort(key=_rank)
-    return _beside_held(ranked, ctx), skipped
+    return _beside_held(_ordered(ranked, ctx), ctx), skipped
 
 
-def _rank(r: Ranked) -> tuple[bool, float]:
+def _ordered(ranked: Sequence[Ranked], ctx: _Context) -> list[Ranked]:
     """
-    Return the sort key of a candidate: significant first, then the least left unexplained.
+    Return the candidates significant first, each group by what it leaves unexplained.
 
     What a model leaves beyond its own noise floor (the mean square over the validation
     windows less its variance before the triggers) is the signal it misses; its whole
     residual also holds the accelerometer noise it passes, which grows with its gain, so
     a model that explains more can leave more energy (a strain of -0.57 Pa/(g/ms) left
-    0.998 of its floor against a delay's 1.054, but 0.5 % more energy).
+    0.998 of its floor against a delay's 1.054, but 0.5 % more energy). Significant
+    effects are taken least-excess first; those within the practical share of the noise
+    of it are not told apart by that and keep the order of the energy they remove (the
+    score), as the others do.
     """
-    return not r.significant, r.leftover.excess * r.leftover.noise_variance
+    def excess(r: Ranked) -> float:
+        return r.leftover.excess * r.leftover.noise_variance
+
+    by_score = sorted(ranked, key=lambda r: -r.score)  # stable: ties keep catalogue order
+    rest = sorted((r for r in by_score if r.significant), key=excess)
+    ordered = []
+    while rest:
+        edge = excess(rest[0]) + PRACTICAL_SHARE * ctx.noise.variance
+        group = [r for r in by_score if r.significant and excess(r) <= edge
+                 and any(r is x for x in rest)]
+        ordered += group
+        rest = [r for r in rest if not any(r is x for x in group)]
+    return ordered + [r for r in by_score if not r.significant]
 
 
 def _beside_held(ranked: list[Ranked], ctx: _Context) -> list[Ranked]:
@@ -989,8 +1003,7 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
     second = _second(best, [r for r in ranked if r.relevant and r is not best], ctx)
     if second is not None and second[0].significant:
         other, left = second
-        ranked = sorted((other if r.effect == other.effect else r for r in ranked),
-                        key=_rank)
+        ranked = _ordered([other if r.effect == other.effect else r for r in ranked], ctx)
         if left.consistent:
             return ('missing_effect',
                     f'missing effects: {best.title} ({best.effect}) and {other.title} '

@@ -5,7 +5,8 @@ Least squares on a noisy measured acceleration shrink the numerators (errors in
 variables): a second mode's gain reads low and the model leaves the signal it misses.
 The diagnosis corrects the base and every candidate as ``identify`` corrects a fit with
 effects, and a model's leftover beyond its own noise floor (the accelerometer noise it
-passes grows with its gain) ranks the candidates and compares them with the free base.
+passes grows with its gain) ranks the candidates (where it tells them apart by the
+practical share) and compares them with the free base.
 The rigs come from :mod:`bench.independent_rig` (the generalisation benchmark's seed-21
 cases 88 and 83).
 """
@@ -41,8 +42,9 @@ def test_a_second_mode_under_heavy_accelerometer_noise_is_named_with_its_gain():
 @pytest.mark.slow
 def test_a_strain_term_ranks_before_a_delay_that_leaves_more_signal():
     # Base strain of -0.57 Pa/(g/ms) at 1.27 MS/s (R = 1.5): strain leaves 1.00 of its own
-    # noise floor, a channel delay 1.05 of its own, though the delay's residual holds less
-    # energy (its smaller gain passes less of the accelerometer noise).
+    # noise floor, a channel delay 1.05 of its own (more than the practical share apart),
+    # though the delay's residual holds less energy (its smaller gain passes less of the
+    # accelerometer noise).
     truth, (calibration, validation) = _halves('strain_sensitivity', 2039212822, 1.5,
                                                (1e6, 2e6))
     result = diagnose([calibration], [validation])
