@@ -549,7 +549,7 @@ def _corrected(fit: ExtendedFit, windows: Sequence[Window],
     Return ``fit`` corrected for the accelerometer noise as ``identify`` corrects an effect.
 
     Least squares on a noisy acceleration bias the numerators and the mode (a 67 kHz
-    second mode's gain read -0.37 +- 0.14 against -0.50 +- 0.09 corrected, leaving 1.5
+    second mode's gain read -0.37 ± 0.14 against -0.50 ± 0.09 corrected, leaving 1.5
     noise energies against 1.0), and the model a user adds an effect to is the corrected
     one: the base and every candidate are judged as they will be used. Where the
     correction cannot be applied the least-squares fit stands. Returns ``(fit, note)``: what
