@@ -466,8 +466,17 @@ class _Context:
     @functools.cached_property
     def held_floor(self) -> float:
         """Return the lag-free base's own noise floor (its variance before the triggers)."""
-        quiet = _quiet(self.residual, self.validation, self.fs)
-        return noise_model(quiet, self.noise_lag).variance if quiet else self.noise.variance
+        return self.own_noise(self.residual).variance
+
+    def own_noise(self, residual: Sequence[np.ndarray]) -> NoiseModel:
+        """
+        Return the noise a model leaving ``residual`` leaves before the triggers.
+
+        The pressure noise plus the accelerometer noise through that model; the base's
+        noise when no window has a pre-trigger to measure it on.
+        """
+        quiet = _quiet(residual, self.validation, self.fs)
+        return noise_model(quiet, self.noise_lag) if quiet else self.noise
 
     @functools.cached_property
     def base_leftover(self) -> Leftover:
@@ -507,11 +516,7 @@ class _Context:
         allowance (see the module docs).
         """
         allowance = self.allowance() if named else PRACTICAL_SHARE
-        noise = self.noise
-        if named:  # its own noise floor: the accelerometer noise through this model
-            quiet = _quiet(residual, self.validation, self.fs)
-            if quiet:
-                noise = noise_model(quiet, self.noise_lag)
+        noise = self.own_noise(residual) if named else self.noise
         return leftover(residual, self.bounds, noise, self.fs, allowance=min(allowance, 1e6))
 
 
@@ -732,12 +737,11 @@ def _ordered(ranked: Sequence[Ranked], ctx: _Context) -> list[Ranked]:
     by_score = sorted(ranked, key=lambda r: -r.score)  # stable: ties keep catalogue order
     rest = sorted((r for r in by_score if r.significant), key=excess)
     ordered = []
-    while rest:
+    while rest:  # each group is a prefix of ``rest``, taken back in score order
         edge = excess(rest[0]) + PRACTICAL_SHARE * ctx.noise.variance
-        group = [r for r in by_score if r.significant and excess(r) <= edge
-                 and any(r is x for x in rest)]
-        ordered += group
-        rest = [r for r in rest if not any(r is x for x in group)]
+        size = sum(excess(r) <= edge for r in rest)
+        ordered += sorted(rest[:size], key=lambda r: -r.score)
+        rest = rest[size:]
     return ordered + [r for r in by_score if not r.significant]
 
 
