@@ -230,7 +230,10 @@ def _with_effect(row: dict, key: str, calibration, validation, effect: str) -> N
 
 def _ranking(diagnosis) -> list[dict]:
     return [{'effect': r.effect, 'score': r.score, 'significant': r.significant,
+             'relevant': r.relevant, 'statistic': r.statistic, 'explained': r.explained,
              'p_value': r.p_value, 'peak_residual_percent': r.peak_residual_percent,
+             'energy_ratio': r.leftover.energy_ratio,
+             'noise_variance': r.leftover.noise_variance,
              'parameters': {k: [v, s] for k, (v, s) in r.parameters.items()}}
             for r in diagnosis.ranking]
 

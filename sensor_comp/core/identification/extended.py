@@ -195,6 +195,8 @@ class ExtendedFit:
         notes: What the user should know (e.g. a parameter that could not be read).
         denominators: Base-order denominators worth starting other fits of the same
             windows from (``starts`` of :func:`fit_extended`).
+        least_squares: The least-squares fit a corrected one
+            (:func:`corrected_for_input_noise`) came from, None for that fit itself.
 
     """
 
@@ -210,6 +212,7 @@ class ExtendedFit:
     notes: tuple[str, ...] = ()
     denominators: tuple[np.ndarray, ...] = field(default=(), repr=False)
     _base: tuple[tuple[str, int], ...] = field(default=(), repr=False)
+    least_squares: ExtendedFit | None = field(default=None, repr=False, compare=False)
 
     def parameters(self, effect_id: str) -> Physical:
         """Return an effect's physical parameters ``name -> (value, std)``."""
@@ -1189,8 +1192,9 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     solved bias-compensated (:meth:`_Fitter.compensated`), the uncertainties recomputed and
     the searched values kept, but a lag, which follows the mode (:func:`_lag_follower`). A
     preferred mode the shots do not resolve widens every parameter's deviation by its
-    change there (:func:`_owning`). Returns ``(fit, None)`` unchanged when the windows have no
-    pre-trigger to measure the noise on.
+    change there (:func:`_owning`). The corrected fit keeps the least-squares one
+    (``least_squares``) for the tests whose null distribution is its own. Returns
+    ``(fit, None)`` unchanged when the windows have no pre-trigger to measure the noise on.
     """
     windows = list(windows)
     levels = noise_levels(windows)
@@ -1213,7 +1217,7 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
         other, _ = _solved_at(fit, fitter, preferred[1], preferred[0], levels,
                               value_std=corrected.value_std)
         corrected = _owning(corrected, other)
-    return replace(corrected, _base=fit._base), note
+    return replace(corrected, _base=fit._base, least_squares=fit.least_squares or fit), note
 
 
 def input_noise_corrected(fit: ExtendedFit, windows: Sequence[Window], *,

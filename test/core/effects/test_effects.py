@@ -587,6 +587,32 @@ def test_a_second_modes_gain_is_judged_against_its_search(searched):
         assert 'not told apart from zero' in why and 'kHz search' in why
 
 
+def test_a_corrected_second_modes_gain_is_told_from_zero_on_its_least_squares_fit():
+    # Seed 19's rig 79 (a 24 kHz mode at 1.57 MS/s): least squares read 0.40 ± 0.10 (|z| 4.0,
+    # centred on zero where no mode is), the correction 0.53 ± 0.18 (|z| 2.9, its deviation
+    # widened by the noise it takes out); the search's threshold lies between.
+    sensor, mount = (20.0, 0.05, 1.0), (6.0, 0.03, 0.5)
+    a, pair = mode_pair(*sensor[:2], FS), mode_pair(*mount[:2], FS)
+    numerator = (sensor[2] * a.sum() * pair + mount[2] * pair.sum() * a) / pair.sum()
+    model = _model([f'a_z@mode={mount[0]!r},{mount[1]!r}'], numerator, a=a, nk=0)
+    effect = get_effect('second_resonance')
+    spec = effect.extend(ModelSpec(fs=FS, nf=2, nb=3, nk=0))
+    values = {'second_resonance.freq_khz': mount[0], 'second_resonance.zeta': mount[1]}
+    least = gain_threshold(1.0, 80.0, mount[1])
+    assert 2.9 < least < 4.0
+
+    def fit(gain, behind=None):
+        reading = dict(effect.physical(model), gain=gain)
+        return SimpleNamespace(spec=spec, values=values, value_std={}, model=lambda: model,
+                               parameters=lambda _: reading, least_squares=behind)
+
+    least_squares = fit((0.40, 0.10))
+    assert effect.implausible(fit((0.53, 0.18), least_squares)) is None
+    assert effect.implausible(fit((0.53, 0.18))) is not None  # read alone, it is not told
+    why = effect.implausible(fit((0.53, 0.10), fit((0.30, 0.10))))
+    assert why is not None and 'least-squares gain (0.3 ± 0.1)' in why
+
+
 def test_every_effect_with_a_size_names_it_among_its_parameters():
     for effect in EFFECTS.values():
         assert effect.amplitude is None or effect.amplitude in effect.parameters

@@ -97,6 +97,7 @@ def test_a_mode_damped_by_accelerometer_noise_is_moved_back(seed):
                            f'sensor mode {hz0 / 1e3:.1f} kHz')
     assert 'numerators bias-compensated' in note
     assert 'corrected for the accelerometer noise' in corrected.estimate.method
+    assert corrected.least_squares is fit and fit.least_squares is None  # for its tests
     # The numerators were solved at the new mode: the static gain is still the sensor's.
     gain = corrected.estimate.b.sum() / corrected.estimate.a.sum()
     assert gain == pytest.approx(1.0, rel=0.02)
