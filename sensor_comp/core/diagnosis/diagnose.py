@@ -225,6 +225,8 @@ class Ranked:
             effect's, in words (:func:`~.rival_forms.untold_form`), or None.
         held: How the base's own structure already holds the effect, in words
             (:meth:`~sensor_comp.core.effects.Effect.held_by_base`), or None.
+        log_p_value: Natural logarithm of ``p_value``, which does not underflow: the
+            strength of the evidence where the p-values are all 0.
         fit: The extended fit (not in :meth:`to_dict`).
 
     """
@@ -248,6 +250,7 @@ class Ranked:
     doubt: str | None = None
     untold: str | None = None
     held: str | None = None
+    log_p_value: float = 0.0
     fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -258,7 +261,9 @@ class Ranked:
                                for k, (v, s) in self.parameters.items()},
                 'evidence': self.evidence, 'significant': self.significant,
                 'statistic': json_number(self.statistic), 'test': self.test,
-                'p_value': json_number(self.p_value), 'fit_percent': json_number(self.fit_percent),
+                'p_value': json_number(self.p_value),
+                'log_p_value': json_number(self.log_p_value),
+                'fit_percent': json_number(self.fit_percent),
                 'peak_residual_percent': json_number(self.peak_residual_percent),
                 'explained_noise_energy': json_number(self.explained),
                 'excess_share': json_number(self.excess_share), 'relevant': self.relevant,
@@ -728,8 +733,9 @@ def _ordered(ranked: Sequence[Ranked], ctx: _Context) -> list[Ranked]:
     a model that explains more can leave more energy (a strain of -0.57 Pa/(g/ms) left
     0.998 of its floor against a delay's 1.054, but 0.5 % more energy). Significant
     effects are taken least-excess first; those within the practical share of the noise
-    of it are not told apart by that and keep the order of the energy they remove (the
-    score), as the others do.
+    of it are not told apart by that and go by the strength of their evidence (the
+    p-value: how surely the change each makes follows the base residual, the noise it
+    passes counted in its spread, not as misfit); the others by the energy they remove.
     """
     def excess(r: Ranked) -> float:
         return r.leftover.excess * r.leftover.noise_variance
@@ -737,10 +743,10 @@ def _ordered(ranked: Sequence[Ranked], ctx: _Context) -> list[Ranked]:
     by_score = sorted(ranked, key=lambda r: -r.score)  # stable: ties keep catalogue order
     rest = sorted((r for r in by_score if r.significant), key=excess)
     ordered = []
-    while rest:  # each group is a prefix of ``rest``, taken back in score order
+    while rest:  # each group is a prefix of ``rest``, taken back in evidence order
         edge = excess(rest[0]) + PRACTICAL_SHARE * ctx.noise.variance
         size = sum(excess(r) <= edge for r in rest)
-        ordered += sorted(rest[:size], key=lambda r: -r.score)
+        ordered += sorted(rest[:size], key=lambda r: r.log_p_value)
         rest = rest[size:]
     return ordered + [r for r in by_score if not r.significant]
 
@@ -791,8 +797,8 @@ def _fit_candidate(calibration: Sequence[Window], effects: tuple[str, ...], fs: 
 
 
 def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.ndarray],
-               ctx: _Context) -> tuple[float, str, float]:
-    """Return ``(statistic, test, p-value)`` of an extension's improvement over the base."""
+               ctx: _Context) -> tuple[float, str, float, float]:
+    """Return ``(statistic, test, p, ln p)`` of an extension's improvement over the base."""
     extra = prediction.disturbance_parameters - ctx.prediction.disturbance_parameters
     if effect.acceleration_driven or extra <= 0:
         delta = [p - b for p, b in zip(prediction.total, ctx.prediction.total)]
@@ -807,12 +813,14 @@ def _statistic(effect: Effect, prediction: Prediction, residual: Sequence[np.nda
         variance = ctx.noise.variance_of(shifted)
         product = sum(float(r @ d) for r, d in zip(ctx.residual, delta))
         statistic = product / math.sqrt(variance) if variance > 0 else 0.0
-        return statistic, 'z', float(stats.norm.sf(statistic))
+        return (statistic, 'z', float(stats.norm.sf(statistic)),
+                float(stats.norm.logsf(statistic)))
     # Energy the validation-fitted regressors take from the residual (a projection).
     before = [w.y - i for w, i in zip(ctx.validation, prediction.induced)]
     taken = sum(float(b @ b - r @ r) for b, r in zip(before, residual))
     statistic = taken / ctx.noise.long_run_variance
-    return statistic, 'chi2', float(stats.chi2.sf(statistic, extra))
+    return (statistic, 'chi2', float(stats.chi2.sf(statistic, extra)),
+            float(stats.chi2.logsf(statistic, extra)))
 
 
 def _unresolved_amplitude(effect: Effect, parameters: Physical, ctx: _Context) -> str | None:
@@ -847,7 +855,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     score = 1.0 - sse / ctx.sse
     explained = (ctx.sse - sse) / (ctx.samples * ctx.noise.variance) \
         if ctx.noise.variance > 0 else math.inf
-    statistic, test, p_value = _statistic(effect, prediction, residual, ctx)
+    statistic, test, p_value, log_p = _statistic(effect, prediction, residual, ctx)
     parameters = fit.parameters(effect_id)
     outcome = Outcome(score=score, parameters=parameters, statistic=statistic,
                       p_value=p_value)
@@ -906,7 +914,8 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
                   explained=float(explained), excess_share=float(share),
                   relevant=bool(relevant), leftover=left, doubt=doubt,
                   untold=None if untold is None else untold.words,
-                  held=None if doubt is not None else effect.held_by_base(fit), fit=fit)
+                  held=None if doubt is not None else effect.held_by_base(fit),
+                  log_p_value=log_p, fit=fit)
 
 
 def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
