@@ -566,22 +566,29 @@ def test_a_searched_modes_gain_threshold_holds_the_chance_of_a_mode_in_noise(zet
     assert least > gain_threshold(low, high, 2 * zeta) > 2.0  # lighter modes: more trials
 
 
-@pytest.mark.parametrize('searched', [True, False])
-def test_a_second_modes_gain_is_judged_against_its_search(searched):
-    # z = 2.5: resolved for a mode given (one trial), not for one searched over 1-80 kHz.
-    sensor, mount = (20.0, 0.05, 1.0), (6.0, 0.03, -0.5)
-    a, pair = mode_pair(*sensor[:2], FS), mode_pair(*mount[:2], FS)
-    numerator = (sensor[2] * a.sum() * pair + mount[2] * pair.sum() * a) / pair.sum()
-    model = _model([f'a_z@mode={mount[0]!r},{mount[1]!r}'], numerator, a=a, nk=0)
+MOUNT = (6.0, 0.03)  # a 6 kHz mount mode beside a 20 kHz sensor (ζ 0.05)
+
+
+def _mount_mode_fit(gain, *, searched=True, behind=None):
+    """Return a second-mode fit of the 6 kHz mount mode whose gain reads ``gain``."""
+    a, pair = mode_pair(20.0, 0.05, FS), mode_pair(*MOUNT, FS)
+    numerator = (a.sum() * pair + gain[0] * pair.sum() * a) / pair.sum()
+    model = _model([f'a_z@mode={MOUNT[0]!r},{MOUNT[1]!r}'], numerator, a=a, nk=0)
     effect = get_effect('second_resonance')
     spec = effect.extend(ModelSpec(fs=FS, nf=2, nb=3, nk=0))
     if not searched:
         spec = replace(spec, searches=())
-    reading = dict(effect.physical(model), gain=(-0.16, 0.064))
-    values = {'second_resonance.freq_khz': mount[0], 'second_resonance.zeta': mount[1]}
-    fit = SimpleNamespace(spec=spec, values=values, value_std={}, model=lambda: model,
-                          parameters=lambda _: reading)
-    why = effect.implausible(fit)
+    reading = dict(effect.physical(model), gain=gain)
+    values = {'second_resonance.freq_khz': MOUNT[0], 'second_resonance.zeta': MOUNT[1]}
+    return SimpleNamespace(spec=spec, values=values, value_std={}, model=lambda: model,
+                           parameters=lambda _: reading, least_squares=behind)
+
+
+@pytest.mark.parametrize('searched', [True, False])
+def test_a_second_modes_gain_is_judged_against_its_search(searched):
+    # z = 2.5: resolved for a mode given (one trial), not for one searched over 1-80 kHz.
+    why = get_effect('second_resonance').implausible(
+        _mount_mode_fit((-0.16, 0.064), searched=searched))
     assert (why is None) == (not searched), why
     if searched:
         assert 'not told apart from zero' in why and 'kHz search' in why
@@ -594,30 +601,18 @@ def test_a_corrected_second_modes_gain_is_told_from_zero_on_its_more_precise_rea
     # (shrunk), corrected -0.50 ± 0.095. Each reading is centred on zero without a mode; the
     # one with the smaller deviation is tested (chosen by it, not by the gain: the level
     # holds), against the search's threshold.
-    sensor, mount = (20.0, 0.05, 1.0), (6.0, 0.03, 0.5)
-    a, pair = mode_pair(*sensor[:2], FS), mode_pair(*mount[:2], FS)
-    numerator = (sensor[2] * a.sum() * pair + mount[2] * pair.sum() * a) / pair.sum()
-    model = _model([f'a_z@mode={mount[0]!r},{mount[1]!r}'], numerator, a=a, nk=0)
-    effect = get_effect('second_resonance')
-    spec = effect.extend(ModelSpec(fs=FS, nf=2, nb=3, nk=0))
-    values = {'second_resonance.freq_khz': mount[0], 'second_resonance.zeta': mount[1]}
-    least = gain_threshold(1.0, 80.0, mount[1])
+    effect, fit = get_effect('second_resonance'), _mount_mode_fit
+    least = gain_threshold(1.0, 80.0, MOUNT[1])
     assert 3.0 < least < 3.9
-
-    def fit(gain, behind=None):
-        reading = dict(effect.physical(model), gain=gain)
-        return SimpleNamespace(spec=spec, values=values, value_std={}, model=lambda: model,
-                               parameters=lambda _: reading, least_squares=behind)
-
-    assert effect.implausible(fit((0.53, 0.18), fit((0.40, 0.10)))) is None
+    assert effect.implausible(fit((0.53, 0.18), behind=fit((0.40, 0.10)))) is None
     assert effect.implausible(fit((0.53, 0.18))) is not None  # read alone, it is not told
-    assert effect.implausible(fit((-0.50, 0.095), fit((-0.37, 0.14)))) is None
+    assert effect.implausible(fit((-0.50, 0.095), behind=fit((-0.37, 0.14)))) is None
     # The larger |z| of the less precise reading does not count.
-    why = effect.implausible(fit((0.30, 0.10), fit((0.60, 0.15))))
+    why = effect.implausible(fit((0.30, 0.10), behind=fit((0.60, 0.15))))
     assert why is not None and 'its gain (0.3 ± 0.1)' in why and f'{least:.2g}' in why
-    why = effect.implausible(fit((0.60, 0.15), fit((0.30, 0.10))))
+    why = effect.implausible(fit((0.60, 0.15), behind=fit((0.30, 0.10))))
     assert why is not None and 'least-squares gain (0.3 ± 0.1)' in why
-    assert effect.implausible(fit((0.53, None), fit((0.40, 0.10)))) is None
+    assert effect.implausible(fit((0.53, None), behind=fit((0.40, 0.10)))) is None
 
 
 def test_every_effect_with_a_size_names_it_among_its_parameters():
