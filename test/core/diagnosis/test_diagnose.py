@@ -34,6 +34,7 @@ checked without the samples around the corners (measured: 20 % with them, 73 % w
 One case runs at 1 MS/s (transverse sensitivity), and one clean pair.
 """
 
+from dataclasses import replace
 import functools
 import json
 
@@ -583,3 +584,19 @@ def test_candidates_the_energy_does_not_tell_apart_go_by_their_evidence():
     assert [r.effect for r in _ordered([far, mode], ctx)] == ['mode', 'channel_delay']
     near = ranked('channel_delay', 0.076, 60.0, 0.019 + 0.049)
     assert [r.effect for r in _ordered([mode, near], ctx)] == ['channel_delay', 'mode']
+
+
+def test_a_cause_outside_the_catalogue_needs_an_improvement_beyond_noise():
+    from types import SimpleNamespace
+    from sensor_comp.core.diagnosis.diagnose import _outside
+    ctx = SimpleNamespace(alpha=1e-3 / 8)
+    why = 'the fit cancels 19.2 kHz where the measured acceleration rings'
+    chance = replace(_ranked('second_resonance', 0.02, consistent=True, significant=False),
+                     p_value=0.01, outside=why)
+    assert _outside([chance], ctx) is None  # an improvement chance gives finds nothing
+    beyond = replace(chance, p_value=1e-12)
+    plain = replace(beyond, effect='strain_sensitivity', outside=None)
+    assert _outside([plain], ctx) is None  # beyond noise, but in the catalogue's form
+    found = _outside([plain, beyond], ctx)
+    assert found.startswith('second resonance (second_resonance) improves it beyond noise '
+                            '(p = 1e-12, 5.000 noise energies)') and found.endswith(why)
