@@ -1085,6 +1085,14 @@ def _outside(ranked: Sequence[Ranked], ctx: _Context) -> str | None:
             f'{found.p_value:.2g}, {found.explained:.3f} noise energies) and {found.outside}')
 
 
+def _accelerometer(finding: str, base_left: Leftover, ranked: list[Ranked]):
+    """Return the ``unexplained`` verdict of a base that leaves noise beside ``finding``."""
+    return ('unexplained',
+            f'unexplained: the base residual is consistent with noise ('
+            f'{base_left.describe()}), but {finding}; no catalogued effect explains it: check '
+            f'the accelerometer and its mounting', (), base_left, None, ranked)
+
+
 def _local(left: Leftover, *, answer: str = 'the name') -> str:
     """Return a sentence on a local misfit the energy does not show, or ''."""
     if not left.peak_above:
@@ -1139,21 +1147,13 @@ def _no_effect(ctx: _Context, base_left: Leftover, ranked: Sequence[Ranked]):
     if base_left.consistent and not failing:
         ignored = ignored_ring(ctx.validation, ctx.base.model())
         if ignored is not None:
-            return ('unexplained',
-                    f'unexplained: the base residual is consistent with noise ('
-                    f'{base_left.describe()}), but {ignored.words()}; no catalogued effect '
-                    f'explains it: check the accelerometer and its mounting', (), base_left,
-                    None, ranked)
+            return _accelerometer(ignored.words(), base_left, ranked)
         held = _held(ranked, ctx)
         if held is not None:
             return held
         outside = _outside(ranked, ctx)
         if outside is not None:
-            return ('unexplained',
-                    f'unexplained: the base residual is consistent with noise ('
-                    f'{base_left.describe()}), but {outside}; no catalogued effect explains '
-                    f'it: check the accelerometer and its mounting', (), base_left, None,
-                    ranked)
+            return _accelerometer(outside, base_left, ranked)
         return ('adequate',
                 f'adequate: the base residual is consistent with noise ('
                 f'{base_left.describe()}, tolerance {base_left.tolerance:.3f}) and no effect '
