@@ -18,7 +18,7 @@ setup(
     install_requires=['setuptools', 'numpy', 'scipy', 'mcap', 'EMD-signal', 'matplotlib',
                       'dask[distributed]', 'pyarrow'],
     extras_require={
-        'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags',
+        'test': ['pytest', 'pytest-xdist', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags',
                  'mcap-ros2-support'],
     },
     zip_safe=True,
