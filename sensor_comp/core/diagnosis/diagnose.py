@@ -46,7 +46,9 @@ and scored on the VALIDATION shots, which it has never seen:
   :data:`MIN_SCORE` and the energy it removes is at least
   :data:`~sensor_comp.core.diagnosis.noise_floor.PRACTICAL_SHARE` of the noise energy of the
   windows (with hundreds of thousands of samples far smaller structure is significant, e.g. the
-  bias accelerometer noise gives an output-error fit) AND the fit reads as the effect
+  bias accelerometer noise gives an output-error fit), both counted by raw energy or beyond
+  each model's own noise floor, whichever is larger (a corrected model passes more of the
+  accelerometer noise, which raw energy counts as misfit) AND the fit reads as the effect
   (:meth:`~sensor_comp.core.effects.Effect.implausible`: physical parameters readable, no
   searched value at an end of its range, a delay that lags; a disturbance must also
   remove before the triggers what it predicts there) AND it removes at least
@@ -78,7 +80,9 @@ The verdict:
   passes for two catalogue effects at once), so neither is named as the answer; ``named``
   lists them, best first. So does a best effect whose form a rival outside the catalogue
   passes for on the base residual (:func:`~.rival_forms.untold_form`: ``a|a|`` against a
-  cubic drive); ``alternatives`` lists what the first cannot be told from;
+  cubic drive), and one that a candidate beats on what it leaves and on its evidence while
+  its size alone is unresolved at the family-wise level (:func:`_unsized`);
+  ``alternatives`` lists what the first cannot be told from;
 - ``'partly_explained'``: the best significant effect removes part of the residual but
   leaves one the noise does not account for (a second effect, or one outside the
   catalogue): the explanation gives the explained share, the leftover in noise units and
@@ -231,6 +235,8 @@ class Ranked:
             strength of the evidence where the p-values are all 0.
         outside: Why a cause outside the catalogue explains the fit as well (then it is
             its doubt, :meth:`~sensor_comp.core.effects.Effect.confounded`), or None.
+        unsized: Its only doubt is its amplitude, told from zero by the effect's own test
+            but not at its share of the family-wise level (:func:`_unresolved_amplitude`).
         fit: The extended fit (not in :meth:`to_dict`).
 
     """
@@ -256,6 +262,7 @@ class Ranked:
     held: str | None = None
     log_p_value: float = 0.0
     outside: str | None = None
+    unsized: bool = False
     fit: ExtendedFit | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -268,6 +275,7 @@ class Ranked:
                 'statistic': json_number(self.statistic), 'test': self.test,
                 'p_value': json_number(self.p_value),
                 'log_p_value': json_number(self.log_p_value), 'outside': self.outside,
+                'unsized': self.unsized,
                 'fit_percent': json_number(self.fit_percent),
                 'peak_residual_percent': json_number(self.peak_residual_percent),
                 'explained_noise_energy': json_number(self.explained),
@@ -472,6 +480,18 @@ class _Context:
         gap = self.sse - self.samples * self.held_floor - free
         return (gap > FREE_GAP * energy
                 and mine - free <= max(PRACTICAL_SHARE * energy, FREE_SHARE * gap))
+
+    def removed_beyond_floor(self, left: Leftover) -> float:
+        """
+        Return the excess a model leaving ``left`` removes from the base's, noise energies.
+
+        Each excess is measured beyond its own model's noise floor (:meth:`leftover`), so
+        the accelerometer noise a model with more gain passes is not counted as misfit.
+        """
+        if not self.noise.variance > 0:
+            return math.inf
+        base = self.sse / self.samples - self.held_floor
+        return (base - left.excess * left.noise_variance) / self.noise.variance
 
     @functools.cached_property
     def held_floor(self) -> float:
@@ -742,18 +762,20 @@ def _ordered(ranked: Sequence[Ranked], ctx: _Context) -> list[Ranked]:
     p-value: how surely the change each makes follows the base residual, the noise it
     passes counted in its spread, not as misfit); the others by the energy they remove.
     """
-    def excess(r: Ranked) -> float:
-        return r.leftover.excess * r.leftover.noise_variance
-
     by_score = sorted(ranked, key=lambda r: -r.score)  # stable: ties keep catalogue order
-    rest = sorted((r for r in by_score if r.significant), key=excess)
+    rest = sorted((r for r in by_score if r.significant), key=_excess)
     ordered = []
     while rest:  # each group is a prefix of ``rest``, taken back in evidence order
-        edge = excess(rest[0]) + PRACTICAL_SHARE * ctx.noise.variance
-        size = sum(excess(r) <= edge for r in rest)
+        edge = _excess(rest[0]) + PRACTICAL_SHARE * ctx.noise.variance
+        size = sum(_excess(r) <= edge for r in rest)
         ordered += sorted(rest[:size], key=lambda r: r.log_p_value)
         rest = rest[size:]
     return ordered + [r for r in by_score if not r.significant]
+
+
+def _excess(r: Ranked) -> float:
+    """Return the mean square ``r``'s model leaves beyond its own noise floor, Pa²."""
+    return r.leftover.excess * r.leftover.noise_variance
 
 
 def _beside_held(ranked: list[Ranked], ctx: _Context) -> list[Ranked]:
@@ -880,8 +902,10 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     doubt, rival, outside = effect.implausible(fit), effect.rival(analysis), None
     if doubt is None:
         doubt = outside = effect.confounded(fit, ctx.calibration + ctx.validation)
+    unsized = False
     if doubt is None:
         doubt = _unresolved_amplitude(effect, parameters, ctx)
+        unsized = doubt is not None
     if rival is not None:
         # The base's misfit sways the probes: the rival must remain in what the fit leaves.
         remains = rival_remains(effect, fit.model(), prediction.total, ctx.validation,
@@ -904,7 +928,12 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
     if doubt is not None:
         evidence = f'{evidence} Not counted: {doubt}.'
     untold = untold_form(effect, analysis, samples=ctx.samples)
-    relevant = (p_value < ctx.alpha and score >= MIN_SCORE and explained >= PRACTICAL_SHARE
+    # Raw energy counts the accelerometer noise a corrected model passes as misfit: the
+    # size gates take the better of it and the excess removed beyond each model's floor.
+    beyond = ctx.removed_beyond_floor(left)
+    relevant = (p_value < ctx.alpha and max(score, beyond * ctx.samples * ctx.noise.variance
+                                            / ctx.sse) >= MIN_SCORE
+                and max(explained, beyond) >= PRACTICAL_SHARE
                 and doubt is None and ctx.as_free(sse, left.noise_variance))
     # Against the extended model's own noise floor: the accelerometer noise through a
     # wrong base can raise the base's floor above the residual's own mean square.
@@ -920,7 +949,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
                   relevant=bool(relevant), leftover=left, doubt=doubt,
                   untold=None if untold is None else untold.words,
                   held=None if doubt is not None else effect.held_by_base(fit),
-                  log_p_value=log_p, outside=outside, fit=fit)
+                  log_p_value=log_p, outside=outside, unsized=unsized, fit=fit)
 
 
 def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],
@@ -1009,12 +1038,16 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
                                        ctx.allowance() - PRACTICAL_SHARE)
         alike = [r for r in significant[1:] if r.leftover.consistent
                  and best.explained - r.explained < margin]
+        unsized = _unsized(best, ranked, ctx)
+        held = '' if best.held is None else f'; {best.held}'
         found = (f'{best.title} ({best.effect}) removes {100 * best.score:.1f} % of the '
-                 f'validation residual energy (p = {best.p_value:.2g}); it leaves '
+                 f'validation residual energy (p = {best.p_value:.2g}){held}; it leaves '
                  f'{best.leftover.describe()}, consistent with the noise')
-        if alike or best.untold:
-            return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}{_untold(best)}'
-                    f'{_local(best.leftover)}', (best.effect, *(r.effect for r in alike)),
+        if alike or best.untold or unsized:
+            return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}'
+                    f'{_unsized_words(best, unsized)}{_untold(best)}'
+                    f'{_local(best.leftover)}',
+                    (best.effect, *(r.effect for r in alike + unsized)),
                     best.leftover, _share(ctx, best.leftover), ranked)
         return ('missing_effect', f'missing effect: {found}{_local(best.leftover)}',
                 (best.effect,), best.leftover, _share(ctx, best.leftover), ranked)
@@ -1111,12 +1144,42 @@ def _alike(best: Ranked, alike: Sequence[Ranked]) -> str:
             f'name is the answer (a cause outside the catalogue can pass for both)')
 
 
+def _unsized(best: Ranked, ranked: Sequence[Ranked], ctx: _Context) -> list[Ranked]:
+    """
+    Return the candidates that beat ``best`` on both counts but whose size is unresolved.
+
+    Each leaves only noise and less beyond its own floor than ``best`` does, with stronger
+    evidence (``log_p_value``), and its only doubt is its amplitude at the family-wise
+    level (:attr:`Ranked.unsized`): a base strain read -0.65 +- 0.31 Pa/(g/ms) at 128 kS/s
+    (|z| 2.12 against 2.73) beat the channel delay named instead. The shots do not tell
+    them apart, and naming ``best`` alone would be a confident answer they do not give.
+    """
+    return [r for r in ranked if r.unsized and r is not best and r.p_value < ctx.alpha
+            and r.leftover.consistent and _excess(r) <= _excess(best)
+            and r.log_p_value <= best.log_p_value]
+
+
+def _unsized_words(best: Ranked, unsized: Sequence[Ranked]) -> str:
+    """Return the clause naming the candidates of :func:`_unsized`, or ''."""
+    if not unsized:
+        return ''
+    one = len(unsized) == 1
+    return (f'; {_leaving(unsized)} leave{"s" if one else ""} less beyond the noise and follow'
+            f'{"s" if one else ""} the residual more surely, but {unsized[0].doubt}: these '
+            f'shots cannot tell {"it" if one else "them"} from {best.effect}')
+
+
+def _leaving(ranked: Sequence[Ranked]) -> str:
+    """Return the candidates in words: name, id, score and what each leaves."""
+    return ', '.join(f'{r.title} ({r.effect}, {100 * r.score:.1f} %, leaving '
+                     f'{r.leftover.energy_ratio:.2f}× the noise energy)' for r in ranked)
+
+
 def _rivals(best: Ranked, rivals: Sequence[Ranked]) -> str:
     """Return the clause naming significant effects that remove as much as ``best``, or ''."""
     if not rivals:
         return ''
-    names = ', '.join(f'{r.title} ({r.effect}, {100 * r.score:.1f} %, leaving '
-                      f'{r.leftover.energy_ratio:.2f}× the noise energy)' for r in rivals)
+    names = _leaving(rivals)
     one = len(rivals) == 1
     return (f'. {names[0].upper()}{names[1:]} remove{"s" if one else ""} as much within '
             f'the practical share of the noise: these shots do not tell '

@@ -6,9 +6,10 @@ variables): a second mode's gain reads low and the model leaves the signal it mi
 The diagnosis corrects the base and every candidate as ``identify`` corrects a fit with
 effects, and a model's leftover beyond its own noise floor (the accelerometer noise it
 passes grows with its gain) ranks the candidates (where it tells them apart by the
-practical share) and compares them with the free base.
+practical share), counts what each removes beyond that floor (the size gates) and
+compares them with the free base.
 The rigs come from :mod:`bench.independent_rig` (the generalisation benchmark's seed-21
-cases 88 and 83).
+cases 88, 83 and 82).
 """
 
 import pytest
@@ -54,3 +55,19 @@ def test_a_strain_term_ranks_before_a_delay_that_leaves_more_signal():
     assert top.leftover.energy_ratio <= delay.leftover.energy_ratio
     value, std = top.parameters['pa_per_g_per_ms']
     assert abs(value - truth['parameters']['pa_per_g_per_ms']) <= 2 * std, (value, std)
+
+
+@pytest.mark.slow
+def test_a_delay_is_counted_by_what_it_removes_beyond_its_own_floor():
+    # A 6.3 us channel delay at 386 kS/s (R = 1.5): the corrected delay model passes more of
+    # the accelerometer noise than the base, so by raw energy it removes only 0.047 noise
+    # energies, under the practical share, and the verdict was ``adequate`` (the base's
+    # peak residual 11 sigma); beyond each model's own floor it removes far more.
+    truth, (calibration, validation) = _halves('channel_delay', 1760818535, 1.5, (3e5, 1e6))
+    result = diagnose([calibration], [validation])
+    assert result.verdict == 'missing_effect' and result.named == ('channel_delay',), \
+        result.explanation
+    top = result.ranking[0]
+    assert top.explained < 0.05 and top.leftover.consistent
+    value, std = top.parameters['delay_us']
+    assert abs(value - truth['parameters']['delay_us']) <= 2 * std, (value, std)
