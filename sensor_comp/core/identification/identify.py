@@ -541,12 +541,14 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
     held = (_lag_free(measured, effects, sources.fs)
             if compare or doubts[chosen] is not None else None)
     check = shot_windows([s for s in sources.validation if s.shots])
+    made = []  # (fit, its input-noise correction) already computed, reused below
     if held is not None and doubts[chosen] is not None:
         why = (f'with free numerators, on every base tried, it read as no such effect '
                f'({doubts[chosen]})')
     elif held is not None:  # both read as the effect: the measured shots decide
-        gain = (_corrected_bic(fits[chosen], measured, check)
-                - _corrected_bic(held, measured, check))
+        made = [(f, input_noise_corrected(f, measured, check=check))
+                for f in (fits[chosen], held)]
+        gain = _corrected_bic(*made[0], measured) - _corrected_bic(*made[1], measured)
         why = (f'BIC on the measured shots, each fit corrected for the accelerometer noise, '
                f'lower by {gain:.1f} than with free numerators on nf={chosen}')
         if not gain > 0:
@@ -568,7 +570,8 @@ def _fit_effects(sources: Sources, data: _Data, effects: Sequence[str], base: _B
                                          replace(base, nb=numerators[chosen]))
             denoised = not denoising
             notes += denoising
-    corrected, correction = input_noise_corrected(fit, measured, check=check)
+    corrected, correction = next((c for f, c in made if f is fit), None) or \
+        input_noise_corrected(fit, measured, check=check)
     if corrected is not None and correction is not None:  # its uncertainty is the measured's
         fit = corrected
     elif denoised:  # the uncertainty is the measured data's, not the EMD's
@@ -712,9 +715,11 @@ def _measured_bic(fit, windows) -> float:
     return n * math.log(max(sse / n, np.finfo(float).tiny)) + _parameters(fit) * math.log(n)
 
 
-def _corrected_bic(fit, windows, check) -> float:
+def _corrected_bic(fit, correction: tuple, windows) -> float:
     """
-    Return :func:`_measured_bic` of ``fit`` as identify keeps it: corrected for input noise.
+    Return :func:`_measured_bic` of ``fit`` as identify keeps it: with ``correction``.
+
+    ``correction`` is :func:`~.extended.input_noise_corrected`'s answer for ``fit``.
 
     The free and the lag-free fit compete as the fits the model will hold: a correction
     near the noise's share of a regressor direction can go astray on one of them (a free
@@ -722,7 +727,7 @@ def _corrected_bic(fit, windows, check) -> float:
     the gain 0.62 +- 0.17 corrected and left 3.6 noise ceilings; the lag-free one, 0.499 +-
     0.011 and 1.35), though its least-squares loss was the lower.
     """
-    corrected, _ = input_noise_corrected(fit, windows, check=check)
+    corrected, _ = correction
     return _measured_bic(fit if corrected is None else corrected, windows)
 
 
