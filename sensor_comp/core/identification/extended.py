@@ -46,7 +46,7 @@ import math
 import re
 
 import numpy as np
-from scipy import optimize
+from scipy import fft, optimize
 
 from ..compensation.initial_state import InitialState, simulate_from_state
 from ..effects import EffectError, get_effect, ordered
@@ -1526,10 +1526,16 @@ def _lag_window(e: np.ndarray, offsets: np.ndarray) -> int:
 
 
 def _autocovariance(x: np.ndarray, lags: int) -> np.ndarray:
-    """Return the sums ``Σ x̃[t] x̃[t + k]`` of the mean-removed ``x`` for ``k < lags`` (FFT)."""
+    """
+    Return the sums ``Σ x̃[t] x̃[t + k]`` of the mean-removed ``x`` for ``k < lags`` (FFT).
+
+    Padded to a fast length of at least ``x.size + lags − 1`` (no circular wrap below
+    ``lags``): a padding to ``2·x.size`` can have a large prime factor and cost ten times more.
+    """
     x = x - np.mean(x)
-    spectrum = np.fft.rfft(x, 2 * x.size)
-    return np.fft.irfft(spectrum * np.conj(spectrum))[:lags]
+    size = fft.next_fast_len(x.size + lags, real=True)
+    spectrum = fft.rfft(x, size)
+    return fft.irfft(spectrum.real ** 2 + spectrum.imag ** 2, size)[:lags]
 
 
 def _baseline_meat(e: np.ndarray, unit: np.ndarray, baseline: int, lags: int) -> np.ndarray:

@@ -206,6 +206,21 @@ def test_stated_deviations_cover_the_truth_over_noise_seeds(effect, name, truth,
     assert np.median(stds) < 3 * scatter, np.median(stds) / scatter
 
 
+def test_the_autocovariance_is_the_direct_sum_at_awkward_lengths():
+    # Lengths whose doubling has a large prime factor (18569 = 31 · 599) and lags up to
+    # beyond the window: every lag is Σ x̃[t] x̃[t + k], none wrapped around.
+    from sensor_comp.core.identification.extended import _autocovariance
+    rng = np.random.default_rng(3)
+    for n, lags in ((18569, 4000), (1009, 1009), (37, 60), (5, 1)):
+        x = rng.standard_normal(n) + 3.0
+        centred = x - x.mean()
+        direct = np.correlate(centred, centred, mode='full')[n - 1:]
+        direct = np.concatenate([direct, np.zeros(max(lags - n, 0))])[:lags]
+        got = _autocovariance(x, lags)
+        assert got.shape == (lags,)
+        assert np.allclose(got, direct, rtol=0, atol=1e-9 * float(centred @ centred)), n
+
+
 def test_the_robust_covariance_of_a_line_in_ar1_noise_is_the_analytic_one():
     # y = θ x + e over 8 windows, e AR(1) with ρ = 0.9 (correlated over ~20 samples), x a
     # smooth pulse: Var θ̂ = Σ_k R_e(k) R_x(k) / (xᵀx)², ~10x the white formula. The
