@@ -62,6 +62,7 @@ from ..shots.inputs import input_channels, mode_pair, parse_channel
 from .coverage import coverage_factor, widened
 from .input_noise import (MIN_CHECK_GAIN, MIN_GAIN, MIN_ZETA, NoiseLevels, noise_levels,
                           refine_mode, Refinement, subtracted_noise)
+from .impulse_noise import IMPULSE_AT, ImpulseNoise
 from .lag_free import LagFree
 from .model import Model
 from ..shots.windows import EARLY_S, ringing_khz, shot_windows, Window, window_channels
@@ -119,8 +120,6 @@ EDGE = 1.01
 HAC_FACTOR, HAC_LEVEL = 3, 0.1
 #: Longest lag window of the robust covariance, samples (and at most a quarter window).
 HAC_MAX_LAGS = 4000
-#: Sample at which the unit impulses of :meth:`_Fitter._impulses` are applied.
-IMPULSE_AT = 64
 #: A search placeholder in a channel name or modifier value.
 _KEYS = re.compile(r'\{([^{}]+)\}')
 
@@ -662,12 +661,13 @@ class _Fitter:
                 coef, cov)
 
     def _impulses(self, values: Mapping[str, float], levels: NoiseLevels
-                  ) -> tuple[list[int], OutputErrorProblem, int]:
+                  ) -> tuple[list[int], ImpulseNoise, int]:
         """
-        Return the noisy axes, the problem of their unit impulses and the samples fitted.
+        Return the noisy axes, their unit impulses and the samples fitted.
 
-        Each segment of the problem is one axis's unit impulse through the model's linear
-        channels (|a|-products and leaky peaks pass little white noise and are left out).
+        Each segment of the impulses' problems is one axis's unit impulse through the
+        model's linear channels (|a|-products and leaky peaks pass little white noise and
+        are left out).
         """
         names = self.spec.channels(values)
         linear = np.array([parse_channel(n).kind in ('a', 'da') for n in names])
@@ -679,7 +679,8 @@ class _Fitter:
             acceleration[k, IMPULSE_AT] = 1.0
             pulses.append(input_channels(names, acceleration, {}, fs=self.fs) * linear[:, None])
         total = sum(w.y.size for w in self.windows)
-        return axes, _problem(pulses, [np.zeros(n)] * len(pulses), None, self.spec), total
+        return axes, ImpulseNoise(pulses, nf=self.spec.nf, nb=self.spec.nb,
+                                  nk=self.spec.nk), total
 
     def noise_ratio(self, values: Mapping[str, float],
                     levels: NoiseLevels) -> Callable[[np.ndarray], float]:
@@ -689,7 +690,7 @@ class _Fitter:
         The noise: the pressure's white noise plus each axis's white acceleration noise
         through the model's linear channels (:meth:`_impulses`).
         """
-        axes, responses, total = self._impulses(values, levels)
+        axes, impulses, total = self._impulses(values, levels)
 
         def ratio(a: np.ndarray) -> float:
             lag = self.lag(values, a)
@@ -698,6 +699,7 @@ class _Fitter:
                     a, transform=None if lag is None else lag.transform)
             except IdentError:
                 return math.inf
+            responses = impulses.problem(a)
             step = responses.simulate(theta[:responses.n_parameters])
             through = sum(levels.axes[k] * float(np.sum(
                 step[responses.offsets[i]:responses.offsets[i + 1]] ** 2))
@@ -714,8 +716,9 @@ class _Fitter:
         through the channels to ``ΦᵀΦ``; :func:`.input_noise.subtracted_noise` says how much
         of it to subtract. The share: the noise's largest share of a regressor direction.
         """
-        axes, responses, total = self._impulses(values, levels)
-        noise = total * sum(levels.axes[k] * g for k, g in zip(axes, responses.grams(a)))
+        axes, impulses, total = self._impulses(values, levels)
+        noise = total * sum(levels.axes[k] * g
+                            for k, g in zip(axes, impulses.problem(a).grams(a)))
         shares = []
 
         def subtracted(gram: np.ndarray) -> np.ndarray:
