@@ -74,7 +74,7 @@ class ImpulseNoise:
         length = self.length(a)
         if length not in self._problems:
             nf, nb, nk = self._orders
-            self._problems[length] = OutputErrorProblem(
-                [np.ascontiguousarray(p[:, :length]) for p in self._pulses], [np.zeros(length)] * len(self._pulses),
-                nf, nb, nk)
+            cut = [np.ascontiguousarray(p[:, :length]) for p in self._pulses]
+            self._problems[length] = OutputErrorProblem(cut, [np.zeros(length)] * len(cut),
+                                                        nf, nb, nk)
         return self._problems[length]
