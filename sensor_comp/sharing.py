@@ -39,6 +39,8 @@ _MISSING = object()
 _idle: list[tuple[float, Worker]] = []
 _idle_lock = threading.Lock()
 _reaper: list[threading.Timer] = []
+#: Seconds between a feeder's looks at whether its helper has started or the jobs are gone.
+_READY_POLL_S = 0.02
 
 
 def pool_size(cost: float, least: float, processes: int | None = None) -> int:
@@ -169,13 +171,21 @@ class _Pool:
         self.function, self.jobs, self.done = function, jobs, done
         self.results: list = [_MISSING] * len(jobs)
         self._next = iter(range(len(jobs)))
+        self._left = len(jobs)
         self._lock = threading.Lock()
         self._finished = 0  # jobs done by helpers, not yet reported
 
     def take(self) -> int | None:
         """Return the index of the next job, or None when every one is taken."""
         with self._lock:
-            return next(self._next, None)
+            index = next(self._next, None)
+            self._left -= index is not None
+            return index
+
+    def taken(self) -> bool:
+        """Return whether every job is taken."""
+        with self._lock:
+            return self._left == 0
 
     def run(self, helpers: int, name: str) -> list:
         """Run every job with ``helpers`` helper processes; return the results."""
@@ -215,6 +225,11 @@ class _Pool:
             self.done()
 
     def _feed(self, worker: Worker) -> None:
+        # A helper still starting takes no job: one handed to it would wait for its start-up
+        # (about a second) while this process may finish the others long before.
+        while not worker.wait_ready(_READY_POLL_S):
+            if self.taken():
+                return
         while (index := self.take()) is not None:
             try:
                 self.results[index] = worker.call(self.function, *self.jobs[index])

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 import os
 import pickle
+import select
 import signal
 import struct
 import subprocess
@@ -21,7 +22,8 @@ __all__ = ['Worker', 'WorkerDied', 'serve']
 
 # Run by the worker: ignore SIGINT first, take the parent's path; no pylab (PyEMD imports
 # it for plots a worker never draws: 0.5 s of start-up); import the modules its calls will
-# need before it waits for the first (a helper started early is then ready when called).
+# need before it waits for the first (a helper started early is then ready when called),
+# then say so (:meth:`Worker.wait_ready`).
 _BOOTSTRAP = ('import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); import sys; '
               'sys.modules["pylab"] = None; sys.path[:] = {path!r}; '
               'import importlib; [importlib.import_module(m) for m in {modules!r}]; '
@@ -71,6 +73,7 @@ class Worker:
         self.pid = self._process.pid
         self._requests = os.fdopen(write, 'wb')
         self._replies = os.fdopen(read, 'rb')
+        self._ready = False
 
     @property
     def alive(self) -> bool:
@@ -91,6 +94,27 @@ class Worker:
         # The kernel's out-of-memory killer sends SIGKILL.
         return f'killed by {name}' + (': out of memory?' if -code == signal.SIGKILL else '')
 
+    def wait_ready(self, timeout: float | None = None) -> bool:
+        """
+        Return whether the process has started (imported its modules), waiting ``timeout`` s.
+
+        A process that ended before it said so counts as started: its next call raises
+        :class:`WorkerDied`. A call waits for the start by itself.
+        """
+        if not self._ready:
+            try:
+                waiting = not select.select([self._replies], [], [], timeout)[0]
+            except (OSError, ValueError):  # closed
+                waiting = False
+            if waiting:
+                return False
+            self._ready = True
+            try:
+                _read_message(self._replies)  # the empty message serve() starts with
+            except (OSError, ValueError):  # closed meanwhile (by a share that raised)
+                pass
+        return True
+
     def call(self, function, *args, **kwargs):
         """
         Return ``function(*args, **kwargs)`` (a module-level function) run in the worker.
@@ -102,6 +126,7 @@ class Worker:
 
         """
         request = pickle.dumps((function, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+        self.wait_ready()
         try:
             self._requests.write(_LENGTH.pack(len(request)))
             self._requests.write(request)
@@ -160,10 +185,15 @@ def _reply(ok: bool, value) -> bytes:
 
 
 def serve(read_fd: int, write_fd: int) -> None:
-    """Answer pickled calls from ``read_fd`` on ``write_fd`` until the request pipe closes."""
+    """
+    Answer pickled calls from ``read_fd`` on ``write_fd`` until the request pipe closes.
+
+    An empty message first says the worker has started.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     with os.fdopen(read_fd, 'rb') as requests:
         try:
+            os.write(write_fd, _LENGTH.pack(0))
             while (request := _read_message(requests)) is not None:
                 try:
                     function, args, kwargs = pickle.loads(request)

@@ -51,6 +51,9 @@ def test_jobs_a_dead_helper_leaves_are_run_here(monkeypatch):
         def __init__(self, **_):
             pass
 
+        def wait_ready(self, timeout=None):
+            return True
+
         def call(self, function, *args):
             raise WorkerDied('the helper process 1 died (killed by SIGKILL)')
 
@@ -148,6 +151,23 @@ def test_a_helper_warmed_early_serves_even_small_work(monkeypatch):
     assert processes == 2
     pids = sharing.share(slow_pid, [(0.3,)] * 8, processes=processes)
     assert helper in pids and os.getpid() in pids
+    sharing.close_idle()
+
+
+def test_a_helper_still_starting_takes_no_job_and_joins_once_started(monkeypatch):
+    # Its modules take 2 s to import; four jobs of 0.05 s handed to it would wait for that.
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip('one core: no helper is ever started')
+    sharing.close_idle()
+    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+    assert sharing.warm(10, 10, modules=['sharing_slow_start']) == 1
+    helper = sharing._idle[0][1]
+    assert not helper.wait_ready(0.0)
+    assert sharing.share(slow_pid, [(0.05,)] * 4, processes=2) == [os.getpid()] * 4
+    assert [w for _, w in sharing._idle] == [helper]  # kept for the next share
+    assert helper.wait_ready(30.0)
+    assert helper.pid in sharing.share(slow_pid, [(0.3,)] * 8, processes=2)
     sharing.close_idle()
 
 
