@@ -278,19 +278,21 @@ class _Data:
     early_stops: list[int]
 
     @classmethod
-    def cut(cls, sources: Sources, *, denoise: bool, progress: ProgressFactory) -> _Data:
-        """Return the calibration windows, EMD-denoised for the fit if asked."""
+    def cut(cls, sources: Sources) -> _Data:
+        """Return the calibration windows, fitted as measured (:meth:`denoised`: not)."""
         measured = [seg for s in sources.calibration
                     for seg in segments(s.recording, s.shots, inputs=BASE_INPUTS)]
-        denoiser = EmdDenoiser() if denoise else None
-        fit = measured
-        if denoiser is not None:
-            with progress('EMD denoising', len(measured)) as bar:
-                denoised = denoiser.map([y for _, y in measured], done=bar.advance)
-            fit = [(u, y) for (u, _), y in zip(measured, denoised)]
         stops = [min(shot.stop, shot.end + round(EARLY_S * s.recording.fs)) - shot.start
                  for s in sources.calibration for shot in s.shots]
-        return cls(sources, measured, fit, denoiser, stops)
+        return cls(sources, measured, measured, None, stops)
+
+    def denoised(self, progress: ProgressFactory) -> _Data:
+        """Return these windows with the pressure fitted EMD-denoised."""
+        denoiser = EmdDenoiser()
+        with progress('EMD denoising', len(self.measured)) as bar:
+            denoised = denoiser.map([y for _, y in self.measured], done=bar.advance)
+        return replace(self, fit=[(u, y) for (u, _), y in zip(self.measured, denoised)],
+                       denoiser=denoiser)
 
     def early(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Return the measured calibration windows up to :data:`EARLY_S` after each pulse."""
@@ -336,8 +338,7 @@ def _fit_base(data: _Data, *, structure: str, orders: tuple[int, int] | None,
             # The delay is read on whole windows: on the pulses alone a sensor whose mode
             # the shots barely excite trades delay for a pole (doc/identification.md).
             early = data.early()
-            if delay is None:  # the grid's helper starts beside the search
-                warm_grid_helpers(early, orders=None if orders is None else [orders])
+            if delay is None:
                 search = estimate_delay(data.measured)
             selection = select_structure(
                 early, valid_segments=data.valid(),
@@ -486,7 +487,11 @@ def identify(calibration: Sequence[ShotSource], *, validation: Sequence[ShotSour
     effects = tuple(e.id for e in ordered(effects))
     progress = progress or Silent
     sources = prepare_sources(calibration, validation)
-    data = _Data.cut(sources, denoise=denoise, progress=progress)
+    data = _Data.cut(sources)
+    if structure == 'auto' and delay is None:  # its start-up runs beside EMD and delay search
+        warm_grid_helpers(data.early(), orders=None if orders is None else [orders])
+    if denoise:
+        data = data.denoised(progress)
     base = _fit_base(data, structure=structure, orders=orders, delay=delay,
                      criterion=criterion, progress=progress)
     explanation = base.explanation + ''.join(f'; WARNING: {w}' for w in sources.warnings)
