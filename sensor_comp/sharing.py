@@ -86,9 +86,13 @@ def warm(cost: float, least: float, *, modules: Sequence[str] = (),
 
     They import ``modules`` (the shared function's) as they start and wait among the idle
     helpers (closed after :data:`IDLE_S` unused): a start-up of about a second then runs on
-    a free core beside this process's work, instead of inside the share. ``cost`` and
-    ``least`` as :func:`pool_size`.
+    a free core beside this process's work, instead of inside the share. Idle helpers
+    already running import the ``modules`` they lack now, likewise. ``cost`` and ``least``
+    as :func:`pool_size`.
     """
+    with _idle_lock:
+        for _, worker in _idle:
+            worker.preload(modules)
     count = pool_size(cost, least) - 1 - _ready()
     workers = [_helper(name, modules) for _ in range(count)]
     if workers:

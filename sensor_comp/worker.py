@@ -9,6 +9,7 @@ user's ``__main__``); why and how: ``doc/outputs-and-workers.md``. No ROS import
 from __future__ import annotations
 
 from collections.abc import Sequence
+import importlib
 import os
 import pickle
 import select
@@ -72,8 +73,12 @@ class Worker:
             os.close(child_write)
         self.pid = self._process.pid
         self._requests = os.fdopen(write, 'wb')
-        self._replies = os.fdopen(read, 'rb')
-        self._ready = False
+        # Unbuffered: a buffer could hold a reply that select() then does not see.
+        self._replies = os.fdopen(read, 'rb', buffering=0)
+        #: Modules imported or being imported there.
+        self.modules = set(modules)
+        # Replies owed before the next call's: the start message, then each preload's.
+        self._owed = 1
 
     @property
     def alive(self) -> bool:
@@ -96,24 +101,45 @@ class Worker:
 
     def wait_ready(self, timeout: float | None = None) -> bool:
         """
-        Return whether the process has started (imported its modules), waiting ``timeout`` s.
+        Return whether the process is free for a call, waiting up to ``timeout`` s for it.
 
-        A process that ended before it said so counts as started: its next call raises
-        :class:`WorkerDied`. A call waits for the start by itself.
+        Free: started (its modules imported) and done with every :meth:`preload`. A process
+        that ended meanwhile counts as free: its next call raises :class:`WorkerDied`. A
+        call waits by itself.
         """
-        if not self._ready:
+        while self._owed:
             try:
                 waiting = not select.select([self._replies], [], [], timeout)[0]
-            except (OSError, ValueError):  # closed
+            except (OSError, ValueError):  # closed (by a share that raised)
                 waiting = False
             if waiting:
                 return False
-            self._ready = True
+            self._owed -= 1
             try:
-                _read_message(self._replies)  # the empty message serve() starts with
-            except (OSError, ValueError):  # closed meanwhile (by a share that raised)
-                pass
+                _read_message(self._replies)  # an empty start message, or a preload's reply
+            except (OSError, ValueError):
+                self._owed = 0
         return True
+
+    def preload(self, modules: Sequence[str]) -> None:
+        """
+        Have the process import ``modules`` it has not, without waiting for it.
+
+        Until it has, :meth:`wait_ready` is False; one that fails to import is left to
+        the call that needs it (which then raises there).
+        """
+        missing = [m for m in modules if m not in self.modules]
+        if not missing:
+            return
+        request = pickle.dumps((_import, (missing,), {}), protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            self._requests.write(_LENGTH.pack(len(request)))
+            self._requests.write(request)
+            self._requests.flush()
+        except (OSError, ValueError):  # gone: its next call says so
+            return
+        self._owed += 1
+        self.modules.update(missing)
 
     def call(self, function, *args, **kwargs):
         """
@@ -166,12 +192,29 @@ class Worker:
 
 def _read_message(stream) -> bytes | None:
     """Return the next message of a pipe, or None if it ends first (the writer is gone)."""
-    header = stream.read(_LENGTH.size)
-    if len(header) < _LENGTH.size:
+    header = _read_exactly(stream, _LENGTH.size)
+    if header is None:
         return None
     (size,) = _LENGTH.unpack(header)
-    data = stream.read(size)
-    return data if len(data) == size else None
+    return _read_exactly(stream, size)
+
+
+def _read_exactly(stream, size: int) -> bytes | None:
+    """Return ``size`` bytes of ``stream`` (an unbuffered one may return fewer per read)."""
+    parts = []
+    while size > 0:
+        part = stream.read(size)
+        if not part:
+            return None
+        parts.append(part)
+        size -= len(part)
+    return b''.join(parts)
+
+
+def _import(modules: Sequence[str]) -> None:
+    """Import ``modules`` (a :meth:`Worker.preload`)."""
+    for module in modules:
+        importlib.import_module(module)
 
 
 def _reply(ok: bool, value) -> bytes:

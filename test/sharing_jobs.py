@@ -1,6 +1,7 @@
 """Jobs for the sharing tests: module-level functions a helper process can import."""
 
 import os
+import sys
 import time
 
 
@@ -15,3 +16,8 @@ def slow_pid(seconds):
     """Return the process id after a pause: a job long enough for a helper to take some."""
     time.sleep(seconds)
     return os.getpid()
+
+
+def imported(name):
+    """Return the process id and whether module ``name`` is imported there."""
+    return os.getpid(), name in sys.modules

@@ -13,7 +13,7 @@ from sensor_comp.worker import WorkerDied
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from sharing_jobs import power, slow_pid  # noqa: E402 (a module helpers can import too)
+from sharing_jobs import imported, power, slow_pid  # noqa: E402 (a module helpers can import too)
 sys.path.remove(HERE)
 
 
@@ -168,6 +168,26 @@ def test_a_helper_still_starting_takes_no_job_and_joins_once_started(monkeypatch
     assert [w for _, w in sharing._idle] == [helper]  # kept for the next share
     assert helper.wait_ready(30.0)
     assert helper.pid in sharing.share(slow_pid, [(0.3,)] * 8, processes=2)
+    sharing.close_idle()
+
+
+def test_a_warm_up_has_an_idle_helper_import_what_it_lacks_without_waiting(monkeypatch):
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip('one core: no helper is ever started')
+    sharing.close_idle()
+    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+    assert sharing.warm(10, 10, modules=['json']) == 1
+    helper = sharing._idle[0][1]
+    assert helper.wait_ready(30.0)
+    began = time.monotonic()
+    assert sharing.warm(10, 10, modules=['sharing_slow_start']) == 0  # no second helper
+    assert time.monotonic() - began < 1.0  # it did not wait for the 2 s import
+    assert not helper.wait_ready(0.0)
+    # Meanwhile quick work stays here; then the helper has the module.
+    assert sharing.share(power, [(b, 2) for b in range(4)], processes=2) == [0, 1, 4, 9]
+    assert helper.wait_ready(30.0)
+    assert helper.call(imported, 'sharing_slow_start') == (helper.pid, True)
     sharing.close_idle()
 
 
