@@ -31,6 +31,16 @@ def jobs_importable(monkeypatch):
     sharing.close_idle()
 
 
+@pytest.fixture
+def free_cores(monkeypatch):
+    """Let helpers start: two cores or more, none busy elsewhere, no limit set; none idle."""
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip('one core: no helper is ever started')
+    sharing.close_idle()
+    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
+    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+
+
 def test_results_in_order_and_each_job_reported_once():
     jobs = [(b, 3) for b in range(7)]
     calls = []
@@ -135,13 +145,7 @@ def _running(pid):
     return True
 
 
-def test_a_helper_warmed_early_serves_even_small_work(monkeypatch):
-    cpus = len(os.sched_getaffinity(0))
-    if cpus < 2:
-        pytest.skip('one core: no helper is ever started')
-    sharing.close_idle()
-    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
-    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+def test_a_helper_warmed_early_serves_even_small_work(free_cores):
     assert sharing.warm(9, 10) == 0  # work too small to pay a start-up
     assert sharing.warm(10, 10, modules=['json']) == 1
     assert sharing.warm(10, 10) == 0  # the one started is waiting
@@ -154,13 +158,8 @@ def test_a_helper_warmed_early_serves_even_small_work(monkeypatch):
     sharing.close_idle()
 
 
-def test_a_helper_still_starting_takes_no_job_and_joins_once_started(monkeypatch):
+def test_a_helper_still_starting_takes_no_job_and_joins_once_started(free_cores):
     # Its modules take 2 s to import; four jobs of 0.05 s handed to it would wait for that.
-    if len(os.sched_getaffinity(0)) < 2:
-        pytest.skip('one core: no helper is ever started')
-    sharing.close_idle()
-    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
-    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
     assert sharing.warm(10, 10, modules=['sharing_slow_start']) == 1
     helper = sharing._idle[0][1]
     assert not helper.wait_ready(0.0)
@@ -171,12 +170,7 @@ def test_a_helper_still_starting_takes_no_job_and_joins_once_started(monkeypatch
     sharing.close_idle()
 
 
-def test_a_warm_up_has_an_idle_helper_import_what_it_lacks_without_waiting(monkeypatch):
-    if len(os.sched_getaffinity(0)) < 2:
-        pytest.skip('one core: no helper is ever started')
-    sharing.close_idle()
-    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
-    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+def test_a_warm_up_has_an_idle_helper_import_what_it_lacks_without_waiting(free_cores):
     assert sharing.warm(10, 10, modules=['json']) == 1
     helper = sharing._idle[0][1]
     assert helper.wait_ready(30.0)
@@ -191,12 +185,7 @@ def test_a_warm_up_has_an_idle_helper_import_what_it_lacks_without_waiting(monke
     sharing.close_idle()
 
 
-def test_a_helper_that_cannot_import_its_modules_leaves_its_jobs_here(monkeypatch):
-    if len(os.sched_getaffinity(0)) < 2:
-        pytest.skip('one core: no helper is ever started')
-    sharing.close_idle()
-    monkeypatch.delenv(sharing.PROCESSES_ENV, raising=False)
-    monkeypatch.setattr(sharing, '_busy_elsewhere', lambda: 0)
+def test_a_helper_that_cannot_import_its_modules_leaves_its_jobs_here(free_cores):
     assert sharing.warm(10, 10, modules=['sensor_comp.no_such_module']) == 1
     assert sharing.share(power, [(b, 2) for b in range(6)], processes=2) == [
         0, 1, 4, 9, 16, 25]
