@@ -1532,7 +1532,7 @@ def _autocovariance(x: np.ndarray, lags: int) -> np.ndarray:
     """
     Return the sums ``Σ x̃[t] x̃[t + k]`` of the mean-removed ``x`` for ``k < lags`` (FFT).
 
-    Padded to a fast length of at least ``x.size + lags − 1`` (no circular wrap below
+    Padded to a fast length of at least ``x.size + lags`` (no circular wrap below
     ``lags``): a padding to ``2·x.size`` can have a large prime factor and cost ten times more.
     """
     x = x - np.mean(x)
