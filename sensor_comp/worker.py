@@ -27,8 +27,8 @@ __all__ = ['Worker', 'WorkerDied', 'serve']
 # then say so (:meth:`Worker.wait_ready`).
 _BOOTSTRAP = ('import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); import sys; '
               'sys.modules["pylab"] = None; sys.path[:] = {path!r}; '
-              'import importlib; [importlib.import_module(m) for m in {modules!r}]; '
-              'from sensor_comp.worker import serve; serve({read}, {write})')
+              'from sensor_comp.worker import _import, serve; _import({modules!r}); '
+              'serve({read}, {write})')
 # How long a retired worker may take to exit before it is killed.
 _EXIT_WAIT_S = 5.0
 # Each message: its length, then a pickle, read whole before it is unpickled, so a pickle
@@ -212,7 +212,7 @@ def _read_exactly(stream, size: int) -> bytes | None:
 
 
 def _import(modules: Sequence[str]) -> None:
-    """Import ``modules`` (a :meth:`Worker.preload`)."""
+    """Import ``modules`` (at the start, and for a :meth:`Worker.preload`)."""
     for module in modules:
         importlib.import_module(module)
 
