@@ -948,7 +948,8 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: _Context) -> Ranked:
                   explained=float(explained), excess_share=float(share),
                   relevant=bool(relevant), leftover=left, doubt=doubt,
                   untold=None if untold is None else untold.words,
-                  held=None if doubt is not None else effect.held_by_base(fit),
+                  held=None if doubt is not None else effect.held_by_base(
+                      fit, base=ctx.base),
                   log_p_value=log_p, outside=outside, unsized=unsized, fit=fit)
 
 
@@ -1083,20 +1084,32 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
 
     The effect must be beyond noise (its own small improvement, which may fall short of
     the practical share: the base took the rest), read as itself and leave only noise; it
-    is then named first, significant, with how the base held it. None when there is none.
+    is then named first, significant, with how the base held it. Another candidate counted
+    beyond noise that leaves less beyond its own floor by the practical share of the noise
+    or more takes that away; one that leaves as little within it makes the verdict
+    ``ambiguous`` (a base strain lags as a delay does). None when there is none.
     """
     held = next((r for r in ranked if r.held is not None and r.doubt is None
                  and r.p_value < ctx.alpha and r.leftover.consistent), None)
     if held is None:
         return None
+    margin = PRACTICAL_SHARE * ctx.noise.variance
+    rivals = [r for r in ranked if r is not held and r.doubt is None
+              and r.p_value < ctx.alpha and _excess(r) < _excess(held) + margin]
+    if any(_excess(r) < _excess(held) - margin for r in rivals):
+        return None
     best = replace(held, significant=True, relevant=True,
                    evidence=f'{held.evidence} {held.held[0].upper()}{held.held[1:]}.')
     ranked = [best] + [r for r in ranked if r is not held]
-    return ('missing_effect',
-            f'missing effect: {best.title} ({best.effect}): {best.held}; with it the model '
-            f'leaves {best.leftover.describe()}, consistent with the noise'
-            f'{_local(best.leftover)}', (best.effect,), best.leftover,
-            _share(ctx, best.leftover), ranked)
+    found = (f'{best.title} ({best.effect}): {best.held}; with it the model leaves '
+             f'{best.leftover.describe()}, consistent with the noise')
+    alike = [r for r in rivals if r.leftover.consistent]
+    if alike:
+        return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}{_local(best.leftover)}',
+                (best.effect, *(r.effect for r in alike)), best.leftover,
+                _share(ctx, best.leftover), ranked)
+    return ('missing_effect', f'missing effect: {found}{_local(best.leftover)}',
+            (best.effect,), best.leftover, _share(ctx, best.leftover), ranked)
 
 
 def _outside(ranked: Sequence[Ranked], ctx: _Context) -> str | None:

@@ -430,13 +430,14 @@ class Effect:
                 return f'{name} = {value:.4g} ± {std:.2g} is not resolved by these data'
         return None
 
-    def held_by_base(self, fit: FitView) -> str | None:
+    def held_by_base(self, fit: FitView, *, base: FitView) -> str | None:
         """
         Return how the base's own structure already holds this effect, in words, or None.
 
-        Then the effect explains little beyond a base that fits the shots, yet the base's
-        reading is not a sensor's (:meth:`SecondResonance.held_by_base`); most effects
-        cannot be held so.
+        Then the effect explains little beyond ``base`` (the fit the candidates are scored
+        against), which fits the shots, yet the base's reading is not a sensor's
+        (:meth:`SecondResonance.held_by_base`, :meth:`ChannelDelay.held_by_base`); most
+        effects cannot be held so.
         """
         return None
 

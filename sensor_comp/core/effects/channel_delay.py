@@ -12,16 +12,20 @@ import math
 
 import numpy as np
 
-from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, ModelSpec, Outcome,
-                   parameters_text, Physical, probe_of, ResidualView, row_of, Search, sentence,
-                   stored_std, traded_lag_s)
+from .base import (delta_std, Effect, excess_delay_s, FittedModel, FitView, mechanics_delay_s,
+                   ModelSpec, Outcome, parameters_text, Physical, probe_of, ResidualView, row_of,
+                   Search, SENSOR_ZETA, sentence, stored_std, traded_lag_s)
 from .probe import ProbeData, ProbeSpec
+from ..estimators.polynomials import resonances
 
 __all__ = ['ChannelDelay', 'RATE_PROBE']
 
 KEY = 'channel_delay.delay_us'
 #: Search range in µs.
 MAX_DELAY_US = 200.0
+#: A lag-free base paid a delay with its pair when the delayed fit's pair lags at most this
+#: share of the base pair's lag and the delay reads within this factor of the lag given up.
+HELD_FACTOR = 2.0
 
 
 def _rates(data: ProbeData, _) -> list[np.ndarray]:
@@ -98,6 +102,36 @@ class ChannelDelay(Effect):
             return (f'the fitted path lags by {delay:.4g} µs, far beyond the {MAX_DELAY_US:g} µs '
                     f'searched: its poles imitate something slower than a delay')
         return None
+
+    def held_by_base(self, fit: FitView, *, base: FitView) -> str | None:
+        """
+        Return how the lag-free base paid this delay with its pair's lag, or None.
+
+        Without a delay, a lag-free pair lags only by slowing and damping itself: where the
+        shots barely excite the sensor's ringing, the base's pair settles far below the
+        sensor, at the most damping a sensor's mode is held to, and follows the shots
+        nearly as well (``doc/effects.md``). The delayed fit hands that lag to the delay:
+        its own pair lags :data:`HELD_FACTOR` times less and the delay reads about the lag
+        given up. The delay itself must be resolved (the diagnosis asks that first).
+        """
+        if not base.spec.lag_free:
+            return None
+        held, mine = base.model(), fit.model()
+        bound = base.spec.max_zeta or SENSOR_ZETA
+        lag = traded_lag_s(held.a, held.fs, bound=bound)
+        own = max(mechanics_delay_s(mine.a, mine.fs), 0.0)
+        delay = 1e-6 * fit.parameters(self.id)['delay_us'][0]
+        if lag is None or own > lag / HELD_FACTOR:
+            return None
+        given = lag - own
+        if not given / HELD_FACTOR <= delay <= HELD_FACTOR * given:
+            return None
+        pairs = resonances(held.a, held.fs)
+        pair = (f'{min(pairs, key=lambda p: p[1])[0] / 1e3:.3g} kHz at ζ {bound:.2g}' if pairs
+                else 'no ringing pair')
+        return (f'the lag-free base paid the delay with its mode: its pair ({pair}, the most '
+                f'damping a sensor\'s mode is held to) lags {1e6 * lag:.3g} µs, the delayed '
+                f'fit\'s {1e6 * own:.2g} µs, so the base followed the shots without naming it')
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say what the rate probe and the delayed model find."""

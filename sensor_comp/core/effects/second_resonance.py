@@ -198,7 +198,7 @@ class SecondResonance(Effect):
                         f'the second mode is read from, is not resolved by these data')
         return None
 
-    def held_by_base(self, fit: FitView) -> str | None:
+    def held_by_base(self, fit: FitView, *, base: FitView) -> str | None:
         """
         Return how the base's pair is this mode, not the sensor's, or None.
 
