@@ -1086,8 +1086,9 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
     the practical share: the base took the rest), read as itself and leave only noise; it
     is then named first, significant, with how the base held it. Another candidate counted
     beyond noise that leaves less beyond its own floor by the practical share of the noise
-    or more takes that away; one that leaves as little within it makes the verdict
-    ``ambiguous`` (a base strain lags as a delay does). None when there is none.
+    or more takes that away; one that leaves as little within it, and does not imitate the
+    held mode (:func:`_beside_held`), makes the verdict ``ambiguous`` (a base strain lags
+    as a delay does). None when there is none.
     """
     held = next((r for r in ranked if r.held is not None and r.doubt is None
                  and r.p_value < ctx.alpha and r.leftover.consistent), None)
@@ -1103,7 +1104,8 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
     ranked = [best] + [r for r in ranked if r is not held]
     found = (f'{best.title} ({best.effect}): {best.held}; with it the model leaves '
              f'{best.leftover.describe()}, consistent with the noise')
-    alike = [r for r in rivals if r.leftover.consistent]
+    alike = [r for r in rivals if r.leftover.consistent
+             and get_effect(r.effect).imitates_held(r.fit) is None]
     if alike:
         return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}{_local(best.leftover)}',
                 (best.effect, *(r.effect for r in alike)), best.leftover,
