@@ -1087,25 +1087,28 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
     is then named first, significant, with how the base held it. Another candidate counted
     beyond noise that leaves less beyond its own floor by the practical share of the noise
     or more takes that away; one that leaves as little within it, and does not imitate the
-    held mode (:func:`_beside_held`), makes the verdict ``ambiguous`` (a base strain lags
-    as a delay does). None when there is none.
+    held mode (:func:`_beside_held`), makes the verdict ``ambiguous``, as does one that
+    makes what the base holds as well (:attr:`~sensor_comp.core.effects.Effect.held_alike`:
+    a base strain lags as a delay does), its size resolved or not. None when there is none.
     """
     held = next((r for r in ranked if r.held is not None and r.doubt is None
                  and r.p_value < ctx.alpha and r.leftover.consistent), None)
     if held is None:
         return None
     margin = PRACTICAL_SHARE * ctx.noise.variance
-    rivals = [r for r in ranked if r is not held and r.doubt is None
+    same = get_effect(held.effect).held_alike
+    rivals = [r for r in ranked if r is not held and (r.doubt is None or r.effect in same)
               and r.p_value < ctx.alpha and _excess(r) < _excess(held) + margin]
-    if any(_excess(r) < _excess(held) - margin for r in rivals):
+    if any(_excess(r) < _excess(held) - margin for r in rivals if r.doubt is None):
         return None
     best = replace(held, significant=True, relevant=True,
                    evidence=f'{held.evidence} {held.held[0].upper()}{held.held[1:]}.')
-    ranked = [best] + [r for r in ranked if r is not held]
     found = (f'{best.title} ({best.effect}): {best.held}; with it the model leaves '
              f'{best.leftover.describe()}, consistent with the noise')
     alike = [r for r in rivals if r.leftover.consistent
              and get_effect(r.effect).imitates_held(r.fit) is None]
+    ranked = [best, *alike] + [r for r in ranked
+                               if r is not held and not any(r is a for a in alike)]
     if alike:
         return ('ambiguous', f'ambiguous: {found}{_alike(best, alike)}{_local(best.leftover)}',
                 (best.effect, *(r.effect for r in alike)), best.leftover,

@@ -334,6 +334,10 @@ class Effect:
     #: Probes of forms outside the catalogue that pass for this effect (a cubic drive for
     #: the ``a|a|`` one): see :meth:`rival`.
     rivals: ClassVar[tuple[ProbeSpec, ...]] = ()
+    #: Catalogue effects that make what the base holds of this one as well (a base strain's
+    #: lag for a delay): beside a held reading (:meth:`held_by_base`) they stay in the
+    #: answer however their own size reads.
+    held_alike: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

@@ -59,6 +59,9 @@ class ChannelDelay(Effect):
     amplitude = 'delay_us'
     order = 0
     probes = (RATE_PROBE,)
+    # At the pulses' frequencies a base strain's term c·da/dt is a lead of c/S (a lag for
+    # c < 0): what a base pays with its mode's lag may be either.
+    held_alike = ('strain_sensitivity',)
 
     def extend(self, spec: ModelSpec) -> ModelSpec:
         """Delay every input continuously; numerator on lags 0 … nf."""

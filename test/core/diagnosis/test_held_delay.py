@@ -8,6 +8,11 @@ sensor's ringing, so the lag-free base holds its pair at 8.5 kHz, ζ at its boun
 lag (2ζ/ω = 7.5 µs) stands in for the delay: the delayed fit removes only 0.02 noise
 energies beyond it. A base strain lags alike and leaves as little beyond its own floor:
 the verdict is ``ambiguous``, the delay first and read.
+
+A base strain that lags makes the same answer: seed 19's case 109 (432 kS/s, a strain of
+-0.34 Pa/(g/ms) at R = 0.5) was ``adequate``; the delay reads its lag (2.6 ± 0.13 µs)
+while the strain fit, its pair at the damping bound, cannot tell its size from zero. The
+verdict names both, never the delay alone.
 """
 
 import pytest
@@ -16,15 +21,19 @@ from bench.independent_rig import draw_spec, simulate
 from sensor_comp.core.diagnosis.diagnose import diagnose
 from sensor_comp.core.identification.identify import ShotSource
 
-SEED = 3132147814
+SEED, STRAIN_SEED = 3132147814, 1445980407
+
+
+def _diagnosed(spec):
+    case = simulate(spec)
+    calibration, validation = (ShotSource.detect(r) for r in case.halves()[1])
+    return case.truth, diagnose([calibration], [validation])
 
 
 @pytest.fixture(scope='module')
 def paid():
-    case = simulate(draw_spec(SEED, effect='channel_delay', R=1.5, rate_range=(1e6, 1e6),
-                              fs=1e6, shots=10))
-    calibration, validation = (ShotSource.detect(r) for r in case.halves()[1])
-    return case.truth, diagnose([calibration], [validation])
+    return _diagnosed(draw_spec(SEED, effect='channel_delay', R=1.5, rate_range=(1e6, 1e6),
+                                fs=1e6, shots=10))
 
 
 def test_the_base_alone_leaves_only_noise(paid):
@@ -43,3 +52,11 @@ def test_the_delay_is_named_first_and_read(paid):
     assert std is not None and abs(value - true) <= 2 * std, (value, std, true)
     # The base had fitted it: the delay explains next to nothing beyond the base.
     assert top.explained < 0.05 and top.leftover.consistent
+
+
+def test_a_lagging_strain_the_base_paid_for_is_named_beside_the_delay():
+    _, result = _diagnosed(draw_spec(STRAIN_SEED, effect='strain_sensitivity', R=0.5,
+                                     rate_range=(3e5, 1e6)))
+    assert result.verdict == 'ambiguous', result.explanation
+    assert set(result.named) == {'channel_delay', 'strain_sensitivity'}
+    assert [r.effect for r in result.ranking[:2]] == list(result.named)
