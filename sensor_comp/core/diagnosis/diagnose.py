@@ -1086,10 +1086,11 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
     the practical share: the base took the rest), read as itself and leave only noise; it
     is then named first, significant, with how the base held it. Another candidate counted
     beyond noise that leaves less beyond its own floor by the practical share of the noise
-    or more takes that away; one that leaves as little within it, and does not imitate the
-    held mode (:func:`_beside_held`), makes the verdict ``ambiguous``, as does one that
-    makes what the base holds as well (:attr:`~sensor_comp.core.effects.Effect.held_alike`:
-    a base strain lags as a delay does), its size resolved or not. None when there is none.
+    or more takes that away. One that makes what the base holds as well
+    (:attr:`~sensor_comp.core.effects.Effect.held_alike`: a base strain lags as a delay
+    does) and leaves as little within that share, its size resolved or not, makes the
+    verdict ``ambiguous``; others do not (a mount mode's anti-resonance in the base's own
+    numerator is its own signature). None when there is none.
     """
     held = next((r for r in ranked if r.held is not None and r.doubt is None
                  and r.p_value < ctx.alpha and r.leftover.consistent), None)
@@ -1105,8 +1106,7 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
                    evidence=f'{held.evidence} {held.held[0].upper()}{held.held[1:]}.')
     found = (f'{best.title} ({best.effect}): {best.held}; with it the model leaves '
              f'{best.leftover.describe()}, consistent with the noise')
-    alike = [r for r in rivals if r.leftover.consistent
-             and get_effect(r.effect).imitates_held(r.fit) is None]
+    alike = [r for r in rivals if r.effect in same and r.leftover.consistent]
     ranked = [best, *alike] + [r for r in ranked
                                if r is not held and not any(r is a for a in alike)]
     if alike:
