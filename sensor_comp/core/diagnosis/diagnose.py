@@ -1037,7 +1037,11 @@ def _verdict(ranked: Sequence[Ranked], ctx: _Context, base_left: Leftover
         # an advantage the size of its own misfit does not tell the forms apart.
         margin = PRACTICAL_SHARE + min(max(best.leftover.excess, 0.0),
                                        ctx.allowance() - PRACTICAL_SHARE)
-        alike = [r for r in significant[1:] if r.leftover.consistent
+        # Where the base held the best's form, what makes that form as well stays in the
+        # answer, counted or not (:func:`_held`).
+        same = get_effect(best.effect).held_alike if best.held is not None else ()
+        alike = [r for r in ranked if r is not best and r.leftover.consistent
+                 and (r.significant or (r.effect in same and r.p_value < ctx.alpha))
                  and best.explained - r.explained < margin]
         unsized = _unsized(best, ranked, ctx)
         held = '' if best.held is None else f'; {best.held}'
