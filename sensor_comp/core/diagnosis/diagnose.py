@@ -1088,16 +1088,15 @@ def _held(ranked: Sequence[Ranked], ctx: _Context):
 
     The effect must be read as itself (no doubt: its size told from zero at the
     family-wise level) and leave only noise; what it improves on the base does not count
-    (the base took it: a 11.55 kHz mount mode at 106 kS/s, read 11.52 ± 0.014 kHz, gain
+    (the base took it: an 11.55 kHz mount mode at 106 kS/s, read 11.52 ± 0.014 kHz, gain
     -0.496 ± 0.079 for -0.5, left 0.018 noise energies more than the base on the
     validation shots). It is then named first, significant, with how the base held it.
-    Another candidate counted
-    beyond noise that leaves less beyond its own floor by the practical share of the noise
-    or more takes that away. One that makes what the base holds as well
-    (:attr:`~sensor_comp.core.effects.Effect.held_alike`: a base strain lags as a delay
-    does) and leaves as little within that share, its size resolved or not, makes the
-    verdict ``ambiguous``; others do not (a mount mode's anti-resonance in the base's own
-    numerator is its own signature). None when there is none.
+    Another candidate counted beyond noise that leaves less beyond its own floor by the
+    practical share of the noise or more takes that away. One that makes what the base
+    holds as well (:attr:`~sensor_comp.core.effects.Effect.held_alike`: a base strain lags
+    as a delay does) and leaves as little within that share, its size resolved or not,
+    makes the verdict ``ambiguous``; others do not (a mount mode's anti-resonance in the
+    base's own numerator is its own signature). None when there is none.
     """
     held = next((r for r in ranked if r.held is not None and r.doubt is None
                  and r.leftover.consistent), None)

@@ -130,11 +130,12 @@ class ChannelDelay(Effect):
         if not given / HELD_FACTOR <= delay <= HELD_FACTOR * given:
             return None
         pairs = resonances(held.a, held.fs)
-        pair = (f'{min(pairs, key=lambda p: p[1])[0] / 1e3:.3g} kHz at ζ {bound:.2g}' if pairs
-                else 'no ringing pair')
-        return (f'the lag-free base paid the delay with its mode: its pair ({pair}, the most '
-                f'damping a sensor\'s mode is held to) lags {1e6 * lag:.3g} µs, the delayed '
-                f'fit\'s {1e6 * own:.2g} µs, so the base followed the shots without naming it')
+        poles = (f'its pair ({min(pairs, key=lambda p: p[1])[0] / 1e3:.3g} kHz at ζ {bound:.2g}, '
+                 f'the most damping a sensor\'s mode is held to)' if pairs
+                 else 'its poles (no ringing pair)')
+        return (f'the lag-free base paid the delay with its mode: {poles} '
+                f'hold{"s" if pairs else ""} {1e6 * lag:.3g} µs of lag, the delayed fit\'s '
+                f'{1e6 * own:.2g} µs, so the base followed the shots without naming it')
 
     def evidence(self, analysis: ResidualView | None, outcome: Outcome) -> str:
         """Say what the rate probe and the delayed model find."""
