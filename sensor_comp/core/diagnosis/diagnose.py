@@ -71,8 +71,8 @@ The verdict:
   significant when it removes :data:`NAME_SHARE` of what the first leaves); or, where no
   effect is significant, an effect the base's own structure holds
   (:meth:`~sensor_comp.core.effects.Effect.held_by_base`: a mount mode in a two-pole base
-  with its anti-resonance in the free numerator), read as itself, beyond noise and
-  leaving only noise;
+  with its anti-resonance in the free numerator, a delay a lag-free pair paid with its
+  own lag), read as itself and leaving only noise (:func:`_held`);
 - ``'ambiguous'``: the best significant effect leaves a residual consistent with the noise,
   but so does another significant one that removes less than :data:`PRACTICAL_SHARE` noise
   energies less (plus what the best itself leaves beyond the noise, up to the form
@@ -81,8 +81,10 @@ The verdict:
   lists them, best first. So does a best effect whose form a rival outside the catalogue
   passes for on the base residual (:func:`~.rival_forms.untold_form`: ``a|a|`` against a
   cubic drive), and one that a candidate beats on what it leaves and on its evidence while
-  its size alone is unresolved at the family-wise level (:func:`_unsized`);
-  ``alternatives`` lists what the first cannot be told from;
+  its size alone is unresolved at the family-wise level (:func:`_unsized`), and a held
+  effect beside another that makes what the base holds as well (a lagging strain beside a
+  delay, :attr:`~sensor_comp.core.effects.Effect.held_alike`); ``alternatives`` lists what
+  the first cannot be told from;
 - ``'partly_explained'``: the best significant effect removes part of the residual but
   leaves one the noise does not account for (a second effect, or one outside the
   catalogue): the explanation gives the explained share, the leftover in noise units and
