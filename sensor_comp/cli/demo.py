@@ -120,7 +120,7 @@ def next_step(diagnosis) -> tuple[str | None, list[str]]:
     """
     Return the effect the demo adds after ``diagnosis`` (None: it stops) and what it prints.
 
-    Every verdict of :data:`~sensor_comp.core.diagnosis.diagnose.VERDICTS` is handled: with
+    Every verdict of :data:`~sensor_comp.core.diagnosis.findings.VERDICTS` is handled: with
     ``missing_effect`` the named effect is added; with ``partly_explained`` too, saying
     that it leaves a residual beyond the noise (so the fall is partial); with ``ambiguous``
     the first of the alternatives, saying that the shots cannot tell it from the others;

@@ -43,7 +43,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     'compensate_recording': '.compensation.filter',
     'CompensationFilter': '.compensation.filter',
     'detect_shots': '.shots.detection',
-    'Diagnosis': '.diagnosis.diagnose',
+    'Diagnosis': '.diagnosis.findings',
     'Identification': '.identification.identify',
     'load': '.identification.model',
     'Model': '.identification.model',

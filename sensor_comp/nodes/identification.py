@@ -44,7 +44,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from ..core.diagnosis.diagnose import ATTENTION
+from ..core.diagnosis.findings import ATTENTION
 from ..core.effects import EFFECTS
 from ..core.identification.identify import STRUCTURE_CHOICES
 from ..core.identification.live_shots import LiveShots, ShotWindow

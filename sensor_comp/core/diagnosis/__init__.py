@@ -14,6 +14,6 @@ __all__ = [
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     'analyse': '.residual',
-    'Diagnosis': '.diagnose',
+    'Diagnosis': '.findings',
     'NoiseModel': '.noise_floor',
 })

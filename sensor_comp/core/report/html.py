@@ -17,7 +17,7 @@ import os
 from matplotlib.figure import Figure
 
 from ..compensation.compare import Comparison, format_table
-from ..diagnosis.diagnose import ATTENTION, NEXT_STEP, VERDICTS
+from ..diagnosis.findings import ATTENTION, NEXT_STEP, VERDICTS
 from .plots import comparison_figure, comparison_residual_figure
 from ..diagnosis.residual import ResidualAnalysis
 from .residual_plots import (amplitude_figure, cross_correlation_figure, probes_figure,

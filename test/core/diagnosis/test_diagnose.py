@@ -34,7 +34,6 @@ checked without the samples around the corners (measured: 20 % with them, 73 % w
 One case runs at 1 MS/s (transverse sensitivity), and one clean pair.
 """
 
-from dataclasses import replace
 import functools
 import json
 
@@ -358,7 +357,7 @@ def test_a_named_effect_that_leaves_more_than_noise_is_partly_explained():
 
 
 def test_a_candidate_whose_fit_fails_is_a_note_and_the_others_go_on(monkeypatch):
-    from sensor_comp.core.diagnosis import diagnose as module
+    from sensor_comp.core.diagnosis import context, scoring
     from sensor_comp.core.identification import held_base
     real = held_base.fit_extended
 
@@ -368,7 +367,8 @@ def test_a_candidate_whose_fit_fails_is_a_note_and_the_others_go_on(monkeypatch)
         return real(windows, effects=effects, **options)
 
     monkeypatch.setattr(held_base, 'fit_extended', failing)
-    monkeypatch.setattr(module, 'pool_size', lambda *args: 1)  # a helper has no patch
+    for module in (context, scoring):  # a helper has no patch
+        monkeypatch.setattr(module, 'pool_size', lambda *args: 1)
     effects, fs, noise, accel_noise, _, _ = CASES['nonlinear_sensitivity']
     (_, calib), (_, valid) = pair(effects, fs, noise, accel_noise)
     result = diagnose([calib], [valid], residual_analysis=False,
@@ -393,17 +393,6 @@ def _fake_diagnosis(verdict):
                            to_dict=lambda: {'verdict': verdict, 'named': list(named),
                                             'alternatives': list(alternatives),
                                             'explanation': f'{verdict}: why'})
-
-
-def test_every_verdict_has_a_next_step_and_an_attention_flag():
-    from sensor_comp.core.diagnosis.diagnose import ATTENTION, NEXT_STEP, VERDICTS
-    assert set(NEXT_STEP) == set(VERDICTS) == set(ATTENTION)
-    assert set(VERDICTS) == {'missing_effect', 'ambiguous', 'partly_explained', 'adequate',
-                             'unexplained'}
-    assert [v for v in VERDICTS if not ATTENTION[v]] == ['adequate']
-    # The module documentation defines each verdict.
-    from sensor_comp.core.diagnosis import diagnose as module
-    assert all(f"``'{v}'``" in module.__doc__ for v in VERDICTS)
 
 
 @pytest.mark.parametrize('verdict', ['missing_effect', 'ambiguous', 'partly_explained',
@@ -431,64 +420,6 @@ def test_the_demo_and_the_report_handle_every_verdict(verdict):
     assert ('(zero_shift or amplifier_highpass)' in text) == (verdict == 'ambiguous')
 
 
-def _ranked(effect, score, *, consistent, significant=True):
-    """Return a ranking entry whose leftover is (or is not) consistent with the noise."""
-    from types import SimpleNamespace
-    from sensor_comp.core.diagnosis.diagnose import Ranked
-    ratio = 1.02 if consistent else 3.0
-    left = SimpleNamespace(consistent=consistent, energy_ratio=ratio, excess=ratio - 1.0,
-                           noise_variance=1.0, peak_above=False,
-                           describe=lambda: '1.02× the noise energy')
-    return Ranked(effect=effect, title=effect.replace('_', ' '), score=score, parameters={},
-                  evidence='', significant=significant, statistic=100.0, test='chi2',
-                  p_value=1e-9, fit_percent=99.0, peak_residual_percent=1.0, units={},
-                  explained=5.0, excess_share=0.9, relevant=True, leftover=left)
-
-
-@pytest.mark.parametrize('second_consistent, verdict', [(True, 'ambiguous'),
-                                                        (False, 'missing_effect')])
-def test_two_effects_that_each_leave_only_noise_are_ambiguous(second_consistent, verdict):
-    # An accelerometer resonance (outside the catalogue) of seed 21 was named as base strain
-    # although a second mode left only noise too: no single name is then the answer.
-    from types import SimpleNamespace
-    from sensor_comp.core.diagnosis.diagnose import _verdict
-    ranked = [_ranked('strain_sensitivity', 0.132, consistent=True),
-              _ranked('second_resonance', 0.130, consistent=second_consistent),
-              _ranked('zero_shift', 0.002, consistent=True, significant=False)]
-    ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
-    found, explanation, named, left, _, _ = _verdict(ranked, ctx, ranked[0].leftover)
-    assert found == verdict and left is ranked[0].leftover
-    if verdict == 'ambiguous':
-        assert named == ('strain_sensitivity', 'second_resonance')
-        assert explanation.startswith('ambiguous: strain sensitivity (strain_sensitivity)')
-        assert 'cannot tell it from strain_sensitivity' in explanation
-    else:
-        assert named == ('strain_sensitivity',) and 'cannot tell' not in explanation
-
-
-def test_a_form_outside_the_catalogue_that_passes_for_the_best_makes_it_ambiguous():
-    # A cubic drive (seed 21, rig 99) was named nonlinear sensitivity: its a|a| fit left only
-    # noise, and on the base residual G·a³ explained as much as G·(a|a|).
-    from dataclasses import replace
-    from types import SimpleNamespace
-    from sensor_comp.core.diagnosis.diagnose import _verdict, Diagnosis
-    best = replace(_ranked('nonlinear_sensitivity', 0.716, consistent=True),
-                   untold='G·a³ (a cubic drive)')
-    ranked = [best, _ranked('zero_shift', 0.03, consistent=False, significant=False)]
-    ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
-    found, explanation, named, left, _, _ = _verdict(ranked, ctx, best.leftover)
-    assert found == 'ambiguous' and named == ('nonlinear_sensitivity',)
-    assert "do not tell its form from nonlinear_sensitivity's" in explanation
-    fields = dict.fromkeys(('ranking', 'skipped', 'base', 'base_effects', 'fit_percent',
-                            'peak_residual_percent', 'noise_sigma_pa', 'energy_ratio',
-                            'energy_tolerance', 'consistent_with_noise'))
-    diagnosis = Diagnosis(**dict(fields, verdict=found, ranking=tuple(ranked), named=named))
-    assert diagnosis.alternatives == ('G·a³ (a cubic drive)',)
-    assert diagnosis.named_words == 'nonlinear_sensitivity or G·a³ (a cubic drive)'
-    # Named as the answer, the same entry's form is not in doubt.
-    assert replace(diagnosis, verdict='missing_effect').alternatives == ()
-
-
 def test_an_unknown_verdict_is_refused_by_the_demo_and_flagged_by_the_report():
     from sensor_comp.cli.demo import next_step
     from sensor_comp.core.report.html import verdict_html
@@ -499,14 +430,16 @@ def test_an_unknown_verdict_is_refused_by_the_demo_and_flagged_by_the_report():
 
 
 def test_candidates_fitted_in_a_helper_process_rank_as_here(monkeypatch):
-    from sensor_comp.core.diagnosis import diagnose as module
+    from sensor_comp.core.diagnosis import context, scoring
     effects, fs, noise, accel_noise, _, _ = CASES['nonlinear_sensitivity']
     (_, calib), (_, valid) = pair(effects, fs, noise, accel_noise)
     options = {'residual_analysis': False,
                'candidates': ['second_resonance', 'nonlinear_sensitivity', 'zero_shift']}
-    monkeypatch.setattr(module, 'pool_size', lambda *args: 1)
+    for module in (context, scoring):
+        monkeypatch.setattr(module, 'pool_size', lambda *args: 1)
     here = diagnose([calib], [valid], **options)
-    monkeypatch.setattr(module, 'pool_size', lambda *args: 2)
+    for module in (context, scoring):
+        monkeypatch.setattr(module, 'pool_size', lambda *args: 2)
     shared = diagnose([calib], [valid], **options)
     assert shared.verdict == here.verdict
     assert [r.effect for r in shared.ranking] == [r.effect for r in here.ranking]
@@ -534,69 +467,3 @@ def test_a_channel_delay_beside_a_mode_above_the_pulses_band_is_told_from_none_b
     assert result.entry('strain_sensitivity').leftover.energy_ratio > 1.15
     delay, std = result.entry('channel_delay').parameters['delay_us']
     assert abs(delay - 40.0) <= 2 * std and std < 10.0
-
-
-def test_a_partly_explained_verdict_names_what_removes_as_much(monkeypatch):
-    # Seed 25's rig 88 (a 20.4 kHz second mode) was partly explained by strain, which
-    # removed 0.674 noise energies against the mode's 0.645, and the mode was not mentioned.
-    from dataclasses import replace
-    from types import SimpleNamespace
-    from sensor_comp.core.diagnosis import diagnose as module
-    monkeypatch.setattr(module, '_second', lambda best, others, ctx: None)
-    best = replace(_ranked('strain_sensitivity', 0.423, consistent=False), explained=0.674)
-    rival = replace(_ranked('second_resonance', 0.404, consistent=False), explained=0.645)
-    far = replace(_ranked('zero_shift', 0.30, consistent=False), explained=0.674 - 0.051)
-    ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
-    found, explanation, named, *_ = module._verdict([best, rival, far], ctx, best.leftover)
-    assert found == 'partly_explained' and named == ('strain_sensitivity',)
-    assert ('. Second resonance (second_resonance, 40.4 %, leaving 3.00× the noise energy) '
-            'removes as much') in explanation
-    assert 'zero_shift' not in explanation
-    found, explanation, *_ = module._verdict([best, far], ctx, best.leftover)
-    assert found == 'partly_explained' and 'as much' not in explanation
-
-
-def test_candidates_the_energy_does_not_tell_apart_go_by_their_evidence():
-    # Seed 25's rig 114 (a 67 kHz mode at 220 kS/s): a delay removed the most energy
-    # (score 0.076) and a second mode the least (0.054), but the mode left 0.019 noise
-    # energies beyond its own floor against the delay's 0.062 (within the practical share,
-    # 0.05) and its change followed the residual more surely (z 47.7 against 35.0).
-    from types import SimpleNamespace
-    from scipy import stats
-    from sensor_comp.core.diagnosis.diagnose import _ordered, Ranked
-
-    def ranked(effect, score, z, beyond, *, significant=True):
-        left = SimpleNamespace(excess=beyond, noise_variance=1.0)
-        return Ranked(effect=effect, title=effect, score=score, parameters={}, evidence='',
-                      significant=significant, statistic=z, test='z',
-                      p_value=float(stats.norm.sf(z)), fit_percent=99.0,
-                      peak_residual_percent=1.0, leftover=left,
-                      log_p_value=float(stats.norm.logsf(z)))
-
-    ctx = SimpleNamespace(noise=SimpleNamespace(variance=1.0))
-    delay, mode = ranked('channel_delay', 0.076, 35.0, 0.062), ranked('mode', 0.054, 47.7, 0.019)
-    strain = ranked('strain', 0.068, 35.1, 0.042)
-    weak = ranked('hum', 0.5, 99.0, 0.0, significant=False)
-    assert [r.effect for r in _ordered([delay, strain, weak, mode], ctx)] == [
-        'mode', 'strain', 'channel_delay', 'hum']
-    # Beyond the practical share the energy tells them apart: the least excess comes first.
-    far = ranked('channel_delay', 0.076, 35.0, 0.019 + 0.051)
-    assert [r.effect for r in _ordered([far, mode], ctx)] == ['mode', 'channel_delay']
-    near = ranked('channel_delay', 0.076, 60.0, 0.019 + 0.049)
-    assert [r.effect for r in _ordered([mode, near], ctx)] == ['channel_delay', 'mode']
-
-
-def test_a_cause_outside_the_catalogue_needs_an_improvement_beyond_noise():
-    from types import SimpleNamespace
-    from sensor_comp.core.diagnosis.diagnose import _outside
-    ctx = SimpleNamespace(alpha=1e-3 / 8)
-    why = 'the fit cancels 19.2 kHz where the measured acceleration rings'
-    chance = replace(_ranked('second_resonance', 0.02, consistent=True, significant=False),
-                     p_value=0.01, outside=why)
-    assert _outside([chance], ctx) is None  # an improvement chance gives finds nothing
-    beyond = replace(chance, p_value=1e-12)
-    plain = replace(beyond, effect='strain_sensitivity', outside=None)
-    assert _outside([plain], ctx) is None  # beyond noise, but in the catalogue's form
-    found = _outside([plain, beyond], ctx)
-    assert found.startswith('second resonance (second_resonance) improves it beyond noise '
-                            '(p = 1e-12, 5.000 noise energies)') and found.endswith(why)

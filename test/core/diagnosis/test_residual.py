@@ -533,7 +533,7 @@ def test_leftover_reports_a_misfit_confined_to_the_pulse_by_its_peak():
     assert found.peak_ratio == pytest.approx(12.0, rel=0.1)
     assert 'largest value' not in found.describe()  # it is consistent: the verdict says it
     assert 'largest value is 12' in found.peak_words() and 'during the pulse' in found.peak_words()
-    from sensor_comp.core.diagnosis.diagnose import _local
+    from sensor_comp.core.diagnosis.verdict import _local
     assert _local(clean) == '' and 'Locally it does not: its largest value is 12' in _local(found)
     assert 'before taking the base model for' in _local(found, answer='the base model')
     doc = json.loads(json.dumps(found.to_dict()))

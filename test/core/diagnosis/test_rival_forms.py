@@ -20,10 +20,11 @@ import pytest
 from scipy import stats
 
 from bench.independent_rig import draw_spec, simulate
-from sensor_comp.core.diagnosis.diagnose import (_unresolved_amplitude, AMPLITUDE_ALPHA,
-                                                 diagnose)
+from sensor_comp.core.diagnosis.diagnose import diagnose
+from sensor_comp.core.diagnosis.findings import AMPLITUDE_ALPHA
 from sensor_comp.core.diagnosis.noise_floor import PRACTICAL_SHARE
 from sensor_comp.core.diagnosis.rival_forms import untold_form
+from sensor_comp.core.diagnosis.scoring import unresolved_amplitude
 from sensor_comp.core.effects import get_effect
 from sensor_comp.core.effects.base import RIVAL_MARGIN, RIVAL_SHARE
 from sensor_comp.core.identification.identify import ShotSource
@@ -208,7 +209,7 @@ def test_an_amplitude_meets_the_family_wise_level():
     assert level == pytest.approx(2.73, abs=0.005)
 
     def doubt(z):
-        return _unresolved_amplitude(effect, {effect.amplitude: (z * 0.02, 0.02)}, ctx)
+        return unresolved_amplitude(effect, {effect.amplitude: (z * 0.02, 0.02)}, ctx)
 
     assert 'not told apart from zero beside the other candidates' in doubt(0.99 * level)
     assert doubt(-0.99 * level) is not None
@@ -216,9 +217,9 @@ def test_an_amplitude_meets_the_family_wise_level():
     # An effect without an amplitude, or an amplitude without a deviation, is left to the
     # effect's own checks.
     assert get_effect('amplifier_highpass').amplitude is None
-    assert _unresolved_amplitude(get_effect('amplifier_highpass'), {'tau_ms': (8.0, 0.01)},
-                                 ctx) is None
-    assert _unresolved_amplitude(effect, {effect.amplitude: (0.01, None)}, ctx) is None
+    assert unresolved_amplitude(get_effect('amplifier_highpass'), {'tau_ms': (8.0, 0.01)},
+                                ctx) is None
+    assert unresolved_amplitude(effect, {effect.amplitude: (0.01, None)}, ctx) is None
 
 
 @pytest.mark.slow
