@@ -85,8 +85,10 @@ class Ranked:
             strength of the evidence where the p-values are all 0.
         outside: Why a cause outside the catalogue explains the fit as well (then it is
             its doubt, :meth:`~sensor_comp.core.effects.Effect.confounded`), or None.
-        unsized: Its only doubt is its amplitude, told from zero by the effect's own test
-            but not at its share of the family-wise level (:func:`~.scoring.unresolved_amplitude`).
+        unsized: Its only doubt is its amplitude: read without a deviation (the fit reads
+            as the effect, the data do not size it), or told from zero by the effect's own
+            test but not at its share of the family-wise level
+            (:func:`~.scoring.unresolved_amplitude`).
         fit: The extended fit (not in :meth:`to_dict`).
 
     """

@@ -232,9 +232,14 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: Context) -> Ranked:
     units = {k: effect.parameters.get(k, '') for k in parameters}
     left = ctx.leftover(residual)
     doubt, rival, outside = effect.implausible(fit), effect.rival(analysis), None
-    if doubt is None:
-        doubt = outside = effect.confounded(fit, ctx.calibration + ctx.validation)
-    unsized = False
+    # A fit that reads as the effect but whose size the data do not pin (no deviation: its
+    # direction is one the base's own parameters trade with) is unsized, not absent.
+    unsized = (doubt is not None and _unpinned(effect, parameters)
+               and effect.implausible(fit, sized=False) is None)
+    if doubt is None or unsized:
+        outside = effect.confounded(fit, ctx.calibration + ctx.validation)
+        if outside is not None:
+            doubt, unsized = outside, False
     if doubt is None:
         doubt = unresolved_amplitude(effect, parameters, ctx)
         unsized = doubt is not None
@@ -283,6 +288,14 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: Context) -> Ranked:
                   held=None if doubt is not None else effect.held_by_base(
                       fit, base=ctx.base),
                   log_p_value=log_p, outside=outside, unsized=unsized, fit=fit)
+
+
+def _unpinned(effect: Effect, parameters: Physical) -> bool:
+    """Return whether the effect's amplitude is read without a deviation."""
+    if effect.amplitude is None:
+        return False
+    value, std = parameters.get(effect.amplitude, (None, None))
+    return value is not None and (std is None or not math.isfinite(std))
 
 
 def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],

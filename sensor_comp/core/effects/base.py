@@ -391,21 +391,22 @@ class Effect:
                          f'{100 * outcome.score:.1f} % of the validation residual energy'
                          f'{parameters_text(self, outcome.parameters)}'])
 
-    def implausible(self, fit: FitView) -> str | None:
+    def implausible(self, fit: FitView, *, sized: bool = True) -> str | None:
         """
         Return why a fit of this effect is no physical reading of it, or None when it is one.
 
         Unreadable parameters, a log-searched value at an end of its range or not resolved
         (its deviation above the value: the data do not tell its decade), or an
         :attr:`amplitude` not told apart from zero mean the extension fits something else
-        (``doc/effects.md``).
+        (``doc/effects.md``). ``sized=False`` leaves the amplitude's size out: whether the
+        fit reads as the effect, whatever the data say of how large it is.
         """
         if self.parameters and not fit.parameters(self.id):
             return 'its physical parameters cannot be read from the fitted model'
         why = self.unread_search(fit)
         if why is not None:
             return why
-        if self.amplitude is not None:
+        if self.amplitude is not None and sized:
             value, std = fit.parameters(self.id).get(self.amplitude, (None, None))
             if value is not None and (std is None or not math.isfinite(std)):
                 return (f'its {self.amplitude} ({value:.3g}) has no deviation: the fit is '

@@ -93,9 +93,9 @@ class ChannelDelay(Effect):
         return {'delay_us': (delay(model.a, model.b) + (0.0 if traded is None else
                                                         0.5e6 * traded), std)}
 
-    def implausible(self, fit: FitView) -> str | None:
+    def implausible(self, fit: FitView, *, sized: bool = True) -> str | None:
         """Return why the fit is no delay: the generic checks, a lead, or an absurd lag."""
-        why = super().implausible(fit)
+        why = super().implausible(fit, sized=sized)
         if why is not None:
             return why
         delay = fit.parameters(self.id)['delay_us'][0]

@@ -217,7 +217,7 @@ class SecondResonance(Effect):
                 f'parallel, which no single-mode sensor has, so the base followed the shots '
                 f'without naming it')
 
-    def implausible(self, fit: FitView) -> str | None:
+    def implausible(self, fit: FitView, *, sized: bool = True) -> str | None:
         """
         Return why the fit is no second mode: its base, the generic checks or its gain.
 
@@ -225,13 +225,14 @@ class SecondResonance(Effect):
         sensor's between two pairs; the searched mode then fits something else (a 12.7 kHz
         mount mode held by four base poles, the sensor's 44 kHz mode read as a 31 kHz
         second one). A corrected fit's gain is told from zero on it or on the
-        least-squares fit it came from (``least_squares``), whichever reads it more precisely.
+        least-squares fit it came from (``least_squares``), whichever reads it more precisely
+        (not with ``sized=False``).
         """
         if fit.spec.nf > MAX_BASE_POLES:
             return (f'a base of {fit.spec.nf} poles holds a mode besides the sensor\'s: the '
                     f'searched one is a third (a second mode is read beside one)')
-        why = super().implausible(fit)
-        if why is not None:
+        why = super().implausible(fit, sized=sized)
+        if why is not None or not sized:
             return why
         # Both readings are centred on zero where no mode exists: least squares shrink the
         # gain by the accelerometer's noise (-0.37 ± 0.14 against -0.50 ± 0.095 corrected),

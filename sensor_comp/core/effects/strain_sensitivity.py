@@ -115,9 +115,9 @@ class StrainSensitivity(Effect):
                 std = math.hypot(std, abs(lead) * UNIFORM_STD)
         return {'pa_per_g_per_ms': (value, std)}
 
-    def implausible(self, fit: FitView) -> str | None:
+    def implausible(self, fit: FitView, *, sized: bool = True) -> str | None:
         """Return why the fit is no base strain: the generic checks or an absurd lead."""
-        why = super().implausible(fit)
+        why = super().implausible(fit, sized=sized)
         if why is not None:
             return why
         model = fit.model()

@@ -84,9 +84,9 @@ class TransverseSensitivity(Effect):
             out[name] = (func(model.a, model.b), std)
         return out
 
-    def implausible(self, fit: FitView) -> str | None:
+    def implausible(self, fit: FitView, *, sized: bool = True) -> str | None:
         """Return why the fit is no transverse sensitivity: a lateral path above the axial."""
-        why = super().implausible(fit)
+        why = super().implausible(fit, sized=sized)
         ratio = fit.parameters(self.id)['ratio'][0] if why is None else 0.0
         if why is None and not ratio <= 1.0:
             why = (f'the lateral sensitivity is {ratio:.3g} times the axial one: the lateral '

@@ -618,3 +618,22 @@ def test_a_corrected_second_modes_gain_is_told_from_zero_on_its_more_precise_rea
 def test_every_effect_with_a_size_names_it_among_its_parameters():
     for effect in EFFECTS.values():
         assert effect.amplitude is None or effect.amplitude in effect.parameters
+
+
+@pytest.mark.parametrize('std', [None, math.inf, 0.065])
+def test_a_reading_without_its_size_leaves_the_amplitude_out(std):
+    # The diagnosis asks whether a fit reads as the effect apart from its size: a size the
+    # data do not pin is a doubt of its own (the candidate is unsized, not absent).
+    effect = get_effect('nonlinear_sensitivity')
+    fit = SimpleNamespace(spec=ModelSpec(), values={}, value_std={},
+                          parameters=lambda _: {'beta_per_g': (0.084, std)})
+    assert effect.implausible(fit) is not None
+    assert effect.implausible(fit, sized=False) is None
+
+
+def test_a_leading_delay_without_a_deviation_reads_no_delay_whatever_its_size():
+    effect = get_effect('channel_delay')
+    fit = SimpleNamespace(spec=ModelSpec(), values={}, value_std={},
+                          parameters=lambda _: {'delay_us': (-5.0, None)})
+    assert 'has no deviation' in effect.implausible(fit)
+    assert 'leads the acceleration' in effect.implausible(fit, sized=False)
