@@ -96,13 +96,13 @@ def ordered(ranked: Sequence[Ranked], ctx: Context) -> list[Ranked]:
     """
     by_score = sorted(ranked, key=lambda r: -r.score)  # stable: ties keep catalogue order
     rest = sorted((r for r in by_score if r.significant), key=excess)
-    ordered = []
+    out = []
     while rest:  # each group is a prefix of ``rest``, taken back in evidence order
         edge = excess(rest[0]) + PRACTICAL_SHARE * ctx.noise.variance
         size = sum(excess(r) <= edge for r in rest)
-        ordered += sorted(rest[:size], key=lambda r: r.log_p_value)
+        out += sorted(rest[:size], key=lambda r: r.log_p_value)
         rest = rest[size:]
-    return ordered + [r for r in by_score if not r.significant]
+    return out + [r for r in by_score if not r.significant]
 
 
 def excess(r: Ranked) -> float:
@@ -234,7 +234,7 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: Context) -> Ranked:
     doubt, rival, outside = effect.implausible(fit), effect.rival(analysis), None
     # A fit that reads as the effect but whose size the data do not pin (no deviation: its
     # direction is one the base's own parameters trade with) is unsized, not absent.
-    unsized = (doubt is not None and _unpinned(effect, parameters)
+    unsized = (doubt is not None and effect.unpinned(parameters)
                and effect.implausible(fit, sized=False) is None)
     if doubt is None or unsized:
         outside = effect.confounded(fit, ctx.calibration + ctx.validation)
@@ -274,28 +274,20 @@ def _score(effect_id: str, fit: ExtendedFit, ctx: Context) -> Ranked:
                 and doubt is None and ctx.as_free(sse, left.noise_variance))
     # Against the extended model's own noise floor: the accelerometer noise through a
     # wrong base can raise the base's floor above the residual's own mean square.
-    share = excess_share(ctx, left) or 0.0
+    part = excess_share(ctx, left) or 0.0
     return Ranked(effect=effect_id, title=effect.title, score=float(score),
                   parameters=parameters, evidence=evidence,
-                  significant=bool(relevant and share >= NAME_SHARE),
+                  significant=bool(relevant and part >= NAME_SHARE),
                   statistic=float(statistic), test=test, p_value=p_value,
                   fit_percent=float(fit_percent([w.y for w in ctx.validation],
                                                 prediction.total)),
                   peak_residual_percent=peak_percent(ctx.validation, residual), units=units,
-                  explained=float(explained), excess_share=float(share),
+                  explained=float(explained), excess_share=float(part),
                   relevant=bool(relevant), leftover=left, doubt=doubt,
                   untold=None if untold is None else untold.words,
                   held=None if doubt is not None else effect.held_by_base(
                       fit, base=ctx.base),
                   log_p_value=log_p, outside=outside, unsized=unsized, fit=fit)
-
-
-def _unpinned(effect: Effect, parameters: Physical) -> bool:
-    """Return whether the effect's amplitude is read without a deviation."""
-    if effect.amplitude is None:
-        return False
-    value, std = parameters.get(effect.amplitude, (None, None))
-    return value is not None and (std is None or not math.isfinite(std))
 
 
 def _after_triggers(prediction: Prediction, residual: Sequence[np.ndarray],

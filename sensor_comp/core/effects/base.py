@@ -407,14 +407,22 @@ class Effect:
         if why is not None:
             return why
         if self.amplitude is not None and sized:
-            value, std = fit.parameters(self.id).get(self.amplitude, (None, None))
-            if value is not None and (std is None or not math.isfinite(std)):
+            parameters = fit.parameters(self.id)
+            value, std = parameters.get(self.amplitude, (None, None))
+            if self.unpinned(parameters):
                 return (f'its {self.amplitude} ({value:.3g}) has no deviation: the fit is '
                         f'over-parameterised, the data do not pin it')
             if value is not None and not abs(value) > AMPLITUDE_Z * std:
                 return (f'its {self.amplitude} ({value:.3g} ± {std:.2g}) is not told apart '
                         f'from zero')
         return None
+
+    def unpinned(self, parameters: Physical) -> bool:
+        """Return whether ``parameters`` read the :attr:`amplitude` without a deviation."""
+        if self.amplitude is None:
+            return False
+        value, std = parameters.get(self.amplitude, (None, None))
+        return value is not None and (std is None or not math.isfinite(std))
 
     def unread_search(self, fit: FitView) -> str | None:
         """

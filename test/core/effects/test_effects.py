@@ -629,6 +629,7 @@ def test_a_reading_without_its_size_leaves_the_amplitude_out(std):
                           parameters=lambda _: {'beta_per_g': (0.084, std)})
     assert effect.implausible(fit) is not None
     assert effect.implausible(fit, sized=False) is None
+    assert effect.unpinned(fit.parameters(effect.id)) == (std is None or std == math.inf)
 
 
 def test_a_leading_delay_without_a_deviation_reads_no_delay_whatever_its_size():
