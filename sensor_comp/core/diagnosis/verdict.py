@@ -216,7 +216,7 @@ def _unsized_words(best: Ranked, unsized: Sequence[Ranked]) -> str:
         return ''
     one = len(unsized) == 1
     return (f'; {_leaving(unsized)} leave{"s" if one else ""} less beyond the noise and follow'
-            f'{"s" if one else ""} the residual more surely, but {unsized[0].doubt}: these '
+            f'{"s" if one else ""} the residual more surely, but {unsized[0].doubt}, so these '
             f'shots cannot tell {"it" if one else "them"} from {best.effect}')
 
 
