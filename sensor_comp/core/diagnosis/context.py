@@ -18,8 +18,9 @@ import numpy as np
 from ..effects import EFFECTS
 from ..effects.mains_hum import line_columns
 from ..estimators import estimate_delay
-from ..identification.extended import (BASE_ORDERS, ExtendedFit, input_noise_corrected,
-                                       Prediction, shot_windows, Window)
+from ..identification.errors_in_variables import input_noise_corrected
+from ..identification.extended import (BASE_ORDERS, ExtendedFit, Prediction, shot_windows,
+                                       Window)
 from ..identification.held_base import base_starts, free_base, held_base
 from ..identification.model import Model
 from .findings import DiagnosisError

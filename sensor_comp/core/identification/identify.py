@@ -18,8 +18,9 @@ import numpy as np
 from ..compensation.compare import compare, Comparison
 from .denoise import DenoiseResult, EmdDenoiser
 from ..effects import EffectError, ordered
-from .extended import (BASE_DELAY, BASE_ORDERS, fit_extended, input_noise_corrected,
-                       robust_uncertainty)
+from .errors_in_variables import input_noise_corrected
+from .extended import BASE_DELAY, BASE_ORDERS, fit_extended
+from .robust_covariance import robust_uncertainty
 from .held_base import base_fits, base_starts, fit_on_base, modes_khz
 from ..shots.windows import EARLY_S, shot_channels, shot_windows, Window
 from ..estimators import (DelayEstimate, Estimate, estimate_delay, fit_armax_els, fit_armax_gls,
@@ -724,7 +725,7 @@ def _corrected_bic(fit, correction: tuple, windows) -> float:
     """
     Return :func:`_measured_bic` of ``fit`` as identify keeps it: with ``correction``.
 
-    ``correction`` is :func:`~.extended.input_noise_corrected`'s answer for ``fit``.
+    ``correction`` is :func:`~.errors_in_variables.input_noise_corrected`'s answer for ``fit``.
 
     The free and the lag-free fit compete as the fits the model will hold: a correction
     near the noise's share of a regressor direction can go astray on one of them (a free

@@ -18,14 +18,12 @@ from sensor_comp.bundled import bundled_bag
 from sensor_comp.core.compensation.filter import CompensationFilter, compensate_recording
 from sensor_comp.core.effects import EffectError
 from sensor_comp.core.compensation import initial_state
-from sensor_comp.core.effects.base import mechanics_delay_s, ModelSpec, Search
-from sensor_comp.core.identification.extended import (_with_traded_lag, fit_extended,
-                                                      search_effort, shot_windows)
+from sensor_comp.core.identification.extended import fit_extended, search_effort, shot_windows
 from sensor_comp.core.estimators import fit_percent, simulate_output
 from sensor_comp.core.identification.identify import identify, ShotSource
 from sensor_comp.core.identification.model import load
 from sensor_comp.io.bag_reader import read_recording
-from sensor_comp.core.shots.inputs import input_channels, mode_pair
+from sensor_comp.core.shots.inputs import input_channels
 from sensor_comp.sim import RigConfig, simulate, TABLE2
 from sensor_comp.streams import G0, Recording
 
@@ -206,86 +204,11 @@ def test_stated_deviations_cover_the_truth_over_noise_seeds(effect, name, truth,
     assert np.median(stds) < 3 * scatter, np.median(stds) / scatter
 
 
-def test_the_autocovariance_is_the_direct_sum_at_awkward_lengths():
-    # Lengths whose doubling has a large prime factor (18569 = 31 · 599) and lags up to
-    # beyond the window: every lag is Σ x̃[t] x̃[t + k], none wrapped around.
-    from sensor_comp.core.identification.extended import _autocovariance
-    rng = np.random.default_rng(3)
-    for n, lags in ((18569, 4000), (1009, 1009), (37, 60), (5, 1)):
-        x = rng.standard_normal(n) + 3.0
-        centred = x - x.mean()
-        direct = np.correlate(centred, centred, mode='full')[n - 1:]
-        direct = np.concatenate([direct, np.zeros(max(lags - n, 0))])[:lags]
-        got = _autocovariance(x, lags)
-        assert got.shape == (lags,)
-        assert np.allclose(got, direct, rtol=0, atol=1e-9 * float(centred @ centred)), n
-
-
-def test_the_robust_covariance_of_a_line_in_ar1_noise_is_the_analytic_one():
-    # y = θ x + e over 8 windows, e AR(1) with ρ = 0.9 (correlated over ~20 samples), x a
-    # smooth pulse: Var θ̂ = Σ_k R_e(k) R_x(k) / (xᵀx)², ~10x the white formula. The
-    # sandwich bounds the lag-window estimate (measured median 0.95 of this) and the
-    # between-window one (unbiased but χ² with 7 degrees of freedom, relative spread 0.53:
-    # 0.45-2.5 here), so its median lies above 1 by about that spread (measured 1.38); the
-    # white formula falls far short.
-    from scipy import signal
-    from sensor_comp.core.identification.extended import _sandwich
-    rho, n, count = 0.9, 2000, 8
-    t = np.arange(n)
-    x = np.exp(-0.5 * ((t - 600) / 80.0) ** 2)
-    ks = np.arange(-n + 1, n)
-    r_x = np.correlate(x, x, mode='full')
-    r_e = rho ** np.abs(ks) / (1 - rho ** 2)  # unit innovations
-    analytic = count * float(r_e @ r_x) / (count * float(x @ x)) ** 2
-    rng = np.random.default_rng(7)
-    ratios, whites = [], []
-    for _ in range(10):
-        e = np.concatenate([signal.lfilter([1.0], [1.0, -rho], rng.standard_normal(n))
-                            for _ in range(count)])
-        jac = np.tile(x, count)[:, None]
-        theta = float(jac[:, 0] @ e) / float(jac[:, 0] @ jac[:, 0])
-        residual = e - theta * jac[:, 0]
-        offsets = np.arange(count + 1) * n
-        ratios.append(_sandwich(residual, jac, offsets)[0, 0] / analytic)
-        whites.append(float(residual @ residual) / residual.size / float(jac[:, 0] @ jac[:, 0])
-                      / analytic)
-    assert 0.9 < np.median(ratios) < 1.8 and min(ratios) > 0.6, ratios
-    assert np.median(whites) < 0.2, whites
-
-
-def test_the_robust_covariance_counts_the_error_of_the_pre_trigger_mean():
-    # y = θ x + n − n̄ over 4 windows: the baseline n̄ is the mean of m = 400 pre-trigger
-    # samples and x a slow decay after them (a zero shift's regressor). θ̂ then carries
-    # −n̄·Σx/Σx² per window: Var θ̂ = σ² (1/Σx² + (Σx)²/(m (Σx²)²)) / windows, here 9×
-    # the white formula, which neither the lag window (3 samples) nor four windows' scatter
-    # (a χ² with 3 degrees of freedom) states reliably.
-    from sensor_comp.core.identification.extended import _sandwich
-    m, n, count = 400, 4000, 4
-    x = np.concatenate([np.zeros(m), np.exp(-np.arange(n - m) / 3000.0)])
-    sxx, sx = float(x @ x), float(x.sum())
-    analytic = (1 / sxx + sx ** 2 / (m * sxx ** 2)) / count
-    rng = np.random.default_rng(11)
-    ratios, thetas, without = [], [], []
-    offsets = np.arange(count + 1) * n
-    jac = np.tile(x, count)[:, None]
-    for _ in range(200):
-        noise = rng.standard_normal((count, n))
-        e = (noise - noise[:, :m].mean(axis=1, keepdims=True)).ravel()
-        theta = float(jac[:, 0] @ e) / float(jac[:, 0] @ jac[:, 0])
-        thetas.append(theta)
-        residual = e - theta * jac[:, 0]
-        ratios.append(_sandwich(residual, jac, offsets, [m] * count)[0, 0] / analytic)
-        without.append(_sandwich(residual, jac, offsets)[0, 0] / analytic)
-    assert 0.8 < np.var(thetas) / analytic < 1.3, np.var(thetas) / analytic
-    assert 0.85 < np.median(ratios) < 1.5 and min(ratios) > 0.7, ratios
-    assert np.median(without) < 0.9 and np.mean(np.array(without) < 0.5) > 0.2, without
-
-
 def test_a_searched_value_the_polynomials_imitate_gets_no_deviation_and_a_note(monkeypatch):
     # When the joint covariance is singular only through a searched value's column, that
     # value is not resolved: no deviation and a note; the polynomial-derived parameters keep
     # their (robust) deviation with it held fixed.
-    from sensor_comp.core.identification import extended as module
+    from sensor_comp.core.identification import robust_covariance as module
     real = module._sandwich
     windows = shot_windows([_coloured_rig('zero_shift:pa_per_g=4', 0)])
     fit = fit_extended(windows, effects=['zero_shift'], fs=FS, nf=2, nb=3, nk=0)
@@ -408,36 +331,3 @@ def test_search_effort_puts_the_coupled_delay_search_first():
     assert efforts['channel_delay'] > efforts['second_resonance'] > efforts['zero_shift'] > 0
     # Without lag-free numerators the delay is searched uncoupled: its grid alone.
     assert search_effort(('channel_delay',), fs=1e6, lag_free=False) == 21
-
-
-def test_a_mode_at_its_damping_bound_owns_the_lag_it_took_even_unresolved():
-    # The traded lag is the delay's deviation when the loss's curvature is not resolved.
-    fs = 200e3
-    spec = ModelSpec(nf=2, nb=3, nk=0, fs=fs, lag_free=True, max_zeta=0.2)
-    search = Search('channel_delay.delay_us', 0.0, 200.0, coupled=True, lag_unit_s=1e-6)
-    bound, free = mode_pair(30.0, 0.2, fs), mode_pair(30.0, 0.05, fs)
-    traded = 1e6 * mechanics_delay_s(bound, fs)
-    assert traded > 1.0
-    assert _with_traded_lag(None, search, spec, fs, bound) == pytest.approx(traded)
-    assert _with_traded_lag(0.5, search, spec, fs, bound) == pytest.approx(
-        math.hypot(0.5, traded / math.sqrt(12)))
-    assert _with_traded_lag(None, search, spec, fs, free) is None  # a resolved mode: as is
-
-
-def test_free_numerators_own_the_lag_of_a_pair_damped_as_no_sensor_is():
-    # Free numerators have no damping bound, but a pair damped beyond SENSOR_ZETA (or two
-    # real poles) holds lag a delay may own: 2ζ/ω, 8.3 µs for 25.8 kHz, ζ 0.67.
-    fs = 1.03e6
-    spec = ModelSpec(nf=2, nb=3, nk=0, fs=fs)
-    search = Search('channel_delay.delay_us', 0.0, 200.0, coupled=True, lag_unit_s=1e-6)
-    damped = mode_pair(25.8, 0.67, fs)
-    traded = 1e6 * mechanics_delay_s(damped, fs)
-    assert traded == pytest.approx(1e6 * 2 * 0.67 / (2 * math.pi * 25.8e3), rel=0.05)
-    assert _with_traded_lag(2.0, search, spec, fs, damped) == pytest.approx(
-        math.hypot(2.0, traded / math.sqrt(12)))
-    real = np.poly([0.9, 0.8])
-    assert _with_traded_lag(2.0, search, spec, fs, real) > 2.0
-    sensor = mode_pair(56.4, 0.07, fs)  # a sensor's mode: the curvature's deviation alone
-    assert _with_traded_lag(2.0, search, spec, fs, sensor) == 2.0
-    plain = Search('zero_shift.tau_ms', 1.0, 2000.0, log=True)  # not a lag: as is
-    assert _with_traded_lag(2.0, plain, spec, fs, damped) == 2.0

@@ -21,7 +21,7 @@ import pytest
 from scipy import signal
 
 from bench.independent_rig import draw_spec, simulate as simulate_rig
-from sensor_comp.core.identification import extended, identify as identify_module
+from sensor_comp.core.identification import fitter as fitter_module, identify as identify_module
 from sensor_comp.core.effects import EffectError
 from sensor_comp.core.identification.extended import fit_extended, shot_windows
 from sensor_comp.core.estimators import estimate_delay, fit_oe, fit_percent, IdentError, is_stable
@@ -233,8 +233,8 @@ def test_an_effect_fit_that_cannot_start_is_one_effect_error(monkeypatch):
     def refuse(*args, **kwargs):
         raise IdentError('the input does not excite this structure')
 
-    monkeypatch.setattr(extended, 'fit_oe', refuse)
-    monkeypatch.setattr(extended, '_grid', lambda nf, fs: [])
+    monkeypatch.setattr(fitter_module, 'fit_oe', refuse)
+    monkeypatch.setattr(fitter_module, 'start_grid', lambda nf, fs: [])
     with pytest.raises(EffectError) as caught:
         fit_extended(shot_windows([source]), effects=['nonlinear_sensitivity'], fs=200e3)
     text = str(caught.value)

@@ -17,7 +17,8 @@ import pytest
 from scipy import signal
 
 from bench.independent_rig import draw_spec, simulate as simulate_rig
-from sensor_comp.core.identification.extended import corrected_for_input_noise, fit_extended
+from sensor_comp.core.identification.errors_in_variables import corrected_for_input_noise
+from sensor_comp.core.identification.extended import fit_extended
 from sensor_comp.core.estimators.oe import OutputErrorProblem
 from sensor_comp.core.identification.input_noise import (CORRECTION_ERROR, noise_levels,
                                                          refine_mode, subtracted_noise)
@@ -195,7 +196,7 @@ def test_refine_mode_keeps_a_slow_pole_and_moves_a_fast_one():
 
 
 def test_identify_keeps_its_fit_when_the_correction_fails(monkeypatch):
-    from sensor_comp.core.identification import extended as module
+    from sensor_comp.core.identification import errors_in_variables as module
     from sensor_comp.core.identification.identify import identify, ShotSource
     from sensor_comp.sim import RigConfig, simulate, TABLE2
 
