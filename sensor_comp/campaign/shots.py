@@ -20,7 +20,7 @@ from .models import model_for, ModelFile
 from .table import failure_row, TABLE_VERSION
 from ..version import __version__
 from ..core.compensation.compare import compare
-from ..core.identification.identify import ShotSource
+from ..core.identification.shot_sources import ShotSource
 from ..core.shots.detection import Shot
 from ..errors import SensorCompError
 from ..io.recording_file import load_recording

@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 
-from ..core.identification.identify import ShotSource
+from ..core.identification.shot_sources import ShotSource
 from ..core.identification.model import load, Model, ModelError, Source
 from ..core.shots.detection import ShotError
 from ..errors import SensorCompError

@@ -17,7 +17,7 @@ import math
 from ..effects import EFFECTS, get_effect
 from ..estimators import fit_percent
 from ..identification.extended import BASE_DELAY, BASE_ORDERS, shot_windows
-from ..identification.identify import prepare_sources, ShotSource
+from ..identification.shot_sources import prepare_sources, ShotSource
 from ..identification.model import Model
 from ..progress import ProgressFactory, Silent
 from . import scoring
