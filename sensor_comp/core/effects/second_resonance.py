@@ -21,7 +21,7 @@ from .base import (BASE_CONTEXT, BOUND_SHARE, delta_std, Effect, EffectError, Fi
 from ..estimators.least_squares import delayed_numerator
 from ..estimators.polynomials import resonances
 from ..shots.inputs import mode_pair
-from ..shots.windows import acceleration_ringing, Window
+from ..shots.windows import acceleration_ringing, RING_CYCLES, Window
 
 __all__ = ['gain_threshold', 'partial_fractions', 'SecondResonance']
 
@@ -41,10 +41,6 @@ GAIN_Z = 2.0
 #: the search puts the mode where the residual rings most, so its gain is the largest of
 #: many trials'.
 SEARCH_ALPHA = 0.05
-#: An accelerometer's ringing (:func:`~.base.unfollowed`) at a lightly damped zero of the
-#: fit lies within this relative distance of it, or its damping ratio (a damped ring's
-#: peak is as wide; fits of an accelerometer mode put the zero within 0.1 %).
-RING_MATCH = 0.01
 
 
 def gain_threshold(low_khz: float, high_khz: float, zeta: float) -> float:
@@ -60,6 +56,18 @@ def gain_threshold(low_khz: float, high_khz: float, zeta: float) -> float:
     """
     trials = max(math.log(high_khz / low_khz) / (2 * max(zeta, ZETA_LOW)), 1.0)
     return max(GAIN_Z, float(stats.norm.isf(SEARCH_ALPHA / (2 * trials))))
+
+
+def _ring_match(zeta: float) -> float:
+    """
+    Return how far, relatively, an accelerometer's ring may lie from a fit's zero at ``ζ``.
+
+    Fits of an accelerometer mode put the zero within 0.1 % of it, but the ring's peak is
+    read on :data:`~sensor_comp.core.shots.windows.RING_CYCLES` cycles: within one bin of it
+    (a ring beside another, an anvil's 11 % below, their Hann lobes overlapping, was read
+    3.2 % low), and as wide as a damped ring's peak (``ζ``); the two combined.
+    """
+    return math.hypot(1.0 / RING_CYCLES, zeta)
 
 
 def _deviation(reading: tuple[float | None, float | None] | None) -> float:
@@ -279,7 +287,7 @@ class SecondResonance(Effect):
             if not (MIN_KHZ * 1e3 < freq < 0.45 * model.fs and abs(zeta) < MAX_ZETA):
                 continue
             ring = acceleration_ringing(windows, freq, fs=model.fs)
-            if unfollowed(ring, gain) and abs(ring.hz / freq - 1) < max(RING_MATCH, abs(zeta)):
+            if unfollowed(ring, gain) and abs(ring.hz / freq - 1) < _ring_match(zeta):
                 return (f'the fit cancels {freq / 1e3:.3g} kHz (a zero pair, ζ = {zeta:.2g}) '
                         f'where the measured acceleration rings after the pulses '
                         f'({ring.prominence:.0f}× its spectrum beside it) and the pressure '
