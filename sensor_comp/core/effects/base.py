@@ -42,6 +42,12 @@ BASE_CONTEXT: ContextVar[Mapping | None] = ContextVar('sensor_comp_base_context'
 EDGE_FACTOR = 1.05
 #: An effect's amplitude within this many standard deviations of zero is not resolved.
 AMPLITUDE_Z = 2.0
+#: :func:`delta_std`'s central-difference step, in standard deviations along each axis:
+#: far above the readings' round-off, far below their curvature.
+DELTA_STEP = 1e-3
+#: A covariance whose correlation matrix has an eigenvalue below minus this share of its
+#: largest is no covariance (round-off stays near 1e-16 of it).
+NEGATIVE_SHARE = 1e-9
 #: A rival probe must explain this many noise variances (Wald χ²) more of the base residual
 #: than the effect's own probe, and :data:`RIVAL_SHARE` more, to make the effect doubtful:
 #: a 5-sigma margin, and one above the share by which the two forms' shapes differ over a
@@ -658,11 +664,24 @@ def delta_std(func: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b:
     """
     Return the standard deviation of ``func(a, b)`` by the delta method, or None.
 
+    The derivative is taken along the covariance's principal axes, each scaled to one
+    standard deviation, by central differences of :data:`DELTA_STEP` of it. Steps along the
+    coordinates, relative to each coefficient, failed where the numerators are nearly
+    collinear (taps at 1.8 MS/s: one coefficient 0.023 with a deviation of 46, its
+    combinations known to 1e-4): the round-off of the reading, over such a step, was
+    weighted by that variance, and a second mode's gain of -0.0126 read ± 0.075 where
+    sampling the covariance gives ± 1.0e-4 (``doc/effects.md``). The axes are those of the
+    correlation matrix, scaled back: the covariance's own spans twenty decades there.
+
     Args:
         func: A smooth function of ``a = [1, a1, ...]`` and ``b`` ``(n_inputs, nb)``.
         a: The denominator.
         b: The numerators.
         covariance: Covariance of ``(a1..ana, b row by row)``, or None.
+
+    Returns:
+        The deviation; None without a finite covariance of the right shape, when the
+        covariance is not positive semi-definite or ``func`` fails beside the estimate.
 
     """
     if covariance is None or not np.all(np.isfinite(covariance)):
@@ -670,24 +689,44 @@ def delta_std(func: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b:
     theta = np.concatenate([a[1:], b.ravel()])
     if covariance.shape != (theta.size, theta.size):
         return None
+    axes = _principal_axes(covariance)
+    if axes is None:
+        return None
     na = a.size - 1
 
     def at(t):
         return func(np.concatenate([[1.0], t[:na]]), t[na:].reshape(b.shape))
 
-    grad = np.zeros(theta.size)
-    for j in range(theta.size):
-        # Small steps: roots of high-order polynomials with close poles move fast.
-        h = 1e-8 * abs(theta[j]) or 1e-14
-        up, down = theta.copy(), theta.copy()
-        up[j] += h
-        down[j] -= h
+    variance = 0.0
+    for axis in axes.T:
         try:
-            grad[j] = (at(up) - at(down)) / (2 * h)
+            slope = (at(theta + DELTA_STEP * axis) - at(theta - DELTA_STEP * axis)) / (
+                2 * DELTA_STEP)
         except (EffectError, ArithmeticError, ValueError):
             return None
-    variance = float(grad @ covariance @ grad)
-    return math.sqrt(variance) if variance >= 0 and math.isfinite(variance) else None
+        variance += slope ** 2
+    return math.sqrt(variance) if math.isfinite(variance) else None
+
+
+def _principal_axes(covariance: np.ndarray) -> np.ndarray | None:
+    """
+    Return one standard deviation along each principal axis of ``covariance``, as columns.
+
+    None when it is not positive semi-definite beyond round-off. Axes without variance
+    are left out (the estimate does not move along them).
+    """
+    scale = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    if np.any(np.diag(covariance) < 0):
+        return None
+    kept = scale > 0
+    scale = scale[kept]
+    correlation = covariance[np.ix_(kept, kept)] / np.outer(scale, scale)
+    share, vectors = np.linalg.eigh((correlation + correlation.T) / 2)
+    if share.size and share[0] < -NEGATIVE_SHARE * max(share[-1], 0.0):
+        return None
+    axes = np.zeros((kept.size, share.size))
+    axes[kept] = scale[:, None] * vectors * np.sqrt(np.clip(share, 0.0, None))
+    return axes[:, share > 0]
 
 
 def entry_of(model: FittedModel, effect_id: str) -> Mapping:
