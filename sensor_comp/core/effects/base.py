@@ -239,6 +239,30 @@ class Search:
             grid = grid[(grid < self.exclude[0]) | (grid > self.exclude[1])]
         return grid
 
+    def coordinate(self, value):
+        """Return the coordinate a value is searched in: its logarithm for a log search."""
+        return np.log(value) if self.log else np.asarray(value, dtype=np.float64)
+
+    def value(self, x: float) -> float:
+        """Return the value at coordinate ``x`` (:meth:`coordinate`'s inverse)."""
+        return float(math.exp(x) if self.log else x)
+
+    def bracket(self, xs: np.ndarray, best: int) -> tuple[float, float]:
+        """
+        Return the coordinates a refinement about grid point ``best`` searches between.
+
+        Its neighbours on the grid ``xs`` (:meth:`coordinate` of :meth:`points`), cut at
+        the excluded band on the best point's side.
+        """
+        low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
+        if self.exclude is not None:
+            band = self.coordinate(self.exclude)
+            if xs[best] < band[0]:
+                high = min(high, band[0])
+            else:
+                low = max(low, band[1])
+        return float(low), float(high)
+
 
 @dataclass(frozen=True)
 class ModelSpec:

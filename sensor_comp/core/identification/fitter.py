@@ -542,10 +542,9 @@ class Fitter:
         ``early`` one its grid's on the pulses and their ringing (:meth:`profile`).
         """
         def at(x):
-            return {**values, search.key: math.exp(x) if search.log else x}
+            return {**values, search.key: search.value(x)}
 
-        grid = search.points()
-        xs = np.log(grid) if search.log else grid
+        xs = search.coordinate(search.points())
         coupled = search.coupled and self.spec.lag_free
         early = search.early and not coupled
         chosen, losses = [], np.empty(xs.size)
@@ -560,13 +559,7 @@ class Fitter:
         if early:  # the refinement's losses are on whole windows
             losses[best] = self.profile(at(xs[best]), chosen[best])
         start = chosen[best]
-        low, high = xs[max(best - 1, 0)], xs[min(best + 1, xs.size - 1)]
-        if search.exclude is not None:  # refine on the best point's side of the band
-            band = np.log(search.exclude) if search.log else np.asarray(search.exclude)
-            if xs[best] < band[0]:
-                high = min(high, band[0])
-            else:
-                low = max(low, band[1])
+        low, high = search.bracket(xs, best)
         # A coupled loss is rugged at a hundredth of a grid step (its descents end apart), so
         # where its refinement stops matters and it keeps the finer tolerance; elsewhere
         # 0.1 % of the bracket is far below any deviation.
@@ -574,8 +567,7 @@ class Fitter:
             (lambda x: self._step(at(x), start)[1]) if coupled else
             (lambda x: self.profile(at(x), start)), bounds=(low, high), method='bounded',
             options={'xatol': (1e-4 if coupled else 1e-3) * max(high - low, 1e-12)})
-        x = result.x if result.fun <= losses[best] else xs[best]
-        return float(math.exp(x) if search.log else x)
+        return search.value(result.x if result.fun <= losses[best] else xs[best])
 
     def polish(self, search: Search, values: Mapping[str, float],
                a: np.ndarray) -> tuple[float, np.ndarray]:
