@@ -239,7 +239,7 @@ class Search:
             grid = grid[(grid < self.exclude[0]) | (grid > self.exclude[1])]
         return grid
 
-    def coordinate(self, value):
+    def coordinate(self, value: float | Sequence[float] | np.ndarray) -> np.ndarray:
         """Return the coordinate a value is searched in: its logarithm for a log search."""
         return np.log(value) if self.log else np.asarray(value, dtype=np.float64)
 
@@ -688,14 +688,10 @@ def delta_std(func: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b:
     """
     Return the standard deviation of ``func(a, b)`` by the delta method, or None.
 
-    The derivative is taken along the covariance's principal axes, each scaled to one
-    standard deviation, by central differences of :data:`DELTA_STEP` of it. Steps along the
-    coordinates, relative to each coefficient, failed where the numerators are nearly
-    collinear (taps at 1.8 MS/s: one coefficient 0.023 with a deviation of 46, its
-    combinations known to 1e-4): the round-off of the reading, over such a step, was
-    weighted by that variance, and a second mode's gain of -0.0126 read ± 0.075 where
-    sampling the covariance gives ± 1.0e-4 (``doc/effects.md``). The axes are those of the
-    correlation matrix, scaled back: the covariance's own spans twenty decades there.
+    The derivative is taken along the covariance's principal axes (the correlation
+    matrix's, scaled back), each scaled to one standard deviation, by central differences
+    of :data:`DELTA_STEP` of it: steps relative to each coefficient weighted the reading's
+    round-off by the variance of nearly collinear taps (``doc/effects.md``).
 
     Args:
         func: A smooth function of ``a = [1, a1, ...]`` and ``b`` ``(n_inputs, nb)``.
@@ -739,9 +735,10 @@ def _principal_axes(covariance: np.ndarray) -> np.ndarray | None:
     None when it is not positive semi-definite beyond round-off. Axes without variance
     are left out (the estimate does not move along them).
     """
-    scale = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    if np.any(np.diag(covariance) < 0):
+    diagonal = np.diag(covariance)
+    if np.any(diagonal < 0):
         return None
+    scale = np.sqrt(diagonal)
     kept = scale > 0
     scale = scale[kept]
     correlation = covariance[np.ix_(kept, kept)] / np.outer(scale, scale)
