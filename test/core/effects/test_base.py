@@ -42,6 +42,12 @@ COVARIANCE = np.array([
      6.5982406194147600e+01]])
 
 
+def _model(a: np.ndarray, b: np.ndarray) -> Model:
+    """Return rig 79's fitted model with the polynomials ``a`` and ``b``."""
+    return Model(fs=FS, structure='oe', inputs=INPUTS, b=b, a=a, nk=0,
+                 effects=({'id': 'second_resonance', 'std': {}},))
+
+
 def _sampled_std(func, samples: int = 4000) -> np.ndarray:
     """Return half the central 68 % width of ``func`` over draws of the coefficients."""
     scale = np.sqrt(np.diag(COVARIANCE))
@@ -62,15 +68,11 @@ def test_deviations_of_collinear_numerators_follow_the_sampled_spread():
     # own error about 1.5 %) against the delta method's: within 5 %. Steps along each
     # coefficient read the gain -0.0126 ± 0.075 (round-off over a 1e-8 step weighted by
     # a variance of 2000); the spread is ± 1.0e-4, so the mode is told from zero.
-    model = Model(fs=FS, structure='oe', inputs=INPUTS, b=B, a=A, nk=0,
-                  effects=({'id': 'second_resonance', 'std': {}},))
     effect = get_effect('second_resonance')
-    read = effect.physical(model, covariance=COVARIANCE)
+    read = effect.physical(_model(A, B), covariance=COVARIANCE)
 
     def readings(a, b):
-        return [v for v, _ in effect.physical(Model(
-            fs=FS, structure='oe', inputs=INPUTS, b=b, a=a, nk=0,
-            effects=({'id': 'second_resonance', 'std': {}},))).values()]
+        return [v for v, _ in effect.physical(_model(a, b)).values()]
 
     sampled = _sampled_std(readings, samples=4000)
     for (name, (value, std)), spread in zip(read.items(), sampled):
