@@ -15,15 +15,20 @@ from scipy import linalg, signal
 
 from .data import IdentError
 
-__all__ = ['BLOCK_ROWS', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'Filtered', 'LeastSquares',
-           'check_orders', 'delayed_numerator', 'equation_error', 'filter_each', 'lagged_blocks',
-           'lagged_regression', 'minimum_norm', 'normal_equations', 'normal_equations_blocks',
-           'scaled_qr', 'solve_blocks', 'solve_least_squares', 'solve_normal',
-           'triangular_inverse']
+__all__ = ['BLOCK_ROWS', 'MAX_CONDITION', 'ORTHOGONALITY', 'RANK_TOLERANCE', 'Filtered',
+           'LeastSquares', 'check_orders', 'delayed_numerator', 'equation_error',
+           'filter_each', 'lagged_blocks', 'lagged_regression', 'minimum_norm',
+           'normal_equations', 'normal_equations_blocks', 'scaled_qr', 'solve_blocks',
+           'solve_least_squares', 'solve_normal', 'triangular_inverse']
 
 #: Least diagonal of a Householder ``R`` of unit-norm columns, relative to its largest, that
 #: still counts as full rank (below it a column lies within 1e-10 of the others' span).
 RANK_TOLERANCE = 1e-10
+#: Largest condition of such an ``R`` whose inverse gives a covariance: ``R⁻¹`` is then
+#: accurate to about the condition times the rounding unit (2e-4). Numerator taps of a
+#: pulse sampled at 1.8 MS/s reach 2e10 and their readings are well resolved (a 3.79 kHz
+#: mode's frequency to 0.03 %); where it is exceeded no deviation is stated.
+MAX_CONDITION = 1e12
 #: Largest ``‖Q₁ᵀQ₁ − I‖₂`` after the first CholeskyQR pass for which the second one is
 #: trusted (the loss grows as the condition squared: 0.5 is a condition of ~1e8).
 ORTHOGONALITY = 0.5

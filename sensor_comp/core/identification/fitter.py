@@ -22,7 +22,7 @@ from scipy import optimize
 from ..effects.base import (Effect, ModelSpec, Search, SENSOR_ZETA, traded_lag_s,
                             UNIFORM_STD)
 from ..estimators import Estimate, fit_oe, IdentError
-from ..estimators.least_squares import scaled_qr
+from ..estimators.least_squares import MAX_CONDITION, scaled_qr
 from ..estimators.oe import OutputErrorProblem
 from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import continuous_poles, least_damping, max_root_radius
@@ -97,7 +97,7 @@ def _joint(problem: OutputErrorProblem, a0: np.ndarray, *, method: str,
     scale[scale == 0] = 1.0
     try:
         _, r, _ = scaled_qr(jac / scale)
-        singular = not np.linalg.cond(r) < 1e10
+        singular = not np.linalg.cond(r) < MAX_CONDITION
     except IdentError:
         singular = True
     if singular:  # over-parameterised: not identifiable

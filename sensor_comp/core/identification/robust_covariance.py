@@ -18,7 +18,7 @@ from scipy import fft
 
 from ..effects import get_effect
 from ..estimators import IdentError
-from ..estimators.least_squares import scaled_qr
+from ..estimators.least_squares import MAX_CONDITION, scaled_qr
 from ..shots.windows import Window
 from .coverage import coverage_factor, widened
 from .extended_fit import assemble_fit, ExtendedFit
@@ -224,7 +224,7 @@ def _sandwich(e: np.ndarray, jac: np.ndarray, offsets: np.ndarray,
     unit = jac / scale
     try:
         _, r, _ = scaled_qr(unit)
-        singular = not np.linalg.cond(r) < 1e10
+        singular = not np.linalg.cond(r) < MAX_CONDITION
     except IdentError:
         singular = True
     if singular:
