@@ -272,6 +272,8 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
     row['diagnose_cpu_s'] = time.process_time() - cpu
     row['verdict'] = diagnosis.verdict
     row['explanation'] = diagnosis.explanation[:400]
+    # Said at the explanation's end, beyond the 400 characters kept (unexcited_mode).
+    row['unexcited_mode'] = "do not excite the base's mode" in diagnosis.explanation
     row['ranking'] = _ranking(diagnosis)
     row['skipped'] = [[s.effect, s.reason[:200]] for s in diagnosis.skipped]
     row['leftover'] = {name: _leftover_row(left) for name, left in (
@@ -525,11 +527,13 @@ def _clean_table(rows: list[dict]) -> tuple[str, dict]:
                     _rate(len(group) - adequate, len(group)),
                     ', '.join(f'{k} {v}' for k, v in sorted(verdicts.items())),
                     ', '.join(f'{k} {v}' for k, v in named.most_common(3)) or '—',
+                    sum(bool(r.get('unexcited_mode')) for r in group
+                        if r.get('verdict') != 'adequate'),
                     _median(r.get('before_percent', math.nan) / r['ceiling_percent']
                             for r in group if r.get('ceiling_percent')),
                     _crashes(group)])
     headers = ['rate band', 'n', 'adequate', 'false alarm', 'verdicts', 'named',
-               'base: peak/ceiling', 'crash']
+               'alarm: mode not excited in calibration', 'base: peak/ceiling', 'crash']
     return _table(headers, out), rates
 
 

@@ -24,6 +24,7 @@ from . import scoring
 from .context import base_context, base_structure, MIN_SHARED_COST, peak_percent
 from .findings import (ALPHA, AMPLITUDE_ALPHA, ATTENTION, Diagnosis, DiagnosisError,
                        NEXT_STEP, Ranked, Skipped, VERDICTS)
+from .unexcited_mode import unexcited_mode
 from .verdict import verdict_of
 from ...sharing import warm
 
@@ -86,6 +87,8 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     ranked, skipped = scoring.candidates(ids, ctx, progress, notes)
     base_left = ctx.base_leftover
     verdict, explanation, named, left, share, ranked = verdict_of(ranked, ctx, base_left)
+    if verdict in ('unexplained', 'partly_explained'):  # a mode calibration left unmeasured?
+        explanation += unexcited_mode(ctx.free.model(), calib, valid) or ''
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
     return Diagnosis(
         verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.free,
