@@ -6,8 +6,8 @@ squares then damp or move it, with nothing in the calibration data to say otherw
 harder validation shot rings the real mode, and the base's misfit there is structure no
 catalogued effect explains. The diagnosis says so rather than leave a bare
 ``unexplained`` (a clean 502 kS/s rig: a 39.1 kHz, ζ 0.082 sensor read 38.3 kHz, ζ 0.126 from
-shots whose signal there was 0.15 times the accelerometer noise; a 2000 g validation shot,
-at 2.0 times, left a residual peak of 10 σ).
+shots whose signal there was 0.18 times the accelerometer noise; a 2023 g validation shot,
+at 2.2 times, left a residual peak of 10 σ).
 """
 
 from __future__ import annotations
