@@ -21,9 +21,10 @@ from ..identification.shot_sources import prepare_sources, ShotSource
 from ..identification.model import Model
 from ..progress import ProgressFactory, Silent
 from . import scoring
-from .context import base_context, base_structure, MIN_SHARED_COST, peak_percent
+from .context import base_context, base_structure, Context, MIN_SHARED_COST, peak_percent
 from .findings import (ALPHA, AMPLITUDE_ALPHA, ATTENTION, Diagnosis, DiagnosisError,
                        NEXT_STEP, Ranked, Skipped, VERDICTS)
+from .noisy_accelerometer import noisy_accelerometer
 from .unexcited_mode import unexcited_mode
 from .verdict import verdict_of
 from ...sharing import warm
@@ -87,8 +88,8 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
     ranked, skipped = scoring.candidates(ids, ctx, progress, notes)
     base_left = ctx.base_leftover
     verdict, explanation, named, left, share, ranked = verdict_of(ranked, ctx, base_left)
-    if verdict in ('unexplained', 'partly_explained'):  # a mode calibration left unmeasured?
-        explanation += unexcited_mode(ctx.free.model(), calib, valid) or ''
+    limits = _limits(verdict, ctx, calib, valid)
+    explanation += ''.join(clause for _, clause in limits)
     consistent = base_left.consistent and all(a.consistent_with_noise for a in ctx.analyses)
     return Diagnosis(
         verdict=verdict, ranking=tuple(ranked), skipped=tuple(skipped), base=ctx.free,
@@ -100,7 +101,23 @@ def diagnose(calibration: Sequence, validation: Sequence = (), *, base: Model | 
         noise_sigma_pa=math.sqrt(ctx.noise.variance), energy_ratio=base_left.energy_ratio,
         energy_tolerance=base_left.tolerance, consistent_with_noise=bool(consistent),
         analyses=ctx.analyses, alpha=alpha, explanation=explanation, notes=tuple(notes),
-        named=named, leftover=left, base_leftover=base_left, explained_share=share)
+        named=named, leftover=left, base_leftover=base_left, explained_share=share,
+        limits=tuple(name for name, _ in limits))
+
+
+def _limits(verdict: str, ctx: Context, calib: list, valid: list) -> list[tuple[str, str]]:
+    """
+    Return ``(id, clause)`` for what in the data limits a verdict that names no cause.
+
+    Only ``unexplained`` and ``partly_explained`` say them: a mode the calibration shots
+    left unmeasured (:func:`.unexcited_mode.unexcited_mode`), an accelerometer whose noise
+    outweighs the pressure's (:func:`.noisy_accelerometer.noisy_accelerometer`).
+    """
+    if verdict not in ('unexplained', 'partly_explained'):
+        return []
+    clauses = (('unexcited_mode', unexcited_mode(ctx.free.model(), calib, valid)),
+               ('noisy_accelerometer', noisy_accelerometer(ctx.free, ctx.calibration)))
+    return [(name, clause) for name, clause in clauses if clause]
 
 
 def _prepare(calibration: Sequence, validation: Sequence, base: Model | None,

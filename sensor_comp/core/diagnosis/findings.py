@@ -180,6 +180,10 @@ class Diagnosis:
         base_leftover: What the base model leaves.
         explained_share: Share of the base residual's energy beyond the noise that the
             named effect(s) remove (None when none is named).
+        limits: What in the data limits a verdict naming no cause, said at the
+            explanation's end: ``'unexcited_mode'`` (the calibration shots do not excite
+            the base's mode), ``'noisy_accelerometer'`` (the accelerometer's noise through
+            the base outweighs the pressure's).
 
     """
 
@@ -202,6 +206,7 @@ class Diagnosis:
     leftover: Leftover | None = field(default=None, repr=False)
     base_leftover: Leftover | None = field(default=None, repr=False)
     explained_share: float | None = None
+    limits: tuple[str, ...] = ()
 
     @property
     def next_step(self) -> str:
@@ -259,6 +264,7 @@ class Diagnosis:
         return {'verdict': self.verdict, 'named': list(self.named),
                 'alternatives': list(self.alternatives),
                 'explained_share': json_number(self.explained_share),
+                'limits': list(self.limits),
                 'leftover': None if self.leftover is None else self.leftover.to_dict(),
                 'ranking': [r.to_dict() for r in self.ranking],
                 'skipped': [s.to_dict() for s in self.skipped],

@@ -472,13 +472,15 @@ class Fitter:
                     a, transform=None if lag is None else lag.transform)
             except IdentError:
                 return math.inf
-            responses = impulses.problem(a)
-            step = responses.simulate(theta[:responses.n_parameters])
-            through = sum(levels.axes[k] * float(np.sum(
-                step[responses.offsets[i]:responses.offsets[i + 1]] ** 2))
-                for i, k in enumerate(axes))
+            through = _passed(axes, impulses, levels, a, theta)
             return float(e @ e) / (total * (levels.pressure + through))
         return ratio
+
+    def passed_noise(self, values: Mapping[str, float], levels: NoiseLevels, a: np.ndarray,
+                     b: np.ndarray) -> float:
+        """Return the acceleration noise variance the model ``b/a`` passes, per sample."""
+        axes, impulses, _ = self._impulses(values, levels)
+        return _passed(axes, impulses, levels, a, np.concatenate([a[1:], b.ravel()]))
 
     def compensated(self, values: Mapping[str, float], a: np.ndarray,
                     levels: NoiseLevels) -> tuple[np.ndarray, float]:
@@ -682,6 +684,15 @@ def with_traded_lag(std: float | None, search: Search, spec: ModelSpec, fs: floa
         return std
     traded /= search.lag_unit_s
     return traded if std is None else math.hypot(std, traded * UNIFORM_STD)
+
+
+def _passed(axes: Sequence[int], impulses: ImpulseNoise, levels: NoiseLevels, a: np.ndarray,
+            theta: np.ndarray) -> float:
+    """Return the white acceleration noise of ``axes`` through ``theta`` (``a`` first)."""
+    responses = impulses.problem(a)
+    step = responses.simulate(theta[:responses.n_parameters])
+    return sum(levels.axes[k] * float(np.sum(
+        step[responses.offsets[i]:responses.offsets[i + 1]] ** 2)) for i, k in enumerate(axes))
 
 
 def start_grid(nf: int, fs: float) -> list[tuple[float, np.ndarray]]:
