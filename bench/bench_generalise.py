@@ -87,6 +87,9 @@ PARAMETER_Z = 2.0
 #: validation peak residual within this many noise ceilings (criterion 4's "explained to
 #: noise"): nothing is left to name, and ``adequate`` is the honest verdict.
 ABSORBED_CEILING = 1.5
+#: The data limits a verdict naming no cause says (``Diagnosis.limits``), as the row keeps
+#: them, and their words in the tables.
+LIMITS = {'unexcited_mode': 'mode not excited', 'noisy_accelerometer': 'noisy accelerometer'}
 #: The speed rigs' rate and shot count (the speed target's recording).
 SPEED_FS, SPEED_SHOTS = 1e6, 10
 #: The product's targets (issue 11), as printed under the summary.
@@ -272,8 +275,8 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
     row['diagnose_cpu_s'] = time.process_time() - cpu
     row['verdict'] = diagnosis.verdict
     row['explanation'] = diagnosis.explanation[:400]
-    # Said at the explanation's end, beyond the 400 characters kept (unexcited_mode).
-    row['unexcited_mode'] = "do not excite the base's mode" in diagnosis.explanation
+    row['unexcited_mode'] = 'unexcited_mode' in diagnosis.limits
+    row['noisy_accelerometer'] = 'noisy_accelerometer' in diagnosis.limits
     row['ranking'] = _ranking(diagnosis)
     row['skipped'] = [[s.effect, s.reason[:200]] for s in diagnosis.skipped]
     row['leftover'] = {name: _leftover_row(left) for name, left in (
@@ -508,11 +511,18 @@ def _catalogue_table(rows: list[dict]) -> tuple[str, dict]:
                         _median(_ratio(r, 'true', 'ceiling_percent') for r in group),
                         _median(_ratio(r, 'top', 'ceiling_percent') for r in group),
                         _crashes(group),
-                        ', '.join(f'{k} {v}' for k, v in named.most_common(3))])
+                        ', '.join(f'{k} {v}' for k, v in named.most_common(3)),
+                        _limits_said(r for r in group if not _detected(r))])
     headers = ['effect', 'R', 'n', 'rank 1 + significant', 'params ok', 'true: after/before',
                'true: after/ceiling', 'named: after/ceiling', 'crash',
-               'otherwise (named or verdict)']
+               'otherwise (named or verdict)', 'misses: data limit said']
     return _table(headers, out), rates
+
+
+def _limits_said(rows) -> str:
+    """Return how many rows said each data limit (``Diagnosis.limits``), or a dash."""
+    said = Counter(name for r in rows for name in LIMITS if r.get(name))
+    return ', '.join(f'{LIMITS[k]} {v}' for k, v in said.most_common()) or '—'
 
 
 def _clean_table(rows: list[dict]) -> tuple[str, dict]:
@@ -527,13 +537,12 @@ def _clean_table(rows: list[dict]) -> tuple[str, dict]:
                     _rate(len(group) - adequate, len(group)),
                     ', '.join(f'{k} {v}' for k, v in sorted(verdicts.items())),
                     ', '.join(f'{k} {v}' for k, v in named.most_common(3)) or '—',
-                    sum(bool(r.get('unexcited_mode')) for r in group
-                        if r.get('verdict') != 'adequate'),
+                    _limits_said(r for r in group if r.get('verdict') != 'adequate'),
                     _median(r.get('before_percent', math.nan) / r['ceiling_percent']
                             for r in group if r.get('ceiling_percent')),
                     _crashes(group)])
     headers = ['rate band', 'n', 'adequate', 'false alarm', 'verdicts', 'named',
-               'alarm: mode not excited in calibration', 'base: peak/ceiling', 'crash']
+               'alarms: data limit said', 'base: peak/ceiling', 'crash']
     return _table(headers, out), rates
 
 
