@@ -97,6 +97,8 @@ def diagnose_fit(calibration: tuple[ShotSource, ...], validation: tuple[ShotSour
         verdict['diagnosis_named'] = found.named_words
     if found.leftover is not None:
         verdict['diagnosis_leftover_noise_energy'] = found.leftover.energy_ratio
+    if found.limits:  # what in the shots limits a verdict that names no cause
+        verdict['diagnosis_limits'] = ', '.join(found.limits)
     if found.ranking:
         top = found.ranking[0]
         verdict.update({'diagnosis_top_effect': top.effect,

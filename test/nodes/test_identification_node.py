@@ -134,6 +134,7 @@ def test_live_model_equals_the_offline_fit_on_the_same_windows(context, other_co
     found = diagnose([ShotSource(recording, by_role['calibration'])],
                      [ShotSource(recording, by_role['validation'])], base=live)
     assert values['diagnosis_verdict'] == found.verdict
+    assert values.get('diagnosis_limits', '') == ', '.join(found.limits)
     # The same top effect when it is significant; without one, two improvements below
     # significance may swap places (mains hum's columns are phased to each recording's
     # start, and the node's buffer starts elsewhere than the bag).
