@@ -275,8 +275,7 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
     row['diagnose_cpu_s'] = time.process_time() - cpu
     row['verdict'] = diagnosis.verdict
     row['explanation'] = diagnosis.explanation[:400]
-    row['unexcited_mode'] = 'unexcited_mode' in diagnosis.limits
-    row['noisy_accelerometer'] = 'noisy_accelerometer' in diagnosis.limits
+    row.update({name: name in diagnosis.limits for name in LIMITS})
     row['ranking'] = _ranking(diagnosis)
     row['skipped'] = [[s.effect, s.reason[:200]] for s in diagnosis.skipped]
     row['leftover'] = {name: _leftover_row(left) for name, left in (
