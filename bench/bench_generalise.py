@@ -274,6 +274,7 @@ def _loop(row: dict, case, *, via_csv: bool, folder: str | None, stage: list[str
     row['diagnose_s'] = time.perf_counter() - began
     row['diagnose_cpu_s'] = time.process_time() - cpu
     row['verdict'] = diagnosis.verdict
+    row['named'] = list(diagnosis.named)
     row['explanation'] = diagnosis.explanation[:400]
     row.update({name: name in diagnosis.limits for name in LIMITS})
     row['ranking'] = _ranking(diagnosis)
@@ -511,11 +512,21 @@ def _catalogue_table(rows: list[dict]) -> tuple[str, dict]:
                         _median(_ratio(r, 'top', 'ceiling_percent') for r in group),
                         _crashes(group),
                         ', '.join(f'{k} {v}' for k, v in named.most_common(3)),
+                        sum(map(_wrongly_named, group)),
                         _limits_said(r for r in group if not _detected(r))])
     headers = ['effect', 'R', 'n', 'rank 1 + significant', 'params ok', 'true: after/before',
                'true: after/ceiling', 'named: after/ceiling', 'crash',
-               'otherwise (named or verdict)', 'misses: data limit said']
+               'otherwise (named or verdict)', 'wrong missing_effect',
+               'misses: data limit said']
     return _table(headers, out), rates
+
+
+def _wrongly_named(row: dict) -> bool:
+    """Return whether a ``missing_effect`` verdict names effects without the hidden one."""
+    if row.get('verdict') != 'missing_effect':
+        return False
+    named = row.get('named') or [_named(row)]  # rows before 'named' was kept: the first
+    return row['effect'] not in named
 
 
 def _limits_said(rows) -> str:

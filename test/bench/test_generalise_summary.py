@@ -1,11 +1,11 @@
-"""The generalisation summary: detection split by what the base leaves; joint parameters."""
+"""The generalisation summary: detection split by what the base leaves; joint parameters; names."""
 
 import math
 
 import pytest
 
-from bench.bench_generalise import (_params_each, _params_ok, _visible_line, joint_z,
-                                    PARAMETER_Z)
+from bench.bench_generalise import (_params_each, _params_ok, _visible_line, _wrongly_named,
+                                    joint_z, PARAMETER_Z)
 
 
 def _row(effect, R, found, before, ceiling=2.0):
@@ -41,3 +41,17 @@ def test_an_effects_parameters_are_checked_jointly_at_one_parameters_coverage():
     del check['gain']  # two parameters: 2.27 std each
     check['freq_khz']['z'] = 2.3
     assert not _params_ok(row)
+
+
+def test_only_a_missing_effect_verdict_without_the_hidden_effect_is_a_wrong_name():
+    row = _row('strain_sensitivity', 1.5, False, 3.0)
+    assert _wrongly_named(dict(row, verdict='missing_effect', named=['channel_delay']))
+    # Both added by a two-effect verdict, or told to be indistinguishable: not wrong.
+    assert not _wrongly_named(dict(row, verdict='missing_effect',
+                                   named=['channel_delay', 'strain_sensitivity']))
+    assert not _wrongly_named(dict(row, verdict='ambiguous',
+                                   named=['channel_delay', 'strain_sensitivity']))
+    # Rows kept before the names were: the confidently named first entry.
+    assert _wrongly_named(dict(row, verdict='missing_effect'))
+    assert not _wrongly_named(dict(_row('strain_sensitivity', 1.5, True, 3.0),
+                                   verdict='missing_effect'))
