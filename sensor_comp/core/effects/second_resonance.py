@@ -198,6 +198,14 @@ class SecondResonance(Effect):
         if bound is not None and parameters['zeta'][0] >= BOUND_SHARE * bound:
             return (f'zeta = {parameters["zeta"][0]:.3g} of the base\'s pair, which the second '
                     f'mode is read from, sits at the most damping a sensor\'s mode is held to')
+        # The search leaves out the band around the sensor's mode: a swap must not bring a
+        # second mode back into it (a 29.6 kHz sensor behind a 24.6 kHz filter split into
+        # 29.6 and 33.9 kHz pairs paid a 3 µs delay, the first read as a mount mode).
+        sensor, second = modifier_value(model, 'mode')[0], parameters['freq_khz'][0]
+        if 1 / (1 + MAIN_BAND) < second / sensor < 1 + MAIN_BAND:
+            return (f'the base\'s pair ({second:.4g} kHz), which the second mode is read from, '
+                    f'lies within {100 * MAIN_BAND:.0f} % of the searched pair read as the '
+                    f'sensor\'s ({sensor:.4g} kHz): one mode split between two pairs')
         for name in ('freq_khz', 'zeta'):
             value, std = parameters[name]
             if std is None or not math.isfinite(std) or std > value:
