@@ -67,9 +67,12 @@ def verdict_of(ranked: Sequence[Ranked], ctx: Context, base_left: Leftover
         # Where the base held the best's form, what makes that form as well stays in the
         # answer, counted or not (:func:`_held`).
         same = get_effect(best.effect).held_alike if best.held is not None else ()
+        # One counted beyond noise but short of a name by its share of the base's excess
+        # (its own floor higher) is as good where it leaves no more beyond that floor.
         alike = [r for r in ranked if r is not best and r.leftover.consistent
-                 and (r.significant or (r.effect in same and r.p_value < ctx.alpha))
-                 and _as_much(best, r, margin)]
+                 and ((r.significant or (r.effect in same and r.p_value < ctx.alpha))
+                      and _as_much(best, r, margin)
+                      or r.relevant and excess(r) <= excess(best))]
         unsized = _unsized(best, ranked, ctx)
         held = '' if best.held is None else f'; {best.held}'
         found = (f'{best.title} ({best.effect}) removes {100 * best.score:.1f} % of the '

@@ -19,7 +19,7 @@ def _ranked(effect, score, *, consistent, significant=True):
     return Ranked(effect=effect, title=effect.replace('_', ' '), score=score, parameters={},
                   evidence='', significant=significant, statistic=100.0, test='chi2',
                   p_value=1e-9, fit_percent=99.0, peak_residual_percent=1.0, units={},
-                  explained=5.0, excess_share=0.9, relevant=True, leftover=left)
+                  explained=5.0, excess_share=0.9, relevant=significant, leftover=left)
 
 
 @pytest.mark.parametrize('second_consistent, expected', [(True, 'ambiguous'),
@@ -64,6 +64,32 @@ def test_a_rival_that_leaves_as_little_beyond_its_own_floor_is_alike(strain_exce
         assert 'cannot tell it from channel_delay' in explanation
     else:
         assert named == ('channel_delay',)
+
+
+@pytest.mark.parametrize('excess, relevant, expected', [
+    (0.046, True, 'ambiguous'), (0.080, True, 'missing_effect'),
+    (0.046, False, 'missing_effect')])
+def test_a_counted_candidate_short_of_a_name_that_leaves_less_is_alike(excess, relevant,
+                                                                       expected):
+    # Seed 37 rig 106 (667 kS/s, a 24.8 kHz second mode at R = 0.5): a strain removed 8 % of
+    # the residual energy and left 1.075 of its floor; the second mode, read 24.83 ± 0.03 kHz
+    # and beyond noise, was short of a name by its share of the base's excess (its floor is
+    # higher), yet left 1.046 of it: the strain alone was named.
+    def entry(effect, explained, excess, *, significant=True, relevant=True):
+        left = SimpleNamespace(consistent=True, energy_ratio=1.0 + excess, excess=excess,
+                               noise_variance=1.0, peak_above=False,
+                               describe=lambda: 'about the noise energy')
+        return replace(_ranked(effect, explained / 10, consistent=True,
+                               significant=significant),
+                       explained=explained, leftover=left, relevant=relevant)
+
+    ranked = [entry('strain_sensitivity', 0.9, 0.075),
+              entry('second_resonance', 0.1, excess, significant=False, relevant=relevant)]
+    ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
+    found, _, named, _, _, _ = verdict_of(ranked, ctx, ranked[0].leftover)
+    assert found == expected
+    assert named == (('strain_sensitivity', 'second_resonance') if expected == 'ambiguous'
+                     else ('strain_sensitivity',))
 
 
 def test_a_form_outside_the_catalogue_that_passes_for_the_best_makes_it_ambiguous():
