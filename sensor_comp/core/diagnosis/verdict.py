@@ -67,12 +67,8 @@ def verdict_of(ranked: Sequence[Ranked], ctx: Context, base_left: Leftover
         # Where the base held the best's form, what makes that form as well stays in the
         # answer, counted or not (:func:`_held`).
         same = get_effect(best.effect).held_alike if best.held is not None else ()
-        # One counted beyond noise but short of a name by its share of the base's excess
-        # (its own floor higher) is as good where it leaves no more beyond that floor.
-        alike = [r for r in ranked if r is not best and r.leftover.consistent
-                 and ((r.significant or (r.effect in same and r.p_value < ctx.alpha))
-                      and _as_much(best, r, margin)
-                      or r.relevant and excess(r) <= excess(best))]
+        alike = [r for r in ranked if r is not best
+                 and _alike_to(best, r, same=same, margin=margin, ctx=ctx)]
         unsized = _unsized(best, ranked, ctx)
         held = '' if best.held is None else f'; {best.held}'
         found = (f'{best.title} ({best.effect}) removes {100 * best.score:.1f} % of the '
@@ -112,19 +108,30 @@ def verdict_of(ranked: Sequence[Ranked], ctx: Context, base_left: Leftover
             best.leftover, share, ranked)
 
 
-def _as_much(best: Ranked, other: Ranked, margin: float) -> bool:
+def _alike_to(best: Ranked, other: Ranked, *, same: Sequence[str], margin: float,
+              ctx: Context) -> bool:
     """
-    Return whether ``other`` explains as much as ``best`` (``margin`` in noise energies).
+    Return whether ``other`` leaves only noise and explains as much as ``best``.
 
-    It does when it removes less than ``margin`` less energy, or leaves no more beyond its
-    own noise floor: a model with more gain passes more accelerometer noise, so the one
-    right about the sensor can remove less raw energy (a strain of -16.7 Pa/(g/ms) at 1.48
-    MS/s, read -16.0 ± 1.3, removed 1.6 noise energies where a 62 µs delay removed 3.3,
-    yet left 0.986 of its floor against the delay's 1.020). Within ``margin`` of the best
-    by the floor alone is not enough: floors differ by what each passes, and a second mode
-    left 0.03 more than a strain at R = 5 that removed 0.35 noise energies more.
+    A significant one (or, where the base held the best's form, one of ``same`` beyond
+    noise) does when it removes less than ``margin`` noise energies less, or leaves no
+    more beyond its own noise floor: a model with more gain passes more accelerometer
+    noise, so the one right about the sensor can remove less raw energy (a strain of -16.7
+    Pa/(g/ms) at 1.48 MS/s, read -16.0 ± 1.3, removed 1.6 noise energies where a 62 µs
+    delay removed 3.3, yet left 0.986 of its floor against the delay's 1.020). Within
+    ``margin`` of the best by the floor alone is not enough: floors differ by what each
+    passes, and a second mode left 0.03 more than a strain at R = 5 that removed 0.35
+    noise energies more. One counted beyond noise (``relevant``) but short of a name by
+    its share of the base's excess, its floor being higher, does where it leaves no more
+    beyond that floor (a 24.8 kHz second mode at R = 0.5 left 1.046 where a strain left
+    1.075).
     """
-    return best.explained - other.explained < margin or excess(other) <= excess(best)
+    if not other.leftover.consistent:
+        return False
+    counted = other.significant or (other.effect in same and other.p_value < ctx.alpha)
+    no_more = excess(other) <= excess(best)
+    return (counted and (best.explained - other.explained < margin or no_more)
+            or (other.relevant and no_more))
 
 
 def _held(ranked: Sequence[Ranked], ctx: Context):
