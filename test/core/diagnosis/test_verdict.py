@@ -22,6 +22,16 @@ def _ranked(effect, score, *, consistent, significant=True):
                   explained=5.0, excess_share=0.9, relevant=significant, leftover=left)
 
 
+def _entry(effect, explained, excess, *, significant=True, relevant=None):
+    """Return a consistent ranking entry that removes ``explained`` and leaves ``excess``."""
+    left = SimpleNamespace(consistent=True, energy_ratio=1.0 + excess, excess=excess,
+                           noise_variance=1.0, peak_above=False,
+                           describe=lambda: 'about the noise energy')
+    return replace(_ranked(effect, explained / 10, consistent=True, significant=significant),
+                   explained=explained, leftover=left,
+                   relevant=significant if relevant is None else relevant)
+
+
 @pytest.mark.parametrize('second_consistent, expected', [(True, 'ambiguous'),
                                                          (False, 'missing_effect')])
 def test_two_effects_that_each_leave_only_noise_are_ambiguous(second_consistent, expected):
@@ -48,14 +58,8 @@ def test_a_rival_that_leaves_as_little_beyond_its_own_floor_is_alike(strain_exce
     # 3.3 noise energies, the strain 1.6 (it passes more accelerometer noise), yet the strain
     # left 0.986 of its own noise floor against the delay's 1.020: it was named the delay.
     # Leaving more beyond its floor, even within the margin, it is told apart by the energy.
-    def entry(effect, explained, excess):
-        left = SimpleNamespace(consistent=True, energy_ratio=1.0 + excess, excess=excess,
-                               noise_variance=1.0, peak_above=False,
-                               describe=lambda: 'about the noise energy')
-        return replace(_ranked(effect, explained / 10, consistent=True), explained=explained,
-                       leftover=left)
-
-    ranked = [entry('channel_delay', 3.3, 0.020), entry('strain_sensitivity', 1.6, strain_excess)]
+    ranked = [_entry('channel_delay', 3.3, 0.020),
+              _entry('strain_sensitivity', 1.6, strain_excess)]
     ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
     found, explanation, named, _, _, _ = verdict_of(ranked, ctx, ranked[0].leftover)
     assert found == expected
@@ -75,16 +79,8 @@ def test_a_counted_candidate_short_of_a_name_that_leaves_less_is_alike(excess, r
     # the residual energy and left 1.075 of its floor; the second mode, read 24.83 ± 0.03 kHz
     # and beyond noise, was short of a name by its share of the base's excess (its floor is
     # higher), yet left 1.046 of it: the strain alone was named.
-    def entry(effect, explained, excess, *, significant=True, relevant=True):
-        left = SimpleNamespace(consistent=True, energy_ratio=1.0 + excess, excess=excess,
-                               noise_variance=1.0, peak_above=False,
-                               describe=lambda: 'about the noise energy')
-        return replace(_ranked(effect, explained / 10, consistent=True,
-                               significant=significant),
-                       explained=explained, leftover=left, relevant=relevant)
-
-    ranked = [entry('strain_sensitivity', 0.9, 0.075),
-              entry('second_resonance', 0.1, excess, significant=False, relevant=relevant)]
+    ranked = [_entry('strain_sensitivity', 0.9, 0.075),
+              _entry('second_resonance', 0.1, excess, significant=False, relevant=relevant)]
     ctx = SimpleNamespace(samples=1000, sse=1200.0, allowance=lambda: 0.06)
     found, _, named, _, _, _ = verdict_of(ranked, ctx, ranked[0].leftover)
     assert found == expected
