@@ -48,9 +48,7 @@ def noisy_accelerometer(fit: ExtendedFit, windows: Sequence[Window]) -> str | No
     levels = noise_levels(windows)
     if levels is None or not levels.pressure > 0:
         return None
-    disturbance = fit.disturbance
-    fitter = Fitter(windows, fit.spec, fit.fs, () if disturbance is None else disturbance.effects,
-                    () if disturbance is None else disturbance.choices)
+    fitter = Fitter.of_fit(fit, windows)
     passed = fitter.passed_noise(fit.values, levels, fit.estimate.a, fit.estimate.b)
     ratio = math.sqrt(passed / levels.pressure)
     if not ratio >= MIN_RATIO:

@@ -50,9 +50,7 @@ def corrected_for_input_noise(fit: ExtendedFit, windows: Sequence[Window], *,
     levels = noise_levels(windows)
     if levels is None:
         return fit, None
-    disturbances = () if fit.disturbance is None else fit.disturbance.effects
-    choices = () if fit.disturbance is None else fit.disturbance.choices
-    fitter = Fitter(windows, fit.spec, fit.fs, disturbances, choices)
+    fitter = Fitter.of_fit(fit, windows)
     values = dict(fit.values)
     refined, moved, preferred = _moved_mode(fit, fitter, values, levels, list(check))
     a = fit.estimate.a if refined is None else refined.a
@@ -170,8 +168,7 @@ def _moved_mode(fit: ExtendedFit, fitter: Fitter, values: dict, levels: NoiseLev
     held_out = ''
     check_levels = noise_levels(check) if check else None
     if check_levels is not None:
-        ratio = _ratio(Fitter(check, fit.spec, fit.fs, fitter.disturbances, fitter.choices),
-                       values, follow, check_levels)
+        ratio = _ratio(Fitter.of_fit(fit, check), values, follow, check_levels)
         before = ratio(fit.estimate.a)
         gain = (before - ratio(refined.a)) / before
         if not gain > MIN_CHECK_GAIN:

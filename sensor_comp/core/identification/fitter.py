@@ -28,7 +28,7 @@ from ..estimators.levenberg_marquardt import levenberg_marquardt
 from ..estimators.polynomials import continuous_poles, least_damping, max_root_radius
 from ..shots.inputs import input_channels, mode_pair, parse_channel
 from ..shots.windows import EARLY_S, Window, window_channels
-from .extended_fit import disturbance_columns
+from .extended_fit import disturbance_columns, ExtendedFit
 from .impulse_noise import IMPULSE_AT, ImpulseNoise
 from .input_noise import NoiseLevels, subtracted_noise
 from .lag_free import LagFree
@@ -219,6 +219,13 @@ class Fitter:
         self._problems: dict[tuple[tuple[str, ...], bool], OutputErrorProblem] = {}
         self._lag: tuple[tuple, LagFree] | None = None
         self._oe: tuple[tuple[str, ...], Estimate | IdentError] | None = None
+
+    @classmethod
+    def of_fit(cls, fit: ExtendedFit, windows: Sequence[Window]) -> Fitter:
+        """Return a fitter of ``fit``'s structure (spec, rate, disturbances) on ``windows``."""
+        dist = fit.disturbance
+        return cls(windows, fit.spec, fit.fs, () if dist is None else dist.effects,
+                   () if dist is None else dist.choices)
 
     def output_error(self, values: Mapping[str, float]) -> Estimate:
         """

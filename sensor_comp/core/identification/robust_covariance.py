@@ -133,8 +133,7 @@ def _joint_jacobian(fit: ExtendedFit, windows: Sequence[Window]
     output (one-sided at a bound).
     """
     dist = fit.disturbance
-    fitter = Fitter(windows, fit.spec, fit.fs, () if dist is None else dist.effects,
-                    () if dist is None else dist.choices)
+    fitter = Fitter.of_fit(fit, windows)
     problem = fitter.problem(fit.values)
     theta = np.concatenate([fit.estimate.a[1:], fit.estimate.b.ravel(),
                             np.zeros(0) if dist is None else dist.coefficients])
