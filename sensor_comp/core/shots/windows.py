@@ -55,11 +55,14 @@ class Window:
 
 
 def shot_windows(sources: Sequence, *,
-                 denoise: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Window]:
+                 denoise: Callable[[np.ndarray], np.ndarray] | None = None,
+                 lateral: bool = True) -> list[Window]:
     """
     Return the windows of every shot of ``sources`` (``recording`` and ``shots`` each).
 
-    ``denoise`` is applied to each window's pressure (as in ``segments``).
+    ``denoise`` is applied to each window's pressure (as in ``segments``). Without
+    ``lateral`` the x and y rows are zeros, not read: for a model of the axial acceleration
+    only, on recordings that may have been read without them.
 
     Raises:
         ShotError: When a window holds missing samples.
@@ -68,8 +71,10 @@ def shot_windows(sources: Sequence, *,
     out = []
     for index, source in enumerate(sources):
         name = getattr(source, 'name', f'recording {index}')
-        cut = segments(source.recording, source.shots, inputs=('a_x', 'a_y', 'a_z'),
-                       denoise=denoise)
+        cut = segments(source.recording, source.shots,
+                       inputs=('a_x', 'a_y', 'a_z') if lateral else ('a_z',), denoise=denoise)
+        if not lateral:
+            cut = [(np.vstack((np.zeros((2, acc.shape[1])), acc)), y) for acc, y in cut]
         for shot, (acc, y) in zip(source.shots, cut):
             out.append(Window(acc, y, shot.start, shot.baseline_stop - shot.start, index,
                               f'{name} shot {shot.index}', shot.end - shot.start))
