@@ -69,10 +69,11 @@ _FITTERS = {
 _SEED_SEARCH = ('gls', 'oe')
 #: Structures whose base model is an output-error fit (corrected for the accelerometer noise).
 _OUTPUT_ERROR = ('auto', 'oe')
-#: Most energy, as a share of the least-squares base's, that the base corrected for the
-#: accelerometer noise may add on the held-out shots: a lighter mode passes more of that
-#: noise (on seed 39's 140 rigs the corrections that moved a mode toward the sensor's added
-#: up to 1.5 %; the ones refused, 7.9 % and more, held a missing effect or an unexcited mode).
+#: Most energy, as a share of what the uncorrected base leaves there, that the base corrected
+#: for the accelerometer noise may add on the held-out shots: a lighter mode passes more of
+#: that noise (on seed 39's 140 rigs the corrections that moved a mode toward the sensor's
+#: added up to 1.5 %; the ones refused, 7.9 % and more, held a missing effect or an
+#: unexcited mode).
 MAX_HELD_OUT_RISE = 0.02
 #: Most calibration window samples, and as many held-out ones, that the base's refit and
 #: correction read (every k-th shot beyond): their fits hold several copies of their
@@ -471,14 +472,15 @@ def _corrected_base(sources: Sources, data: _Data, base: _Base) -> tuple[object,
         fit, notes = _undenoised(fit, None, measured, (), sources.fs, base)
     check = shot_windows(_thinned(sources.validation, REFIT_SAMPLES)[0], lateral=False)
     # The base as fitted on every shot is what a refit on fewer, or a correction, must beat.
-    left = _held_out_sse(base.estimate, check)
-    if fit is not least_squares and _held_out_sse(fit, check) > left:
+    left, mine = _left_energy(base.estimate, check), _left_energy(fit, check)
+    if fit is not least_squares and mine > left:
         fit, notes = least_squares, ['kept the fit to the EMD-denoised pressure: the one to the '
                                      'measured pressure left more energy on the held-out shots']
-    left = min(left, _held_out_sse(fit, check))
+        mine = _left_energy(fit, check)
+    left = min(left, mine)
     corrected, correction = input_noise_corrected(fit, measured, check=check)
     if corrected is not None and correction is not None:
-        rise = _held_out_sse(corrected, check) / left - 1.0
+        rise = _left_energy(corrected, check) / left - 1.0
         if rise <= MAX_HELD_OUT_RISE:
             return corrected, notes + [correction]
         correction = (f'not corrected for the accelerometer\'s noise: the corrected fit left '
@@ -510,7 +512,7 @@ def _thinned(sources: Sequence[ShotSource], budget: int
     return thinned, kept
 
 
-def _held_out_sse(fit, windows: Sequence[Window]) -> float:
+def _left_energy(fit, windows: Sequence[Window]) -> float:
     """Return the energy an extended fit, or a base estimate, leaves on ``windows``."""
     if isinstance(fit, Estimate):  # of the axial acceleration alone, from rest
         predicted = simulate_output(fit, [w.acceleration[2:] for w in windows])
@@ -644,8 +646,7 @@ def _lag_free(windows, effects: Sequence[str], fs: float):
 
 def _measured_bic(fit, windows) -> float:
     """Return the BIC of an extended fit's prediction of ``windows`` (its own parameters)."""
-    prediction = fit.predict(windows)
-    sse = sum(float(np.sum((w.y - p) ** 2)) for w, p in zip(windows, prediction.total))
+    sse = _left_energy(fit, windows)
     n = sum(w.y.size for w in windows)
     return n * math.log(max(sse / n, np.finfo(float).tiny)) + _parameters(fit) * math.log(n)
 
