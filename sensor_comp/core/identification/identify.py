@@ -811,8 +811,9 @@ def _check_excitation(model: Model, calib: Sequence[ShotSource]) -> str:
         return ''
     if snr >= MIN_EXCITATION:
         return (f'; WARNING: the calibration acceleration excites the {what} only {snr:.2g} '
-                f'times above its noise power: the accelerometer noise biases the model '
-                f'towards more damping (ζ about {100 / snr:.0f} % too large); add shorter, '
+                f'times above its noise power: the accelerometer noise biases a least-squares '
+                f'fit towards more damping (ζ about {100 / snr:.0f} % too large before a '
+                f'correction for it, which the explanation states where made); add shorter, '
                 f'harder shots')
     grid = np.geomspace(f / 10, model.fs / 2 / (1 + EXCITATION_BAND), 200)
     excited = grid[excitation(calib, grid) >= MIN_EXCITATION]
