@@ -445,48 +445,116 @@ def _corrected_base(sources: Sources, data: _Data, base: _Base) -> tuple[object,
     """
     Return the output-error base fitted as an effect's fit is (None: unchanged) and how.
 
-    To the measured pressure where its BIC is the lower (:func:`_undenoised`), then
-    corrected for the accelerometer's noise (errors in variables, ``doc/identification.md``),
-    as ``identify --effect`` and the diagnosis's base are: the EMD takes a mode's ringing at
+    To the measured pressure where its BIC is the lower, then corrected for the
+    accelerometer's noise, the held-out shots deciding (:func:`_refitted`), as
+    ``identify --effect`` and the diagnosis's base are: the EMD takes a mode's ringing at
     the pulse onsets and least squares damp the mode against the accelerometer noise, so
     the model leaves that ringing (a 58.2 kHz mode with ζ 0.021 at 1.26 MS/s: 57.0 kHz,
     ζ 0.041 and 2.9 noise ceilings at the worst validation peak; refitted and corrected
-    57.4 kHz, ζ 0.024 and 1.1). The held-out shots decide against the base as fitted: the
-    measured-pressure fit is kept where it leaves them less energy, the correction where
-    it leaves no more than :data:`MAX_HELD_OUT_RISE` more than the better: a model nearer
-    the sensor passes more of the accelerometer's noise, and a base that misses an effect
-    can be moved astray (strain at R = 5, 289 kS/s: 2.5 times the held-out energy). Both
-    read :func:`_thinned` shots. None where nothing changed (the base stands; a step not
-    taken says why).
+    57.4 kHz, ζ 0.024 and 1.1). A base of more than two poles that the selection chose
+    competes with two (:func:`_two_poles`). Both read :func:`_thinned` shots. None where
+    nothing changed (the base stands; a step not taken says why).
     """
     calibration, kept = _thinned(sources.calibration, REFIT_SAMPLES)
     measured = shot_windows(calibration, lateral=False)
     windows = [replace(w, y=data.fit[i][1]) for w, i in zip(measured, kept)]
-    try:
-        fit = fit_extended(windows, effects=(), fs=sources.fs, nf=base.na, nb=base.nb,
-                           nk=base.nk, starts=(base.estimate.a,))
-    except IdentError:
-        return None, []
-    least_squares, notes = fit, []
-    if data.denoiser is not None:
-        fit, notes = _undenoised(fit, None, measured, (), sources.fs, base)
     check = shot_windows(_thinned(sources.validation, REFIT_SAMPLES)[0], lateral=False)
     # The base as fitted on every shot is what a refit on fewer, or a correction, must beat.
-    left, mine = _left_energy(base.estimate, check), _left_energy(fit, check)
-    if fit is not least_squares and mine > left:
-        fit, notes = least_squares, ['kept the fit to the EMD-denoised pressure: the one to the '
-                                     'measured pressure left more energy on the held-out shots']
-        mine = _left_energy(fit, check)
-    left = min(left, mine)
-    corrected, correction = input_noise_corrected(fit, measured, check=check)
-    if corrected is not None and correction is not None:
-        rise = _left_energy(corrected, check) / left - 1.0
-        if rise <= MAX_HELD_OUT_RISE:
-            return corrected, notes + [correction]
-        correction = (f'not corrected for the accelerometer\'s noise: the corrected fit left '
-                      f'{100 * rise:.1f} % more energy on the held-out shots')
-    notes += [correction] if correction else []
-    return (None if fit is least_squares else fit), notes
+    left = _left_energy(base.estimate, check)
+    refit = _Refit(windows, measured, check, data.denoiser is not None, sources.fs)
+    fit, notes, changed = refit(base, left=left, start=base.estimate.a)
+    if base.na > 2 and base.chosen_nb:
+        fit, notes, changed = _two_poles(refit, base, (fit, notes, changed), left=left)
+    return (fit if changed else None), notes
+
+
+@dataclass(frozen=True)
+class _Refit:
+    """The windows a base is refitted on (:func:`_corrected_base`), and how."""
+
+    windows: list[Window]   # the denoised pressure (the measured where not denoised)
+    measured: list[Window]
+    check: list[Window]     # held-out
+    denoised: bool
+    fs: float
+
+    def __call__(self, base: _Base, *, left: float, start: np.ndarray | None
+                 ) -> tuple[object, list[str], bool]:
+        """
+        Return ``base``'s orders fitted, refitted and corrected; the notes; and if it moved.
+
+        The measured-pressure fit (:func:`_undenoised`) is kept where it leaves the
+        held-out shots less energy than ``left``, the base's as fitted; the correction where
+        it leaves no more than :data:`MAX_HELD_OUT_RISE` more than the better
+        (:func:`_held_out_guard`): a model nearer the sensor passes more of the
+        accelerometer's noise, and a base that misses an effect can be moved astray (strain
+        at R = 5, 289 kS/s: 2.5 times the held-out energy). ``(None, [], False)`` where
+        the orders cannot be fitted.
+        """
+        try:
+            fit = fit_extended(self.windows, effects=(), fs=self.fs, nf=base.na, nb=base.nb,
+                               nk=base.nk, starts=() if start is None else (start,))
+        except IdentError:
+            return None, [], False
+        least_squares, notes = fit, []
+        if self.denoised:
+            fit, notes = _undenoised(fit, None, self.measured, (), self.fs, base)
+        mine = _left_energy(fit, self.check)
+        if fit is not least_squares and mine > left:
+            fit, notes = least_squares, ['kept the fit to the EMD-denoised pressure: the one '
+                                         'to the measured pressure left more energy on the '
+                                         'held-out shots']
+            mine = _left_energy(fit, self.check)
+        corrected, correction = input_noise_corrected(fit, self.measured, check=self.check)
+        if corrected is not None and correction is not None:
+            corrected, correction = _held_out_guard(corrected, correction, self.check,
+                                                    left=min(left, mine))
+            if corrected is not None:
+                return corrected, notes + [correction], True
+        notes += [correction] if correction else []
+        return fit, notes, fit is not least_squares
+
+
+def _two_poles(refit: _Refit, base: _Base, own: tuple[object, list[str], bool], *,
+               left: float) -> tuple[object, list[str], bool]:
+    """
+    Return ``own`` (the chosen base refitted) or two poles refitted, whichever is better.
+
+    The selection chose its poles by BIC on the EMD-denoised early windows, uncorrected:
+    extra poles there can stand in for a mode's ringing that the EMD took or that least
+    squares damped, and the correction moves only the least damped pair (an accelerometer
+    resonance at 59.8 kHz, 391 kS/s: four poles, corrected, left 2.85 noise ceilings at the
+    worst peak, two 0.7). Two poles are kept where, each fit as it will be kept, they leave
+    the held-out shots less energy by more than :data:`MAX_HELD_OUT_RISE`, the margin
+    within which a correction is taken as no worse.
+    """
+    fit, notes, _ = refit(replace(base, na=2, nb=_sensor_nb(base, 2)), left=left, start=None)
+    if fit is None:
+        return own
+    rival = _left_energy(own[0] if own[0] is not None else base.estimate, refit.check)
+    fall = 1.0 - _left_energy(fit, refit.check) / rival
+    if not fall > MAX_HELD_OUT_RISE:
+        return own
+    return fit, [f'two poles (the sensor\'s own mode) instead of the nf={base.na} chosen on '
+                 f'the EMD-denoised pressure: {100 * fall:.1f} % less energy left on the '
+                 f'held-out shots, each fit as kept'] + notes, True
+
+
+def _held_out_guard(corrected, correction: str, check: Sequence[Window], *, left: float
+                    ) -> tuple[object, str]:
+    """
+    Return ``(corrected, correction)``, or ``(None, why not)`` where the held-out shots refuse.
+
+    The correction is refused where ``corrected`` leaves more than :data:`MAX_HELD_OUT_RISE`
+    more energy on ``check`` than ``left``, the uncorrected fit's: a weakly excited
+    direction moved along the accelerometer's noise (strain at R = 5, 1.23 MS/s: read 6.3
+    for 3.35).
+    """
+    rise = _left_energy(corrected, check) / left - 1.0
+    if rise <= MAX_HELD_OUT_RISE:
+        return corrected, correction
+    return None, (f'not corrected for the accelerometer\'s noise: the corrected fit left '
+                  f'{100 * rise:.1f} % more energy on the held-out shots')
 
 
 def _thinned(sources: Sequence[ShotSource], budget: int
