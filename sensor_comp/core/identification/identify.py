@@ -73,7 +73,8 @@ _OUTPUT_ERROR = ('auto', 'oe')
 #: for the accelerometer noise may add on the held-out shots: a lighter mode passes more of
 #: that noise (on seed 39's 140 rigs the corrections that moved a mode toward the sensor's
 #: added up to 1.5 %; the ones refused, 7.9 % and more, held a missing effect or an
-#: unexcited mode).
+#: unexcited mode). Two poles replace the selection's more only where they leave less by
+#: more than this (:func:`_two_poles`).
 MAX_HELD_OUT_RISE = 0.02
 #: Most calibration window samples, and as many held-out ones, that the base's refit and
 #: correction read (every k-th shot beyond): their fits hold several copies of their
@@ -446,7 +447,7 @@ def _corrected_base(sources: Sources, data: _Data, base: _Base) -> tuple[object,
     Return the output-error base fitted as an effect's fit is (None: unchanged) and how.
 
     To the measured pressure where its BIC is the lower, then corrected for the
-    accelerometer's noise, the held-out shots deciding (:func:`_refitted`), as
+    accelerometer's noise, the held-out shots deciding (:class:`_Refit`), as
     ``identify --effect`` and the diagnosis's base are: the EMD takes a mode's ringing at
     the pulse onsets and least squares damp the mode against the accelerometer noise, so
     the model leaves that ringing (a 58.2 kHz mode with ζ 0.021 at 1.26 MS/s: 57.0 kHz,
@@ -524,14 +525,14 @@ def _two_poles(refit: _Refit, base: _Base, own: tuple[object, list[str], bool], 
     extra poles there can stand in for a mode's ringing that the EMD took or that least
     squares damped, and the correction moves only the least damped pair (an accelerometer
     resonance at 59.8 kHz, 391 kS/s: four poles, corrected, left 2.85 noise ceilings at the
-    worst peak, two 0.7). Two poles are kept where, each fit as it will be kept, they leave
-    the held-out shots less energy by more than :data:`MAX_HELD_OUT_RISE`, the margin
-    within which a correction is taken as no worse.
+    worst peak, two 0.7). Two poles are kept where, as they will be kept, they leave the
+    held-out shots less energy by more than :data:`MAX_HELD_OUT_RISE` (the margin within
+    which a correction counts as no worse) than ``own`` and than the base as fitted.
     """
     fit, notes, _ = refit(replace(base, na=2, nb=_sensor_nb(base, 2)), left=left, start=None)
     if fit is None:
         return own
-    rival = _left_energy(own[0] if own[0] is not None else base.estimate, refit.check)
+    rival = left if own[0] is None else min(left, _left_energy(own[0], refit.check))
     fall = 1.0 - _left_energy(fit, refit.check) / rival
     if not fall > MAX_HELD_OUT_RISE:
         return own
@@ -546,9 +547,9 @@ def _held_out_guard(corrected, correction: str, check: Sequence[Window], *, left
     Return ``(corrected, correction)``, or ``(None, why not)`` where the held-out shots refuse.
 
     The correction is refused where ``corrected`` leaves more than :data:`MAX_HELD_OUT_RISE`
-    more energy on ``check`` than ``left``, the uncorrected fit's: a weakly excited
-    direction moved along the accelerometer's noise (strain at R = 5, 1.23 MS/s: read 6.3
-    for 3.35).
+    more energy on ``check`` than ``left`` (the uncorrected fit's, or the base's as fitted
+    where lower): where the shots barely excite the mode, least squares damped against the
+    accelerometer noise predict better than the sensor itself.
     """
     rise = _left_energy(corrected, check) / left - 1.0
     if rise <= MAX_HELD_OUT_RISE:
