@@ -453,8 +453,9 @@ def _corrected_base(sources: Sources, data: _Data, base: _Base) -> tuple[object,
     the model leaves that ringing (a 58.2 kHz mode with ζ 0.021 at 1.26 MS/s: 57.0 kHz,
     ζ 0.041 and 2.9 noise ceilings at the worst validation peak; refitted and corrected
     57.4 kHz, ζ 0.024 and 1.1). A base of more than two poles that the selection chose
-    competes with two (:func:`_two_poles`). Both read :func:`_thinned` shots. None where
-    nothing changed (the base stands; a step not taken says why).
+    competes with two (:func:`_two_poles`). The refits and the held-out check read
+    :func:`_thinned` shots. None where nothing changed (the base stands; a step not taken
+    says why).
     """
     calibration, kept = _thinned(sources.calibration, REFIT_SAMPLES)
     measured = shot_windows(calibration, lateral=False)
