@@ -130,7 +130,7 @@ class _Diagnostics:
         from rclpy.executors import SingleThreadedExecutor
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_comp.nodes.diagnostics import DIAGNOSTICS, DIAGNOSTICS_QOS
-        from sensor_comp.nodes.lifecycle import use_fastdds_profile
+        from sensor_comp.nodes.lifecycle import spin_until, use_fastdds_profile
         use_fastdds_profile()
         self._context = rclpy.Context()
         self._context.init()
@@ -140,7 +140,9 @@ class _Diagnostics:
                                        DIAGNOSTICS_QOS)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
-        self._thread = threading.Thread(target=self._executor.spin, daemon=True)
+        self._ends = threading.Event()
+        self._thread = threading.Thread(target=spin_until, args=(self._executor, self._ends),
+                                        daemon=True)
         self._thread.start()
 
     def _on_array(self, array) -> None:
@@ -159,8 +161,9 @@ class _Diagnostics:
         return None if value in (None, '') else int(value)
 
     def close(self) -> None:
-        self._executor.shutdown()
+        self._ends.set()
         self._thread.join()
+        self._executor.shutdown()
         self._node.destroy_node()
         self._context.try_shutdown()
 

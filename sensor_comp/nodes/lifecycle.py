@@ -58,14 +58,17 @@ _DRAIN_STEP_S = 0.05
 
 
 def spin_until(executor: Executor, stop: threading.Event, *,
-               progress: Callable[[], int], wait: Callable[[float], bool] | None = None,
+               progress: Callable[[], int] | None = None,
+               wait: Callable[[float], bool] | None = None,
                take: Callable[[], object] | None = None) -> None:
     """
     Spin ``executor`` until ``stop`` is set, then take what had arrived before the stop.
 
-    After the stop, spinning goes on while ``progress`` grows (at most 10 s). With ``wait``
-    and ``take`` (a node's busy subscriptions) it waits for and takes their messages itself
-    and runs one executor round every :data:`ROUND_S`.
+    After the stop, spinning goes on while ``progress`` grows (at most 10 s; None: it ends
+    at once). With ``wait`` and ``take`` (a node's busy subscriptions) it waits for and
+    takes their messages itself and runs one executor round every :data:`ROUND_S`. Shut
+    the executor down only after this returns: ``shutdown()`` under a running ``spin()``
+    destroys the guard condition the spinning thread may be triggering (rclpy #968).
     """
     context = executor.context
     if wait is None or take is None:
@@ -73,6 +76,8 @@ def spin_until(executor: Executor, stop: threading.Event, *,
             executor.spin_once(timeout_sec=0.1)
     else:
         _spin_fast(executor, stop, wait, take)
+    if progress is None:
+        return
     limit = time.monotonic() + _DRAIN_LIMIT_S
     while context.ok() and time.monotonic() < limit:
         before = progress()

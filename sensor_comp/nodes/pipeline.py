@@ -21,7 +21,7 @@ from .acquisition import Acquisition
 from .compensation import Compensation
 from .errors import NodeError
 from .identification import Identification
-from .lifecycle import join_callbacks, use_fastdds_profile
+from .lifecycle import join_callbacks, spin_until, use_fastdds_profile
 from .recorder import Recorder
 from .transport import DEFAULT_NAMESPACE
 
@@ -71,6 +71,7 @@ class Pipeline:
         self._acquisition_thread: threading.Thread | None = None
         self._acquisition_error: BaseException | None = None
         self._spin_thread: threading.Thread | None = None
+        self._spinning_ends = threading.Event()  # after the drain, before the shutdown
         self.executor = MultiThreadedExecutor(num_threads=2, context=context)
         try:
             for name in (n for n in NODES if n in nodes):
@@ -84,8 +85,9 @@ class Pipeline:
             for name, node in self.nodes.items():
                 if name != 'acquisition':
                     self.executor.add_node(node)
-            self._spin_thread = threading.Thread(target=self.executor.spin,
-                                                 name='pipeline-executor', daemon=True)
+            self._spin_thread = threading.Thread(
+                target=spin_until, args=(self.executor, self._spinning_ends),
+                name='pipeline-executor', daemon=True)
             self._spin_thread.start()
             if self.recorder is not None:
                 self._wait_for_recorder()
@@ -220,9 +222,10 @@ class Pipeline:
             self._acquisition_thread = None
         if self._spin_thread is not None:
             self.drain()
-            self.executor.shutdown()
+            self._spinning_ends.set()
             self._spin_thread.join()
             self._spin_thread = None
+            self.executor.shutdown()
         join_callbacks(self.executor)
         for node in reversed(list(self.nodes.values())):
             node.destroy_node()

@@ -40,7 +40,8 @@ from sensor_msgs.msg import Image  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from sensor_comp.io.messages import encode_block, encode_stream_info  # noqa: E402
-from sensor_comp.nodes.lifecycle import join_callbacks, use_fastdds_profile  # noqa: E402
+from sensor_comp.nodes.lifecycle import (  # noqa: E402
+    join_callbacks, spin_until, use_fastdds_profile)
 from sensor_comp.nodes.player import Player  # noqa: E402
 from sensor_comp.streams import Recording, StreamInfo  # noqa: E402
 
@@ -242,9 +243,10 @@ def spin():
     Return the spinner: called with nodes, it spins them in a thread and returns a stopper.
 
     The executor (2 threads; ``threads=1``: a single-threaded one) uses the first node's
-    context. Calling the stopper shuts it down, joins its thread and waits for its callbacks
-    (destroy the nodes only after that); spinners not stopped by the test are stopped at
-    its end.
+    context. Calling the stopper ends the spinning, joins its thread, then shuts the
+    executor down and waits for its callbacks (destroy the nodes only after that; a shutdown
+    under a running spin can raise in its thread, rclpy #968); spinners not stopped by the
+    test are stopped at its end.
     """
     stoppers = []
 
@@ -254,15 +256,17 @@ def spin():
                     else MultiThreadedExecutor(num_threads=threads, context=context))
         for node in nodes:
             executor.add_node(node)
-        thread = threading.Thread(target=executor.spin, daemon=True)
+        ends = threading.Event()
+        thread = threading.Thread(target=spin_until, args=(executor, ends), daemon=True)
         thread.start()
         done = []
 
         def stop():
             if not done:
                 done.append(True)
-                executor.shutdown()
+                ends.set()
                 thread.join()
+                executor.shutdown()
                 join_callbacks(executor)
         stoppers.append(stop)
         return stop

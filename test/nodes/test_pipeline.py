@@ -142,6 +142,21 @@ def test_pipeline_errors(context):
     assert p.nodes == {} and context.ok()  # a given context is left running
 
 
+def test_the_executor_is_shut_down_only_after_its_spinning_ended(context):
+    # rclpy's shutdown() under a running spin() destroys the guard condition the spinning
+    # thread may be triggering: an InvalidHandle raised in that thread, at random.
+    seen = []
+    with pipeline(context=context, nodes=('compensation', 'identification')) as p:
+        thread, shutdown = p._spin_thread, p.executor.shutdown
+
+        def watched(*args, **kwargs):
+            seen.append(thread.is_alive())
+            return shutdown(*args, **kwargs)
+        p.executor.shutdown = watched
+        assert thread.is_alive()
+    assert seen == [False] and not thread.is_alive() and p.nodes == {}
+
+
 def test_a_timeout_says_where_the_identification_stands(context):
     with pipeline(context=context, nodes=('identification',)) as p:
         with pytest.raises(PipelineTimeout, match=r'for the model in vain; identification: 0 '

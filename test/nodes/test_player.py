@@ -14,6 +14,7 @@ from sensor_comp.io.bag_writer import BagWriter, write_recording
 from sensor_comp.io.messages import (decode_block, decode_string, DIAGNOSTIC_ARRAY,
                                      encode_block, encode_string, IMAGE, STRING)
 from sensor_comp.nodes.errors import NodeError
+from sensor_comp.nodes.lifecycle import spin_until
 from sensor_comp.nodes.player import Player
 from sensor_comp.nodes.qos import BLOCK_QOS, latched_qos
 from sensor_comp.nodes.transport import message_class
@@ -130,7 +131,9 @@ class _Listener:
             node.create_subscription(String, topic, self._note(topic, delay), qos)
         self._executor = SingleThreadedExecutor(context=node.context)
         self._executor.add_node(node)
-        self._thread = threading.Thread(target=self._executor.spin, daemon=True)
+        self._ends = threading.Event()
+        self._thread = threading.Thread(target=spin_until, args=(self._executor, self._ends),
+                                        daemon=True)
         self._thread.start()
 
     def _note(self, topic, delay):
@@ -149,8 +152,9 @@ class _Listener:
         return self.texts(topic)
 
     def close(self):
-        self._executor.shutdown()
+        self._ends.set()
         self._thread.join()
+        self._executor.shutdown()
 
 
 @pytest.mark.parametrize('rate', [1.0, 2.5])
@@ -213,7 +217,8 @@ def test_as_fast_as_possible_loses_nothing_to_a_slow_subscriber(context, make_no
     node.create_subscription(message_class(IMAGE), 'pressure/raw', slow, BLOCK_QOS, raw=True)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
+    ends = threading.Event()
+    thread = threading.Thread(target=spin_until, args=(executor, ends), daemon=True)
     thread.start()
     player = make_player(path, as_fast_as_possible=True, wait_for_subscribers=1)
     assert player.play() == n
@@ -221,8 +226,9 @@ def test_as_fast_as_possible_loses_nothing_to_a_slow_subscriber(context, make_no
     deadline = time.monotonic() + 10
     while len(got) < n and time.monotonic() < deadline:
         time.sleep(0.01)
-    executor.shutdown()
+    ends.set()
     thread.join()
+    executor.shutdown()
     assert len(got) == n
     assert all(np.array_equal(a, b) for a, b in zip(got, blocks))
 
